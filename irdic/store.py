@@ -288,7 +288,10 @@ class FrameStore:
         self._written = np.zeros(n_frames, dtype=bool)
 
     def write(self, index: int, time: float, frame: np.ndarray, **extra) -> None:
-        """Store ``frame`` at position ``index`` with frame time ``time`` (s)."""
+        """Store ``frame`` at position ``index`` with frame time ``time`` (s).
+
+        ``extra`` gives the values of the ``extra_time_vars`` for this frame.
+        """
         frame = np.asarray(frame)
         if frame.shape != self.frame_shape:
             raise DataError(
@@ -299,6 +302,13 @@ class FrameStore:
         for k, v in extra.items():
             self._extra_buf[k][index] = v
         self._written[index] = True
+
+    def set_times(self, times: np.ndarray) -> None:
+        """Set all frame times at once (s), e.g. when they are known only at the end."""
+        times = np.asarray(times, dtype=float)
+        if times.shape != (self.n_frames,):
+            raise DataError(f"{self.path}: got {times.shape[0]} frame times for {self.n_frames} frames")
+        self._time_buf[:] = times
 
     def close(self) -> Path:
         """Finish the store and move it into place."""
@@ -313,10 +323,7 @@ class FrameStore:
         self._root.attrs.update(self._attrs)
         self._closed = True
         _mark_complete(self._tmp)
-        try:
-            self._ctx.__exit__(None, None, None)
-        except BaseException:
-            raise
+        self._ctx.__exit__(None, None, None)
         return self.path
 
     def abort(self) -> None:

@@ -1,0 +1,21 @@
+# irdic: couple stereo DIC and infrared thermography, stage by stage.
+# Rules live in workflow/rules/, logic in the irdic package, settings in config/.
+
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config/config.yaml"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/demo.smk"
+include: "workflow/rules/ingest.smk"
+include: "workflow/rules/calibrate.smk"
+
+
+rule all:
+    input:
+        all_outputs(),
+    default_target: True

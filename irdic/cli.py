@@ -1,0 +1,131 @@
+"""``irdic`` command line: run a stage without Snakemake, or look into a store.
+
+Examples
+--------
+::
+
+    irdic demo resources/demo --scale tiny
+    irdic ingest-ir resources/demo/tube/ir results/tube/ir.zarr
+    irdic ingest-dic resources/demo/tube/dic results/tube/dic.zarr
+    irdic calibrate --markers resources/demo/setup/markers.txt \\
+        --target resources/demo/setup/target.txt --out results/setups/lab/calibration.zarr
+    irdic run --config config/config.yaml
+    irdic info results/tube/ir.zarr
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Sequence
+
+from .errors import IrdicError
+
+__all__ = ["main", "describe_store"]
+
+
+def describe_store(path) -> str:
+    """A readable summary of an irdic zarr store: dims, variables with units, provenance."""
+    from .store import open_store
+
+    ds = open_store(path)
+    lines = [f"{path}", "  dimensions: " + ", ".join(f"{k}={v}" for k, v in ds.sizes.items())]
+    lines.append("  coordinates:")
+    for name, c in ds.coords.items():
+        lines.append(f"    {name:<28} {str(c.dims):<28} {c.attrs.get('units', '')}")
+    lines.append("  variables:")
+    for name, v in ds.data_vars.items():
+        desc = v.attrs.get("long_name", "")
+        lines.append(f"    {name:<28} {str(v.dims):<28} {v.attrs.get('units', ''):<8} {desc}")
+    a = ds.attrs
+    lines.append(f"  stage: {a.get('irdic_stage', '?')}  irdic {a.get('irdic_version', '?')}  created {a.get('irdic_created', '?')}")
+    params = a.get("irdic_parameters")
+    if params:
+        try:
+            lines.append("  parameters: " + json.dumps(json.loads(params), sort_keys=True))
+        except ValueError:
+            lines.append(f"  parameters: {params}")
+    other = {k: v for k, v in a.items() if not k.startswith("irdic_")}
+    for k, v in list(other.items())[:20]:
+        lines.append(f"  {k}: {v}")
+    return "\n".join(lines)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="irdic", description="Couple stereo DIC and infrared thermography.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("info", help="summarise an irdic zarr store")
+    s.add_argument("store")
+
+    s = sub.add_parser("demo", help="write the synthetic demo experiment")
+    s.add_argument("outdir")
+    s.add_argument("--scale", choices=["tiny", "demo", "paper"], default="demo")
+    s.add_argument("--ir-noise", type=float, default=0.05, help="K")
+    s.add_argument("--dic-noise", type=float, default=0.005, help="mm")
+    s.add_argument("--seed", type=int, default=0)
+
+    for kind in ("ir", "dic"):
+        s = sub.add_parser(f"ingest-{kind}", help=f"{kind.upper()} exports -> {kind}.zarr")
+        s.add_argument("source", help="folder, glob or file")
+        s.add_argument("out", help="store to write")
+        s.add_argument("--format", default="auto")
+        s.add_argument("--frame-rate", type=float, default=None, help="Hz")
+        s.add_argument("--time-source", choices=["file", "frame_rate"], default="file")
+        s.add_argument("--time-origin", choices=["first", "file"], default="first")
+        s.add_argument("--time-offset", type=float, default=0.0, help="s")
+
+    s = sub.add_parser("calibrate", help="calibrate the IR camera from one target image")
+    s.add_argument("--markers", required=True, help="marker centres export (ID, x, y, z in mm)")
+    s.add_argument("--target", required=True, help="IR image of the reference object")
+    s.add_argument("--out", required=True, help="calibration.zarr to write")
+    s.add_argument("--figure", default=None, help="PNG of detections and residuals")
+    s.add_argument("--distortion", choices=["none", "k1", "k1k2"], default="none")
+    s.add_argument("--polarity", choices=["auto", "dark", "bright"], default="auto")
+
+    s = sub.add_parser("run", help="run all stages of a configuration without Snakemake")
+    s.add_argument("--config", default="config/config.yaml")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``irdic`` command."""
+    args = _parser().parse_args(argv)
+    from .logs import configure
+
+    configure(None)
+    try:
+        if args.command == "info":
+            print(describe_store(args.store))
+        elif args.command == "demo":
+            from .pipeline import make_demo
+
+            make_demo(args.outdir, scale=args.scale, ir_noise=args.ir_noise, dic_noise=args.dic_noise, seed=args.seed)
+        elif args.command in ("ingest-ir", "ingest-dic"):
+            from .ingest import ingest_dic, ingest_ir
+
+            fn = ingest_ir if args.command == "ingest-ir" else ingest_dic
+            fn(args.source, args.out, format=args.format, frame_rate=args.frame_rate, time_source=args.time_source,
+               time_origin=args.time_origin, time_offset=args.time_offset)
+            print(describe_store(args.out))
+        elif args.command == "calibrate":
+            from .pipeline import calibrate_setup
+
+            calibrate_setup(args.markers, args.target, args.out, args.figure,
+                            distortion=args.distortion, polarity=args.polarity)
+            print(describe_store(args.out))
+        elif args.command == "run":
+            from .config import load_config
+            from .pipeline import run
+
+            paths = run(load_config(args.config))
+            print(json.dumps(paths, default=str, indent=2))
+    except IrdicError as exc:
+        print(f"irdic: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

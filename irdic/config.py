@@ -1,0 +1,159 @@
+"""Loading and validating the irdic configuration.
+
+The schema (``irdic/schemas/config.schema.yaml``) lists every key with its
+default, unit and meaning. :func:`validate_config` checks a configuration
+against it, fills in the defaults and raises :class:`~irdic.errors.ConfigError`
+with the dotted key that is wrong (``calibration.polarty: unknown key ...``).
+The Snakemake workflow, the CLI and the Python API all call this one function.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+
+from .errors import ConfigError
+
+__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config"]
+
+SCHEMA_PATH = Path(str(resources.files("irdic") / "schemas" / "config.schema.yaml"))
+
+
+def load_schema() -> dict:
+    """The configuration schema as a dict."""
+    with open(SCHEMA_PATH, encoding="utf-8") as fh:
+        return yaml.safe_load(fh)
+
+
+def _fill_defaults(validator_class):
+    """A validator class that also writes ``default`` values into the instance.
+
+    Objects that are absent but have a default (usually ``{}``) are created
+    first, so nested defaults are filled as well.
+    """
+    validate_properties = validator_class.VALIDATORS["properties"]
+
+    def set_defaults(validator, properties, instance, schema):
+        if isinstance(instance, dict):
+            for name, sub in properties.items():
+                if "default" in sub and name not in instance:
+                    instance[name] = copy.deepcopy(sub["default"])
+        yield from validate_properties(validator, properties, instance, schema)
+
+    return jsonschema.validators.extend(validator_class, {"properties": set_defaults})
+
+
+def _where(error: jsonschema.ValidationError) -> str:
+    parts = [str(p) for p in error.absolute_path]
+    return ".".join(parts) if parts else "(top level)"
+
+
+def _message(error: jsonschema.ValidationError) -> str:
+    where = _where(error)
+    if error.validator == "additionalProperties" and isinstance(error.instance, dict):
+        allowed = sorted(error.schema.get("properties", {}))
+        extra = sorted(set(error.instance) - set(allowed))
+        if allowed:
+            keys = ", ".join(repr(e) for e in extra)
+            prefix = f"{where}." if where != "(top level)" else ""
+            return f"{prefix}{extra[0] if len(extra) == 1 else '{' + keys + '}'}: unknown key; allowed here: {', '.join(allowed)}"
+    if error.validator == "required":
+        return f"{where}: {error.message}"
+    if error.validator == "enum":
+        return f"{where}: {error.instance!r} is not one of {', '.join(map(repr, error.validator_value))}"
+    return f"{where}: {error.message}"
+
+
+def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) -> dict:
+    """Check ``config`` against the schema and fill in defaults (in place).
+
+    Parameters
+    ----------
+    config : dict
+        The configuration (as loaded from YAML).
+    base_dir : path-like, optional
+        Unused for now; relative paths are taken relative to the working
+        directory, as Snakemake does.
+
+    Returns
+    -------
+    dict
+        ``config`` itself, completed with defaults.
+
+    Raises
+    ------
+    ConfigError
+        Naming the dotted key and what was expected; cross-references (an
+        experiment's ``setup``) are checked too.
+    """
+    if not isinstance(config, dict):
+        raise ConfigError(f"the configuration must be a mapping of keys to values, got {type(config).__name__}")
+    schema = load_schema()
+    cls = _fill_defaults(jsonschema.Draft202012Validator)
+    validator = cls(schema)
+    errors = sorted(validator.iter_errors(config), key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
+    if errors:
+        msgs = [_message(e) for e in errors[:5]]
+        more = f" (and {len(errors) - 5} more)" if len(errors) > 5 else ""
+        raise ConfigError("invalid configuration: " + "; ".join(msgs) + more)
+    setups = config["setups"]
+    for name, exp in config["experiments"].items():
+        if exp["setup"] not in setups:
+            raise ConfigError(
+                f"experiments.{name}.setup: setup {exp['setup']!r} is not defined; defined setups: {', '.join(setups)}"
+            )
+        for kind in ("dic", "ir"):
+            src = exp[kind]
+            if src["time_source"] == "frame_rate" and src["frame_rate"] is None:
+                raise ConfigError(f"experiments.{name}.{kind}.frame_rate: required when time_source is frame_rate")
+        if exp["dic"]["format"] == "table":
+            cols = exp["dic"]["columns"]
+            missing = [r for r in ("x", "y", "z") if r not in cols]
+            if missing:
+                raise ConfigError(
+                    f"experiments.{name}.dic.columns: format table needs the column names of {', '.join(missing)}"
+                )
+    for name, setup in setups.items():
+        seeds = setup.get("seeds", {})
+        if seeds and len(seeds) < 6:
+            raise ConfigError(f"setups.{name}.seeds: give at least 6 markers (got {len(seeds)}) or none")
+        for key in seeds:
+            try:
+                int(key)
+            except (TypeError, ValueError):
+                raise ConfigError(f"setups.{name}.seeds: marker ID {key!r} is not an integer") from None
+    return config
+
+
+def load_config(path: str | os.PathLike) -> dict:
+    """Read a YAML configuration file and validate it (see :func:`validate_config`)."""
+    p = Path(path)
+    try:
+        with open(p, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: configuration file not found") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: not valid YAML ({exc})") from None
+    if data is None:
+        raise ConfigError(f"{p}: configuration file is empty")
+    try:
+        return validate_config(data)
+    except ConfigError as exc:
+        raise ConfigError(f"{p}: {exc}") from None
+
+
+def get(config: dict, dotted: str, default: Any = None) -> Any:
+    """``config["a"]["b"]`` for ``"a.b"``, or ``default``."""
+    cur: Any = config
+    for part in dotted.split("."):
+        if not isinstance(cur, dict) or part not in cur:
+            return default
+        cur = cur[part]
+    return cur

@@ -1,0 +1,136 @@
+"""The whole pipeline as plain Python functions, one per stage.
+
+These are what the Snakemake scripts, the CLI and the tests call. Each takes
+paths and parameters (as in the configuration) and writes its store
+atomically. :func:`run` runs every stage for every configured experiment in
+order, without Snakemake (no caching: use the workflow for that).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+from pathlib import Path
+from typing import Mapping
+
+import yaml
+
+from .errors import ConfigError
+from .ingest import ingest_dic, ingest_ir
+
+__all__ = ["make_demo", "ingest_experiment", "calibrate_setup", "run", "stage_paths"]
+
+log = logging.getLogger(__name__)
+
+
+def stage_paths(config: Mapping) -> dict:
+    """Output paths of every stage (the contract of the results folder)."""
+    r = Path(config.get("results", "results"))
+    out = {"setups": {}, "experiments": {}}
+    for s in config["setups"]:
+        out["setups"][s] = {"calibration": r / "setups" / s / "calibration.zarr",
+                            "figure": r / "setups" / s / "calibration.png"}
+    for e in config["experiments"]:
+        out["experiments"][e] = {k: r / e / f"{k}.zarr" for k in ("dic", "ir", "points", "fields")}
+    return out
+
+
+def make_demo(outdir: str | os.PathLike, *, scale: str = "demo", ir_noise: float = 0.05,
+              dic_noise: float = 0.005, seed: int = 0, manifest: str | os.PathLike | None = None) -> Path:
+    """Generate the synthetic demo (raw exports + truth) under ``outdir``.
+
+    The folder is emptied first; ``manifest`` (default ``outdir/manifest.yaml``)
+    lists what was written and is written last, so its presence means the
+    demo is complete.
+    """
+    from . import synthetic
+
+    out = Path(outdir)
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    written = synthetic.make_demo(out, scale=scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
+    man = Path(manifest) if manifest is not None else out / "manifest.yaml"
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and ".zarr" not in p.parts[-2:])
+    with open(man, "w", encoding="utf-8") as fh:
+        yaml.safe_dump({"scale": scale, "ir_noise": ir_noise, "dic_noise": dic_noise, "seed": seed,
+                        "n_files": len(files), "contents": written if isinstance(written, dict) else None},
+                       fh, sort_keys=False)
+    log.info("demo written to %s (%d files)", out, len(files))
+    return out
+
+
+def ingest_experiment(exp: Mapping, dic_out: str | os.PathLike, ir_out: str | os.PathLike) -> None:
+    """Ingest one experiment's DIC and IR exports (``exp`` as in the configuration)."""
+    dic = dict(exp["dic"])
+    ir = dict(exp["ir"])
+    ingest_dic(dic.pop("path"), dic_out, **dic)
+    ingest_ir(ir.pop("path"), ir_out, **ir)
+
+
+def calibrate_setup(markers: str | os.PathLike, target: Mapping | str | os.PathLike,
+                    store: str | os.PathLike, figure: str | os.PathLike | None = None, *,
+                    seeds: Mapping | None = None, **settings) -> Path:
+    """Calibrate the IR camera of one setup and write ``calibration.zarr`` (+ figure).
+
+    Parameters
+    ----------
+    markers : path-like
+        Marker centres export (ID, x, y, z in mm).
+    target : mapping or path-like
+        IR image of the reference object (``{"path": ..., "format": ...}`` or a path).
+    store : path-like
+        Output store.
+    figure : path-like, optional
+        PNG of the detections and residuals.
+    seeds : mapping, optional
+        ``{marker_id: [u, v]}`` approximate pixel positions.
+    **settings
+        The ``calibration`` section of the configuration.
+    """
+    from . import io
+    from .calibrate import calibrate_from_files
+
+    if isinstance(target, Mapping):
+        tpath, tfmt = target["path"], target.get("format", "auto")
+    else:
+        tpath, tfmt = target, "auto"
+    return calibrate_from_files(markers, tpath, store, figure, target_format=tfmt, seeds=seeds, **settings)
+
+
+def run(config: Mapping, *, stages: tuple[str, ...] = ("demo", "ingest", "calibrate")) -> dict:
+    """Run the configured stages for every setup and experiment, in order.
+
+    Parameters
+    ----------
+    config : mapping
+        A validated configuration (see :func:`irdic.config.load_config`).
+    stages : tuple of str
+        Which stages to run.
+
+    Returns
+    -------
+    dict
+        The output paths (see :func:`stage_paths`).
+    """
+    unknown = set(stages) - {"demo", "ingest", "calibrate"}
+    if unknown:
+        raise ConfigError(f"unknown stage(s) {sorted(unknown)}; expected demo, ingest, calibrate")
+    paths = stage_paths(config)
+    demo = config.get("demo", {})
+    if "demo" in stages and demo.get("enabled", False):
+        man = Path(demo["outdir"]) / "manifest.yaml"
+        if not man.exists():
+            make_demo(demo["outdir"], scale=demo["scale"], ir_noise=demo["ir_noise"],
+                      dic_noise=demo["dic_noise"], seed=demo["seed"])
+    if "calibrate" in stages:
+        for name, s in config["setups"].items():
+            p = paths["setups"][name]
+            calibrate_setup(s["markers"]["path"], s["target_image"], p["calibration"], p["figure"],
+                            seeds=s.get("seeds"), **config.get("calibration", {}))
+    if "ingest" in stages:
+        for name, e in config["experiments"].items():
+            p = paths["experiments"][name]
+            ingest_experiment(e, p["dic"], p["ir"])
+    return paths

@@ -1,0 +1,57 @@
+# Configuration, lookups and input functions shared by all rules.
+
+import re
+
+import irdic.config
+from irdic.codehash import code_hash
+from irdic.ingest import list_inputs
+
+irdic.config.validate_config(config)
+
+RESULTS = config["results"]
+DEMO = config["demo"]
+SETUPS = list(config["setups"])
+EXPERIMENTS = list(config["experiments"])
+DEMO_MANIFEST = f"{DEMO['outdir']}/manifest.yaml"
+
+
+wildcard_constraints:
+    experiment="|".join(map(re.escape, EXPERIMENTS)) or "NONE",
+    setup="|".join(map(re.escape, SETUPS)) or "NONE",
+
+
+def _in_demo(path):
+    """True when a configured path lies in the generated demo folder."""
+    if not DEMO["enabled"]:
+        return False
+    demo = os.path.normpath(DEMO["outdir"])
+    return os.path.normpath(path).startswith(demo + os.sep) or os.path.normpath(path) == demo
+
+
+def raw_files(path):
+    """Input files for a configured path: the demo manifest, or the files themselves."""
+    if _in_demo(path):
+        return [DEMO_MANIFEST]
+    return [str(f) for f in list_inputs(path)]
+
+
+def experiment_files(kind):
+    def inner(wildcards):
+        return raw_files(config["experiments"][wildcards.experiment][kind]["path"])
+
+    return inner
+
+
+def setup_files(wildcards):
+    s = config["setups"][wildcards.setup]
+    return {
+        "markers": raw_files(s["markers"]["path"]),
+        "target": raw_files(s["target_image"]["path"]),
+    }
+
+
+def all_outputs():
+    out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
+    for e in EXPERIMENTS:
+        out += [f"{RESULTS}/{e}/dic.zarr", f"{RESULTS}/{e}/ir.zarr"]
+    return out

@@ -1,0 +1,43 @@
+# Raw exports -> dic.zarr and ir.zarr, one pair per experiment.
+
+
+rule ingest_ir:
+    input:
+        experiment_files("ir"),
+    output:
+        directory(f"{RESULTS}/{{experiment}}/ir.zarr"),
+    params:
+        source=lambda wc: config["experiments"][wc.experiment]["ir"],
+        code=code_hash("ingest"),
+    log:
+        f"{RESULTS}/logs/{{experiment}}/ingest_ir.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/{{experiment}}/ingest_ir.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        "../envs/irdic.yaml"
+    script:
+        "../../scripts/ingest_ir.py"
+
+
+rule ingest_dic:
+    input:
+        experiment_files("dic"),
+    output:
+        directory(f"{RESULTS}/{{experiment}}/dic.zarr"),
+    params:
+        source=lambda wc: config["experiments"][wc.experiment]["dic"],
+        code=code_hash("ingest"),
+    log:
+        f"{RESULTS}/logs/{{experiment}}/ingest_dic.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/{{experiment}}/ingest_dic.tsv"
+    threads: 1
+    resources:
+        mem_mb=4000,
+    conda:
+        "../envs/irdic.yaml"
+    script:
+        "../../scripts/ingest_dic.py"
