@@ -1,0 +1,166 @@
+"""Where the specimen is in an IR frame: normals, visibility, pixel mask, edge distance.
+
+Only pixels that lie on the specimen may feed the temperature interpolant:
+the specimen edge is a temperature discontinuity (specimen against a hot
+plate or a cool room), and an interpolant that uses background pixels rings
+(METHOD.md §2: up to 38 K at edge points). The mask is built from the
+projected DIC point cloud itself: its triangulation, with triangles longer
+than a few point spacings removed (so concave outlines and holes stay
+open), rasterised on the pixel centres and eroded by about one pixel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import Delaunay, QhullError, cKDTree
+
+from .errors import ConfigError, GeometryError
+
+__all__ = ["point_normals", "facing_camera", "specimen_mask", "edge_distance"]
+
+
+def point_normals(x: np.ndarray, *, k: int = 12, towards: np.ndarray | None = None) -> np.ndarray:
+    """Unit surface normals of a point cloud by local principal component analysis.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, 3)
+        Point coordinates (mm); NaN rows are missing points (normal NaN).
+    k : int
+        Number of neighbours (including the point) for each local plane fit.
+    towards : ndarray, shape (3,), optional
+        A location (e.g. a camera centre) the normals are oriented towards;
+        without it the orientation is made consistent with the mean normal.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise ConfigError(f"x must have shape (N, 3), got {x.shape}")
+    ok = np.isfinite(x).all(axis=1)
+    n = np.full_like(x, np.nan)
+    pts = x[ok]
+    if pts.shape[0] < 3:
+        raise GeometryError(f"need at least 3 valid points to estimate surface normals, got {pts.shape[0]}")
+    k = min(k, pts.shape[0])
+    _, idx = cKDTree(pts).query(pts, k=k)
+    nb = pts[idx] - pts[idx].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", nb, nb)
+    _, vecs = np.linalg.eigh(cov)
+    normals = vecs[:, :, 0]
+    if towards is not None:
+        sign = np.sign(np.einsum("ni,ni->n", normals, np.asarray(towards, float) - pts))
+    else:
+        sign = np.sign(normals @ normals.mean(axis=0))
+    sign[sign == 0] = 1.0
+    n[ok] = normals * sign[:, None]
+    return n
+
+
+def facing_camera(x: np.ndarray, normals: np.ndarray, centre: np.ndarray, *, max_angle_deg: float = 80.0) -> np.ndarray:
+    """True where the surface at ``x`` faces the camera at ``centre``.
+
+    A point is visible when the angle between its normal and the direction to
+    the camera is below ``max_angle_deg`` (grazing views are unreliable: the
+    emissivity drops and a pixel averages over a long stretch of surface).
+    """
+    d = np.asarray(centre, float) - np.asarray(x, float)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    cosang = np.einsum("...i,...i->...", d, normals)
+    with np.errstate(invalid="ignore"):
+        return np.nan_to_num(cosang, nan=-1.0) > np.cos(np.deg2rad(max_angle_deg))
+
+
+def specimen_mask(
+    pixels: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    *,
+    erosion_px: float = 1.0,
+    max_edge_factor: float = 3.0,
+) -> np.ndarray:
+    """Pixels of a frame that lie on the specimen, from its projected point cloud.
+
+    Parameters
+    ----------
+    pixels : ndarray, shape (N, 2)
+        Projected (u, v) of the DIC points in px; NaN rows are ignored.
+    u, v : ndarray, shape (W,), (H,)
+        Full-sensor pixel coordinates of the frame's columns and rows.
+    erosion_px : float
+        Distance (px) by which the covered area is shrunk, so that pixels
+        that straddle the specimen edge are left out.
+    max_edge_factor : float
+        Triangles with an edge longer than this multiple of the median
+        nearest-neighbour spacing are not part of the specimen (holes,
+        concave outlines).
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+    """
+    if erosion_px < 0:
+        raise ConfigError(f"erosion_px must be >= 0, got {erosion_px}")
+    if max_edge_factor <= 1:
+        raise ConfigError(f"max_edge_factor must be > 1, got {max_edge_factor}")
+    p = np.asarray(pixels, float)
+    p = p[np.isfinite(p).all(axis=1)]
+    u = np.asarray(u)
+    v = np.asarray(v)
+    mask = np.zeros((v.size, u.size), dtype=bool)
+    if p.shape[0] < 3:
+        return mask
+    try:
+        tri = Delaunay(p)
+    except QhullError as exc:
+        raise GeometryError(f"the projected points are degenerate (all on a line?): {exc}") from None
+    spacing = np.median(cKDTree(p).query(p, k=2)[0][:, 1])
+    corners = p[tri.simplices]
+    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    keep = edges <= max_edge_factor * max(spacing, 1e-12)
+    # only the bounding box of the cloud needs testing
+    iu = np.flatnonzero((u >= p[:, 0].min() - 1) & (u <= p[:, 0].max() + 1))
+    iv = np.flatnonzero((v >= p[:, 1].min() - 1) & (v <= p[:, 1].max() + 1))
+    if iu.size == 0 or iv.size == 0:
+        return mask
+    uu, vv = np.meshgrid(u[iu], v[iv])
+    simplex = tri.find_simplex(np.column_stack([uu.ravel(), vv.ravel()]))
+    inside = (simplex >= 0) & keep[np.maximum(simplex, 0)]
+    mask[np.ix_(iv, iu)] = inside.reshape(uu.shape)
+    if erosion_px > 0:
+        # erode by a Euclidean distance rather than a square structuring element
+        dist = ndimage.distance_transform_edt(mask)
+        mask &= dist > erosion_px
+    return mask
+
+
+def edge_distance(mask: np.ndarray, pixels: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Distance (px) from points to the edge of ``mask``; negative outside it.
+
+    Parameters
+    ----------
+    mask : ndarray of bool, shape (H, W)
+    pixels : ndarray, shape (N, 2)
+        (u, v) in full-sensor px; NaN rows give NaN.
+    u, v : ndarray
+        Pixel coordinates of the mask's columns and rows (consecutive integers).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        Bilinearly interpolated signed distance: > 0 inside (distance to the
+        nearest pixel outside the mask), < 0 outside.
+    """
+    inside = ndimage.distance_transform_edt(mask)
+    outside = ndimage.distance_transform_edt(~mask)
+    signed = np.where(mask, inside - 0.5, -(outside - 0.5))
+    p = np.asarray(pixels, float)
+    out = np.full(p.shape[0], np.nan)
+    ok = np.isfinite(p).all(axis=1)
+    cols = p[ok, 0] - u[0]
+    rows = p[ok, 1] - v[0]
+    out[ok] = ndimage.map_coordinates(signed, [rows, cols], order=1, mode="nearest")
+    return out

@@ -1,0 +1,68 @@
+import numpy as np
+import pytest
+
+from irdic.errors import ConfigError, GeometryError
+from irdic.footprint import edge_distance, facing_camera, point_normals, specimen_mask
+
+
+def _grid(n=30, spacing=1.0):
+    a = np.arange(n) * spacing
+    uu, vv = np.meshgrid(a, a)
+    return np.column_stack([uu.ravel(), vv.ravel()])
+
+
+def test_point_normals_on_cylinder_are_radial():
+    th, z = np.meshgrid(np.linspace(-0.6, 0.6, 40), np.linspace(0, 20, 20))
+    r = 30.0
+    x = np.column_stack([r * np.sin(th.ravel()), z.ravel(), r * np.cos(th.ravel())])
+    x[7] = np.nan
+    n = point_normals(x, towards=np.array([0.0, 10.0, 500.0]))
+    radial = np.column_stack([np.sin(th.ravel()), np.zeros(th.size), np.cos(th.ravel())])
+    ok = np.isfinite(n[:, 0])
+    assert not ok[7] and ok.sum() == x.shape[0] - 1
+    assert np.min(np.einsum("ij,ij->i", n[ok], radial[ok])) > 0.999
+
+
+def test_facing_camera_rejects_grazing_and_back():
+    x = np.zeros((3, 3))
+    n = np.array([[0, 0, 1.0], [1.0, 0, 0], [0, 0, -1.0]])
+    vis = facing_camera(x, n, np.array([0, 0, 100.0]))
+    np.testing.assert_array_equal(vis, [True, False, False])
+
+
+def test_specimen_mask_square_with_erosion():
+    # points covering [10, 40] x [20, 50] px with 0.8 px spacing
+    p = _grid(38, 0.8) + [10.0, 20.0]
+    u, v = np.arange(0, 64), np.arange(0, 72)
+    m0 = specimen_mask(p, u, v, erosion_px=0.0)
+    uu, vv = np.meshgrid(u, v)
+    expected = (uu >= 10) & (uu <= 10 + 37 * 0.8) & (vv >= 20) & (vv <= 20 + 37 * 0.8)
+    assert (m0 == expected).mean() > 0.995
+    m1 = specimen_mask(p, u, v, erosion_px=1.0)
+    assert m1.sum() < m0.sum() and not (m1 & ~m0).any()
+    # the eroded mask keeps pixels more than 1 px inside the covered square only
+    assert not m1[20, 10] and m1[21 + 1, 12]
+
+
+def test_specimen_mask_keeps_holes_open():
+    p = _grid(40, 1.0)
+    hole = np.linalg.norm(p - 20.0, axis=1) < 6.0
+    m = specimen_mask(p[~hole], np.arange(40), np.arange(40), erosion_px=0.0)
+    assert not m[20, 20] and m[5, 5]
+
+
+def test_specimen_mask_checks():
+    with pytest.raises(ConfigError, match="erosion_px"):
+        specimen_mask(_grid(), np.arange(3), np.arange(3), erosion_px=-1)
+    with pytest.raises(GeometryError, match="degenerate"):
+        specimen_mask(np.column_stack([np.arange(10.0), np.arange(10.0)]), np.arange(10), np.arange(10))
+
+
+def test_edge_distance_signed():
+    mask = np.zeros((20, 30), bool)
+    mask[5:15, 5:25] = True
+    d = edge_distance(mask, np.array([[15.0, 10.0], [5.0, 10.0], [2.0, 10.0], [np.nan, 1.0]]), np.arange(30), np.arange(20))
+    assert d[0] == pytest.approx(4.5)  # row 10: 5 px to row 15 (first outside), minus half a pixel
+    assert d[1] == pytest.approx(0.5)
+    assert d[2] < 0
+    assert np.isnan(d[3])
