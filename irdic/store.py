@@ -155,6 +155,10 @@ def write_dataset(
         ``path``.
     """
     ds = ds.copy()
+    # fixed-width unicode arrays are not yet stable in the zarr v3 spec; variable-length strings are
+    for name in list(ds.variables):
+        if ds[name].dtype.kind == "U":
+            ds[name] = ds[name].astype(object)
     ds.attrs.update(provenance(stage, params, inputs))
     ds.attrs.pop(COMPLETE_ATTR, None)
     with atomic_directory(path) as tmp:

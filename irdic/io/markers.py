@@ -1,0 +1,205 @@
+"""Marker centres of the calibration target as measured by the DIC system.
+
+Accepted layouts:
+
+- the ``;`` style of the nodemap export (comments start with ``#``; the
+  header may itself be a comment)::
+
+      # Calibration target, 84 markers
+      #        ID;             x [mm];             y [mm];             z [mm]
+               1;          -40.123456;           12.345678;            0.000000
+
+- CSV/TXT with a header naming the ID and x, y, z columns (case ignored,
+  units in brackets allowed, other columns ignored); the ID column may be
+  called ``id``, ``marker``, ``marker_id``, ``point``, ``point_id``, ``nr`` or
+  ``no``;
+- four numeric columns ``ID x y z`` without a header.
+
+IDs are integers: they link each marker to its detection in the IR image.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..errors import ConfigError, DataError, FormatError, IrdicWarning
+from .table import (COMPONENTS, Header, check_unique, data_lines, detect_decimal, length_scale, read_lines,
+                    read_rows, split_fields)
+
+__all__ = ["read_markers", "write_markers"]
+
+log = logging.getLogger(__name__)
+
+_ID_NAMES = ("id", "marker", "marker_id", "markerid", "marker id", "marker no", "point", "point_id",
+             "point id", "pointid", "nr", "no", "no.", "number")
+_SEPS: tuple[str | None, ...] = (";", "\t", ",", None)
+
+
+def _header_columns(header: Header) -> list[int] | None:
+    """Indices of (ID, x, y, z) in a candidate header, or None."""
+    low = [b.lower() for b in header.bare]
+    j_id = next((j for j, b in enumerate(low) if b in _ID_NAMES), None)
+    if j_id is None:
+        return None
+    idx = [j_id]
+    for c in COMPONENTS:
+        hits = [j for j, b in enumerate(low) if b == c]
+        if len(hits) != 1:
+            return None
+        idx.append(hits[0])
+    return idx
+
+
+def _find_header(lines: list[str], path: Path) -> tuple[int, str | None, Header, list[int]] | None:
+    for k, ln in enumerate(lines[:1000]):
+        s = ln.strip().lstrip("#").strip()
+        if not s:
+            continue
+        for sep in _SEPS:
+            if sep is not None and sep not in s:
+                continue
+            header = Header.from_fields(split_fields(s, sep), k + 1, path)
+            idx = _header_columns(header)
+            if idx is not None:
+                return k, sep, header, idx
+    return None
+
+
+def _headerless_sep(line: str) -> str | None:
+    for sep in (";", "\t"):
+        if sep in line:
+            return sep
+    if line.count(",") == 3:
+        return ","
+    return None
+
+
+def read_markers(path: str | os.PathLike) -> xr.Dataset:
+    """Read the marker centres of a calibration target (ID, x, y, z in mm).
+
+    Parameters
+    ----------
+    path : path-like
+        See the module docstring for the accepted layouts. Decimal commas are
+        detected when the separator is not a comma.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``x(marker, component)`` float64 in mm; coordinate ``marker`` (int64
+        IDs, file order), ``component = ["x", "y", "z"]``. attrs: ``format``,
+        ``source``, ``n_markers``, ``dropped_markers`` (IDs without
+        coordinates).
+
+    Warns
+    -----
+    IrdicWarning
+        Markers with NaN coordinates (not seen by the DIC system) are dropped.
+
+    Raises
+    ------
+    FormatError
+        No usable header and not four columns, non-integer IDs, bad cells
+        (named by line and column), rows of the wrong length, no rows.
+    DataError
+        A marker ID occurs twice, or no marker has coordinates.
+    """
+    p, lines = read_lines(path)
+    found = _find_header(lines, p)
+    if found is not None:
+        k, sep, header, idx = found
+        body, nos = data_lines(lines, k + 1)
+    else:
+        body, nos = data_lines(lines, 0)
+        if not body:
+            raise FormatError("no data rows; expected lines 'ID; x; y; z' (mm)", p)
+        sep = _headerless_sep(body[0])
+        fields = split_fields(body[0], sep)
+        if len(fields) != 4:
+            raise FormatError(
+                f"found no header naming the columns ID, x, y, z and {len(fields)} fields in the first data row; "
+                "expected a header such as '# ID; x [mm]; y [mm]; z [mm]' or four columns ID x y z",
+                p, int(nos[0]))
+        header = Header.from_fields(["ID", "x", "y", "z"], 0, p)
+        idx = [0, 1, 2, 3]
+    rows = read_rows(body, nos, header, sep=sep, decimal=detect_decimal(body, sep))
+    j_id, *j_xyz = idx
+    col = rows.frame.iloc[:, j_id]
+    if not rows.is_numeric(j_id):
+        # say clearly that names such as "P12" are not accepted, instead of "not a number"
+        text = col.astype(str).str.strip()
+        ok = text.str.fullmatch(r"[+-]?\d+(\.0*)?").to_numpy(dtype=bool) | col.isna().to_numpy()
+        bad = np.flatnonzero(~ok)
+        if bad.size:
+            i = int(bad[0])
+            raise FormatError(
+                f"marker ID {rows.cell(i, j_id)!r} in column {header.names[j_id]!r} is not an integer; irdic links "
+                "markers to their IR detections by integer IDs: number the markers (e.g. 12 instead of 'P12')",
+                p, int(rows.line_nos[i]))
+    ids = rows.integers(j_id, what="marker ID")
+    check_unique(ids, rows.line_nos, p, what="marker ID")
+    x = np.column_stack([rows.number(j) * length_scale(header.units[j], header.names[j], p, header.line or None)
+                         for j in j_xyz])
+    seen = np.isfinite(x).all(axis=1)
+    dropped = ids[~seen]
+    if dropped.size:
+        warnings.warn(
+            f"{p}: {dropped.size} marker(s) without coordinates dropped (not seen by the DIC system): "
+            f"IDs {', '.join(map(str, dropped.tolist()))}", IrdicWarning, stacklevel=2)
+    if not seen.any():
+        raise DataError(f"{p}: none of the {ids.size} markers has coordinates (all NaN)")
+    ds = xr.Dataset(
+        {"x": (("marker", "component"), x[seen], {"units": "mm", "long_name": "marker centre"})},
+        coords={"marker": ("marker", ids[seen], {"long_name": "marker ID"}),
+                "component": ("component", np.array(COMPONENTS, dtype=object))},
+    )
+    ds.attrs = {"format": "markers", "source": os.fspath(p), "n_markers": int(seen.sum()),
+                "dropped_markers": dropped.tolist()}
+    log.info("%s: %d markers read, %d dropped", p, int(seen.sum()), dropped.size)
+    return ds
+
+
+def write_markers(path: str | os.PathLike, ids: Any, x: Any, *, decimals: int = 6) -> Path:
+    """Write marker centres in the ``;`` style read by :func:`read_markers`.
+
+    Parameters
+    ----------
+    path : path-like
+    ids : array_like of int, shape (n,)
+        Unique marker IDs.
+    x : array_like, shape (n, 3)
+        Marker centres, mm; NaN rows are written as ``nan`` (markers not seen).
+    decimals : int
+        Decimals written (mm).
+
+    Returns
+    -------
+    Path
+    """
+    ids_arr = np.asarray(ids)
+    if ids_arr.ndim != 1 or ids_arr.size == 0 or not np.issubdtype(ids_arr.dtype, np.integer):
+        raise ConfigError(f"ids must be a non-empty 1-D integer array, got dtype {ids_arr.dtype} "
+                          f"shape {ids_arr.shape}")
+    if np.unique(ids_arr).size != ids_arr.size:
+        raise ConfigError("ids must be unique")
+    xs = np.asarray(x, dtype=np.float64)
+    if xs.shape != (ids_arr.size, 3):
+        raise ConfigError(f"x must have shape ({ids_arr.size}, 3), got {xs.shape}")
+    if np.isinf(xs).any():
+        raise ConfigError("x holds infinite values; use NaN for markers not seen")
+    if not isinstance(decimals, (int, np.integer)) or isinstance(decimals, bool) or not 0 <= decimals <= 15:
+        raise ConfigError(f"decimals must be an integer from 0 to 15, got {decimals!r}")
+    head = ["# Calibration target marker centres (irdic)",
+            "#" + "; ".join([f"{'ID':>9}"] + [f"{c + ' [mm]':>19}" for c in COMPONENTS])]
+    fmt = "%10d; " + "; ".join([f"%19.{decimals}f"] * 3)
+    body = [fmt % (i, *row) for i, row in zip(ids_arr.tolist(), xs.tolist())]
+    out = Path(path)
+    out.write_text("\n".join(head + body) + "\n", encoding="utf-8", newline="\n")
+    return out
