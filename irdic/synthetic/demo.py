@@ -1,0 +1,205 @@
+"""Write the demo experiment as real raw exports plus truth stores.
+
+:func:`make_demo` writes::
+
+    outdir/setup/markers.txt          84 marker centres (ID; x; y; z in mm, DIC frame)
+    outdir/setup/target.txt           IRBIS text, full 1024 x 768 frame of the open-book target, 0.04 K noise
+    outdir/setup/seeds.yaml           approximate pixel positions (true +- 2 px) of 8 markers
+    outdir/setup/truth.zarr           true camera and per-marker truth
+    outdir/<exp>/dic/<exp>_0_<k>.txt  ZEISS/ARAMIS nodemap of DIC stage k (relative time in s)
+    outdir/<exp>/ir/<exp>_<n:05d>.txt IRBIS text crop export of IR frame n (n = position in the recording)
+    outdir/<exp>/truth.zarr           every truth quantity on (time = DIC times, point)
+
+IR exports: 3 decimals, ``StartPos`` = the crop window, ``ms`` = 1000 t +
+1234.5 (ms since the recording started; t = 0 is the trigger shared with the
+DIC), ``FrameIndex`` = n + 1, ``RecDate``/``RecTime`` of the frame. The
+half-shell is written with TAB and ``.``; the tube as a German-locale export
+(``;``, decimal comma, rows ending in ``;``) with one frame missing (dropped:
+frame 17 at the demo scale, 5 at the tiny one).
+DIC exports: 4 decimals, ``nan`` rows for failed facets and a few points
+left out of some stages (see :mod:`irdic.synthetic.experiments`).
+
+Everything is reproducible from ``seed``. Each of ``setup`` and ``<exp>`` is
+written to a temporary folder and moved into place when complete.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import logging
+import time as _time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..store import atomic_directory, write_dataset
+from ._checks import choice
+from .camera import lab_camera
+from .experiments import EXPERIMENTS, SCALES, Experiment, experiment
+from .target import OpenBook, open_book_target
+
+__all__ = ["make_demo", "write_setup", "write_experiment", "demo_book", "IR_MS_OFFSET"]
+
+log = logging.getLogger(__name__)
+
+#: ms of the trigger (t = 0) in the IR recording's clock
+IR_MS_OFFSET = 1234.5
+_REC_START = {"halfshell": _dt.datetime(2024, 5, 13, 10, 15, 40), "tube": _dt.datetime(2024, 5, 14, 14, 2, 10)}
+_SETUP_TIME = _dt.datetime(2024, 5, 13, 9, 30, 5)
+_IR_STYLE = {"halfshell": {"sep": "\t", "decimal": ".", "trailing_sep": False},
+             "tube": {"sep": ";", "decimal": ",", "trailing_sep": True}}
+
+
+def demo_book() -> OpenBook:
+    """The demo's open-book target: the full 2 x 6 x 7 grid with one corner left
+    unpainted, as on real targets, so that the open book is not symmetric and
+    the markers can be assigned without seeds (83 markers)."""
+    return OpenBook(unpainted=((1, 0, 6),))
+
+
+def write_setup(outdir, *, camera=None, seed: int = 0, noise: float = 0.04) -> dict:
+    """Write ``outdir/setup``: markers, target image, seeds and the camera truth.
+
+    Returns
+    -------
+    dict
+        Paths of the written files.
+    """
+    from ..io.irbis import write_irbis
+    from ..io.markers import write_markers
+
+    camera = lab_camera() if camera is None else camera
+    target = open_book_target(camera, noise=noise, seed=seed, book=demo_book())
+    final = Path(outdir) / "setup"
+    with atomic_directory(final) as tmp:
+        tmp.mkdir(parents=True)
+        order = np.argsort(target.markers.marker.values)  # DIC exports list markers by ID
+        ids = target.markers.marker.values[order]
+        write_markers(tmp / "markers.txt", ids, target.markers.x.values[order])
+        write_irbis(tmp / "target.txt", target.image.values, ms=0.0, frame_index=1, rec_datetime=_SETUP_TIME,
+                    sensor_size=(camera.width, camera.height), decimals=3, filename="target.irb",
+                    parameters={"Distance": 0.45, "EnvTemp": 22.0, "Emissivity": 0.96})
+        _write_seeds(tmp / "seeds.yaml", target, seed)
+        write_dataset(target.truth, tmp / "truth.zarr", stage="synthetic-setup",
+                      params={"seed": seed, "noise_K": noise, "camera": camera.describe()})
+    return {"markers": final / "markers.txt", "target": final / "target.txt", "seeds": final / "seeds.yaml",
+            "truth": final / "truth.zarr"}
+
+
+def _write_seeds(path: Path, target, seed: int) -> None:
+    book = target.book
+    pick = [k for k in range(book.n_markers)
+            if book.painted[k] and book.marker_row[k] in (0, book.n_rows - 1)
+            and book.marker_col[k] in (0, 1, book.n_cols - 2, book.n_cols - 1)][:8]
+    rng = np.random.default_rng([seed, 99])
+    uv = target.truth.marker_centroid.sel(marker=book.ids[pick]).values + rng.uniform(-2.0, 2.0, (len(pick), 2))
+    lines = ["# Approximate IR pixel positions of 8 calibration markers (true centre +- 2 px),",
+             "# for users who prefer to seed the marker assignment by hand: paste under the",
+             "# setup in config/config.yaml. Keys: marker IDs of setup/markers.txt; values:",
+             "# [u, v] = pixel column and row (0-based, full sensor).",
+             "seeds:"]
+    for k, (u, v) in zip(pick, uv):
+        lines.append(f"  {int(book.ids[k])}: [{u:.1f}, {v:.1f}]")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def write_experiment(outdir, ex: Experiment, *, write_ir: bool = True) -> dict:
+    """Write ``outdir/<ex.name>``: DIC nodemaps, IR exports and the truth store.
+
+    Returns
+    -------
+    dict
+        ``{"dic": [paths], "ir": [paths], "truth": path}``.
+    """
+    from ..io.irbis import write_irbis
+    from ..io.nodemap import write_nodemap
+
+    name = ex.name
+    final = Path(outdir) / name
+    start = _REC_START[name]
+    dic_files, ir_files = [], []
+    with atomic_directory(final) as tmp:
+        (tmp / "dic").mkdir(parents=True)
+        (tmp / "ir").mkdir()
+        x_undef = ex.x_dic[0]
+        for k, t in enumerate(ex.dic_times):
+            keep = ex.present[k]
+            p = tmp / "dic" / f"{name}_0_{k}.txt"
+            write_nodemap(p, ex.ids[keep], x_undef[keep], ex.x_dic[k][keep] - x_undef[keep], stage_index=k,
+                          relative_time=float(t), reference_stage_index=0, stage_name=f"Stage {k}",
+                          stage_date=start + _dt.timedelta(seconds=float(t)))
+            dic_files.append(final / "dic" / p.name)
+        if write_ir:
+            u0, v0, _, _ = ex.window
+            for i, frame in enumerate(ex.ir_frames()):
+                n = int(ex.ir_frame_numbers[i])
+                ms = 1000.0 * float(ex.ir_times[i]) + IR_MS_OFFSET
+                p = tmp / "ir" / f"{name}_{n:05d}.txt"
+                write_irbis(p, frame.values, ms=ms, frame_index=n + 1,
+                            rec_datetime=start + _dt.timedelta(milliseconds=ms), start_pos=(u0, v0),
+                            sensor_size=(ex.camera.width, ex.camera.height), decimals=3,
+                            filename=f"{name}.irb", parameters={"Distance": 0.45, "EnvTemp": 22.0,
+                                                                "Emissivity": 0.96},
+                            **_IR_STYLE[name])
+                ir_files.append(final / "ir" / p.name)
+        write_dataset(ex.truth(), tmp / "truth.zarr", stage="synthetic-truth",
+                      params={"experiment": name, "scale": ex.scale, "ir_noise_K": ex.ir_noise,
+                              "dic_noise_mm": ex.dic_noise, "seed": ex.seed, "ir_ms_offset": IR_MS_OFFSET,
+                              "specimen": ex.specimen.describe()})
+    return {"dic": dic_files, "ir": ir_files, "truth": final / "truth.zarr"}
+
+
+def make_demo(outdir, *, scale: str = "demo", ir_noise: float = 0.05, dic_noise: float = 0.005, seed: int = 0,
+              experiments=EXPERIMENTS, write_ir: bool = True) -> dict:
+    """Write the synthetic demo experiment(s) as raw exports plus truth.
+
+    Parameters
+    ----------
+    outdir : path-like
+        Output folder (created; ``setup`` and each experiment's folder are
+        replaced as a whole).
+    scale : {"tiny", "demo", "paper"}
+        ``tiny``: a few frames and ~270 points per experiment (workflow tests,
+        ~2 s); ``demo``: half-shell 30 s and tube 10 s, ~1,600 points
+        (~10 s, ~75 MB); ``paper``: ~10,000 points and 500 IR frames per
+        experiment (minutes and ~0.5 GB of IR text; consider
+        ``write_ir=False`` and the in-memory generators).
+    ir_noise : float
+        IR pixel noise (K).
+    dic_noise : float
+        DIC coordinate noise (mm).
+    seed : int
+        Seed of all noise and defects.
+    experiments : sequence of {"halfshell", "tube"}
+        Which experiments to write.
+    write_ir : bool
+        Write the IR frame exports (False: only DIC and truth).
+
+    Returns
+    -------
+    dict
+        ``{"setup": {...}, "halfshell": {...}, "tube": {...}}`` of written paths.
+    """
+    choice(scale, "scale", SCALES)
+    if isinstance(experiments, str):
+        experiments = (experiments,)
+    experiments = tuple(experiments)
+    if not experiments:
+        raise ConfigError("`experiments` is empty; expected some of 'halfshell', 'tube'")
+    for e in experiments:
+        choice(e, "experiments", EXPERIMENTS)
+    out = Path(outdir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"cannot create the demo folder {out}: {exc.strerror}") from exc
+    t0 = _time.perf_counter()
+    result = {"setup": write_setup(out, camera=lab_camera(), seed=seed)}
+    log.info("demo setup written to %s (%.1f s)", out / "setup", _time.perf_counter() - t0)
+    for name in experiments:
+        t1 = _time.perf_counter()
+        ex = experiment(name, scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
+        result[name] = write_experiment(out, ex, write_ir=write_ir)
+        log.info("demo %s (%s) written to %s (%.1f s)", name, scale, out / name, _time.perf_counter() - t1)
+    return result
