@@ -1,0 +1,238 @@
+"""The calibration stage on exactly rendered synthetic targets (irdic.synthetic) with known cameras."""
+
+import json
+
+import numpy as np
+import pytest
+
+from irdic.calibrate import calibrate, calibrate_from_files, load_camera, summarize
+from irdic.errors import CalibrationError, ConfigError, DataError, IrdicWarning
+from irdic.plot import plot_calibration
+from irdic.store import open_store, write_dataset
+from irdic.synthetic.camera import lab_camera
+from irdic.synthetic.target import open_book_target
+
+from .test_markers import book_order, erase
+
+POSES = {
+    "lab": dict(),
+    "left-low": dict(distance=400.0, azimuth_deg=-12.0, elevation_deg=-6.0, roll_deg=-2.0),
+    "far-high": dict(distance=520.0, azimuth_deg=25.0, elevation_deg=18.0, roll_deg=4.0),
+}
+
+
+def seeds_of(tg, pick=(3, 17, 30, 47, 66, 79), jitter=2.0, seed=0):
+    """A few marker positions, a few px off, as a user reads them off the image."""
+    rng = np.random.default_rng(seed)
+    ids = tg.markers.marker.values
+    pix = tg.truth.marker_pixel.values
+    return {int(ids[i]): (pix[i] + rng.uniform(-jitter, jitter, 2)).tolist() for i in pick}
+
+
+def specimen_points(n=400, seed=1):
+    """Points of a specimen-like curved surface in front of the target (a cylinder patch, mm)."""
+    rng = np.random.default_rng(seed)
+    phi = rng.uniform(-0.6, 0.6, n)
+    y = rng.uniform(-20, 20, n)
+    return np.column_stack([30 * np.sin(phi), y, -15 + 30 * np.cos(phi)])
+
+
+@pytest.fixture(scope="module")
+def lab():
+    return open_book_target(lab_camera())
+
+
+@pytest.fixture(scope="module")
+def lab_cal(lab):
+    return calibrate(lab.image, lab.markers, seeds=seeds_of(lab), marker_radius_mm=1.6)
+
+
+@pytest.mark.parametrize("pose", list(POSES))
+def test_accuracy_against_the_true_camera(pose, lab, lab_cal):
+    if pose == "lab":
+        tg, cal = lab, lab_cal
+    else:
+        tg = open_book_target(lab_camera(**POSES[pose]), seed=3)
+        cal = calibrate(tg.image, tg.markers, seeds=seeds_of(tg))
+    cam = tg.camera
+    assert cal.attrs["n_used"] == 84 and cal.attrs["n_outliers"] == 0
+    assert float(cal.rms_px) <= 0.05
+    model = load_camera(cal)
+    x = specimen_points()
+    err = np.hypot(*(model.project(x) - cam.project(x)).T)
+    assert np.sqrt(np.mean(err**2)) <= 0.03
+    g = model.decompose()
+    assert g.ifov_mrad == pytest.approx(0.57, rel=0.01)
+    np.testing.assert_allclose(g.C, cam.C, atol=0.02 * np.linalg.norm(cam.C))
+    # the reported uncertainty is of the size of the actual error
+    unc = model.projection_uncertainty(x)
+    assert 0.2 < np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(unc**2)) < 5
+
+
+def test_bias_correction_with_estimated_radius(lab):
+    cal = calibrate(lab.image, lab.markers, seeds=seeds_of(lab))  # radius from the image
+    assert cal.attrs["marker_radius_mm"] == pytest.approx(1.6, rel=0.1)
+    truth = lab.truth.marker_centroid.values - lab.truth.marker_pixel.values
+    np.testing.assert_allclose(cal.bias_correction.values, truth, atol=0.003)
+
+
+def test_distortion_is_recovered():
+    k1 = -0.4
+    cam = lab_camera(distance=250.0, k1=k1)
+    tg = open_book_target(cam, seed=5)
+    seeds = seeds_of(tg)
+    # a pinhole fit of a distorted image flags corner markers: the right hint to model distortion
+    with pytest.warns(IrdicWarning, match="outliers"):
+        pin = calibrate(tg.image, tg.markers, seeds=seeds, marker_radius_mm=1.6)
+    dist = calibrate(tg.image, tg.markers, seeds=seeds, marker_radius_mm=1.6, distortion="k1")
+    k1_fit = float(dist.distortion.sel(coefficient="k1"))
+    sd = float(np.sqrt(dist.covariance.sel(parameter="k1", parameter_2="k1")))
+    print(f"k1 true {k1}, fitted {k1_fit:.4f} +- {sd:.4f}; RMS pinhole {float(pin.rms_px):.4f} px, "
+          f"with k1 {float(dist.rms_px):.4f} px")
+    assert abs(k1_fit - k1) < max(4 * sd, 0.02)
+    assert float(dist.rms_px) <= 0.05
+    assert float(pin.rms_px) > 3 * float(dist.rms_px)
+    x = specimen_points(seed=2) * 0.6
+    err = np.hypot(*(load_camera(dist).project(x) - cam.project(x)).T)
+    assert np.sqrt(np.mean(err**2)) <= 0.03
+
+
+def test_dataset_contract_and_store_round_trip(lab, lab_cal, tmp_path):
+    cal = lab_cal
+    assert cal.projection_matrix.dims == ("row", "col") and cal.projection_matrix.shape == (3, 4)
+    assert np.linalg.norm(cal.projection_matrix.values[2, :3]) == pytest.approx(1.0)
+    assert cal.K.dims == ("row3", "col3") and cal.R.dims == ("row3", "col3")
+    assert cal.camera_centre.dims == ("component",)
+    assert cal.distortion.coefficient.values.tolist() == ["k1", "k2"]
+    assert cal.detected.dims == ("marker", "axis") and cal.axis.values.tolist() == ["u", "v"]
+    for name in ("reprojected", "residual", "residual_norm", "loo_residual", "status", "marker_x", "rms_px",
+                 "max_px", "focal_length_px", "ifov_mrad", "covariance", "unassigned_uv"):
+        assert name in cal, name
+    assert cal.attrs["sensor_width"] == 1024 and cal.attrs["sensor_height"] == 768
+    assert set(cal.status.values) == {"used"}
+    np.testing.assert_allclose(cal.residual_norm.values, np.hypot(*cal.residual.values.T))
+    assert float(cal.max_px) == pytest.approx(cal.residual_norm.values.max())
+    path = write_dataset(cal, tmp_path / "calibration.zarr", stage="calibrate")
+    back = open_store(path)
+    x = specimen_points()
+    np.testing.assert_allclose(load_camera(back).project(x), load_camera(cal).project(x), atol=1e-9)
+    assert back.status.values.tolist() == cal.status.values.tolist()
+    text = summarize(back)
+    assert "RMS" in text and "IFOV 0.57" in text and "84 of 84 markers used" in text
+
+
+def test_flags_outlier_missing_and_unassigned(lab):
+    ids = lab.markers.marker.values
+    x = lab.markers.x.values.copy()
+    bad_id, lost_id, extra_id = int(ids[40]), int(ids[12]), int(ids[55])
+    x[40] += [0.0, 0.6, 0.0]  # a marker measured 0.6 mm off by the DIC
+    keep = np.ones(len(ids), bool)
+    keep[12] = False
+    image = erase(lab, keep)  # marker 12 covered in the IR image
+    drop = ids != extra_id  # marker 55 missing from the marker file
+    far = np.array([[500.0, 500.0, 500.0]])  # a marker far outside the view
+    markers = (np.append(ids[drop], 999), np.vstack([x[drop], far]))
+    with pytest.warns(IrdicWarning, match=rf"markers {bad_id} are outliers"):
+        cal = calibrate(image, markers, seeds=seeds_of(lab), marker_radius_mm=1.6)
+    st = dict(zip(cal.marker.values.tolist(), cal.status.values.tolist()))
+    assert st[bad_id] == "outlier" and st[lost_id] == "not_detected" and st[999] == "outside_image"
+    assert json.loads(cal.attrs["outlier_ids"]) == [str(bad_id)]
+    assert json.loads(cal.attrs["not_detected_ids"]) == [str(lost_id)]
+    assert cal.attrs["n_unassigned"] == 1
+    np.testing.assert_allclose(cal.unassigned_uv.values[0], lab.truth.marker_centroid.values[55], atol=0.1)
+    assert np.isnan(cal.detected.sel(marker=lost_id)).all()
+    assert float(cal.loo_residual.sel(marker=bad_id)) > 1.0
+    assert float(cal.rms_px) <= 0.05  # the outlier does not spoil the fit
+    assert "outliers (not used): " + str(bad_id) in summarize(cal)
+
+
+def test_automatic_correspondence_on_an_asymmetric_target(lab):
+    book = lab.book
+    gone = book.ids[(book.marker_wing == 1) & (book.marker_col == 6)]
+    keep = ~np.isin(lab.markers.marker.values, gone)
+    image = erase(lab, keep)
+    markers = lab.markers.isel(marker=np.flatnonzero(keep))
+    cal = calibrate(image, markers, marker_radius_mm=1.6)
+    assert cal.attrs["correspondence"] == "automatic" and cal.attrs["n_used"] == 78
+    assert float(cal.rms_px) <= 0.05
+
+
+def test_automatic_correspondence_with_one_unpainted_marker():
+    # the demo's target: one corner left unpainted is enough to break the symmetry
+    from irdic.synthetic.demo import demo_book
+
+    tg = open_book_target(lab_camera(), book=demo_book())
+    cal = calibrate(tg.image, tg.markers, marker_radius_mm=1.6)
+    assert cal.attrs["correspondence"] == "automatic" and cal.attrs["n_used"] == 83
+    np.testing.assert_allclose(cal.detected.values, tg.truth.marker_centroid.values, atol=0.1)
+
+
+def test_symmetric_target_without_seeds_asks_for_seeds(lab):
+    with pytest.raises(CalibrationError, match=r"(?s)ambiguous.*seeds: \{<marker id>: \[u, v\]"):
+        calibrate(lab.image, lab.markers)
+
+
+def test_bad_inputs(lab):
+    ids = lab.markers.marker.values
+    x = lab.markers.x.values
+    seeds = seeds_of(lab)
+    with pytest.raises(CalibrationError, match="only 5 markers have finite coordinates"):
+        calibrate(lab.image, (ids[:5], x[:5]), seeds=seeds)
+    wing = lab.book.marker_wing[book_order(lab)]
+    with pytest.raises(CalibrationError, match="coplanar"):
+        calibrate(lab.image, (ids[wing == 0], x[wing == 0]))
+    dup = ids.copy()
+    dup[7] = dup[8]
+    with pytest.raises(DataError, match=rf"duplicate marker IDs: \['{dup[8]}'\]"):
+        calibrate(lab.image, (dup, x), seeds=seeds)
+    dup_ds = lab.markers.assign_coords(marker=dup)
+    with pytest.raises(DataError, match="duplicate marker IDs"):
+        calibrate(lab.image, dup_ds, seeds=seeds)
+    with pytest.raises(ConfigError, match=r"not in the marker file: \['4242'\]"):
+        calibrate(lab.image, lab.markers, seeds={**seeds, 4242: [10.0, 10.0]})
+    k = next(iter(seeds))
+    with pytest.raises(ConfigError, match="contradict each other"):
+        calibrate(lab.image, lab.markers, seeds={**seeds, k: [seeds[k][0] + 60.0, seeds[k][1] + 45.0]})
+    blank = lab.image.copy(data=np.full(lab.image.shape, 22.0, np.float32))
+    with pytest.raises(CalibrationError, match="blank"):
+        calibrate(blank, lab.markers, seeds=seeds)
+    with pytest.raises(CalibrationError, match="saturated"):
+        calibrate(lab.image.copy(data=np.minimum(lab.image.values, 21.0)), lab.markers, seeds=seeds)
+    with pytest.raises(ConfigError, match="`distortion` needs `refine=True`"):
+        calibrate(lab.image, lab.markers, seeds=seeds, refine=False, distortion="k1")
+    with pytest.raises(ConfigError, match="`markers` must be a Dataset"):
+        calibrate(lab.image, x, seeds=seeds)
+
+
+def test_mirrored_image_is_behind_the_camera(lab):
+    mirrored = lab.image.copy(data=lab.image.values[:, ::-1])
+    seeds = {k: [1023.0 - u, v] for k, (u, v) in seeds_of(lab).items()}
+    with pytest.raises(CalibrationError, match="behind.*mirrored"):
+        calibrate(mirrored, lab.markers, seeds=seeds)
+
+
+def test_dlt_only_matches_the_paper_method(lab):
+    cal = calibrate(lab.image, lab.markers, seeds=seeds_of(lab), refine=False, correct_bias=False)
+    assert cal.covariance.parameter.values[0] == "m11"
+    assert float(cal.rms_px) <= 0.05
+    err = np.hypot(*(load_camera(cal).project(specimen_points()) - lab.camera.project(specimen_points())).T)
+    assert np.sqrt(np.mean(err**2)) <= 0.03
+
+
+def test_figures_and_files(lab, lab_cal, tmp_path):
+    from irdic.io.markers import write_markers
+
+    png = plot_calibration(lab_cal, lab.image, tmp_path / "cal.png")
+    assert png.stat().st_size > 20_000
+    mpath = tmp_path / "markers.txt"
+    write_markers(mpath, lab.markers.marker.values, lab.markers.x.values)
+    ipath = tmp_path / "target.npy"
+    np.save(ipath, lab.image.values)
+    store = calibrate_from_files(mpath, ipath, tmp_path / "cal.zarr", tmp_path / "fig.png", seeds=seeds_of(lab),
+                                 marker_radius_mm=1.6, polarity="auto", distortion="none")
+    assert float(open_store(store).rms_px) <= 0.05 and (tmp_path / "fig.png").exists()
+    # without seeds the symmetric target fails, and the detection figure is there to read seeds off
+    with pytest.raises(CalibrationError, match="ambiguous"):
+        calibrate_from_files(mpath, ipath, tmp_path / "cal2.zarr", tmp_path / "detections.png")
+    assert (tmp_path / "detections.png").stat().st_size > 20_000
+    assert not (tmp_path / "cal2.zarr").exists()
