@@ -17,6 +17,7 @@ from typing import Mapping
 import yaml
 
 from .errors import ConfigError
+from .store import _jsonable
 from .ingest import ingest_dic, ingest_ir
 
 __all__ = ["make_demo", "ingest_experiment", "calibrate_setup", "run", "stage_paths"]
@@ -55,7 +56,7 @@ def make_demo(outdir: str | os.PathLike, *, scale: str = "demo", ir_noise: float
     files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and ".zarr" not in p.parts[-2:])
     with open(man, "w", encoding="utf-8") as fh:
         yaml.safe_dump({"scale": scale, "ir_noise": ir_noise, "dic_noise": dic_noise, "seed": seed,
-                        "n_files": len(files), "contents": written if isinstance(written, dict) else None},
+                        "n_files": len(files), "contents": _jsonable(written)},
                        fh, sort_keys=False)
     log.info("demo written to %s (%d files)", out, len(files))
     return out
@@ -89,7 +90,6 @@ def calibrate_setup(markers: str | os.PathLike, target: Mapping | str | os.PathL
     **settings
         The ``calibration`` section of the configuration.
     """
-    from . import io
     from .calibrate import calibrate_from_files
 
     if isinstance(target, Mapping):

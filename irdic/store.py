@@ -24,6 +24,7 @@ import json
 import os
 import shutil
 import uuid
+import warnings
 from pathlib import Path
 from typing import Any, Iterator, Mapping, Sequence
 
@@ -189,7 +190,10 @@ def open_store(path: str | os.PathLike) -> xr.Dataset:
     if not p.exists():
         raise DataError(f"{p}: store not found (run the stage that produces it first)")
     try:
-        ds = xr.open_zarr(str(p), consolidated=False)
+        with warnings.catch_warnings():
+            # Snakemake drops a .snakemake_timestamp file into directory outputs
+            warnings.filterwarnings("ignore", message=r".*\.snakemake_timestamp.*")
+            ds = xr.open_zarr(str(p), consolidated=False)
     except Exception as exc:  # zarr raises several unrelated types here
         raise DataError(f"{p}: not a readable zarr store ({type(exc).__name__}: {exc})") from exc
     if not ds.attrs.get(COMPLETE_ATTR, False):

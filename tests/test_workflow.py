@@ -1,0 +1,109 @@
+"""The Snakemake workflow on the tiny demo, in a temporary folder."""
+
+import copy
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from irdic.store import open_store
+
+ROOT = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake"]
+
+pytestmark = pytest.mark.slow
+
+
+def _config(tmp):
+    with open(ROOT / "config" / "config.yaml") as fh:
+        cfg = yaml.safe_load(fh)
+    cfg["demo"]["scale"] = "tiny"
+    return cfg
+
+
+def _snakemake(workdir, *args, config=None):
+    if config is not None:
+        with open(workdir / "config.yaml", "w") as fh:
+            yaml.safe_dump(config, fh)
+    cmd = SNAKEMAKE + ["-s", str(ROOT / "Snakefile"), "--directory", str(workdir),
+                       "--configfile", str(workdir / "config.yaml"), *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+
+
+def _planned(result) -> set[str]:
+    """Rule names a dry run would execute (from `--quiet rules` output)."""
+    rules = set()
+    for line in result.stdout.splitlines():
+        parts = line.split()
+        if len(parts) == 2 and parts[1].isdigit() and parts[0] not in ("job", "total"):
+            rules.add(parts[0])
+    return rules
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    work = tmp_path_factory.mktemp("wf")
+    cfg = _config(work)
+    res = _snakemake(work, "--cores", "2", config=cfg)
+    assert res.returncode == 0, res.stderr[-4000:]
+    return work, cfg
+
+
+def test_demo_runs_end_to_end(run):
+    work, _ = run
+    for exp in ("halfshell", "tube"):
+        ir = open_store(work / "results" / exp / "ir.zarr")
+        dic = open_store(work / "results" / exp / "dic.zarr")
+        assert ir["temperature"].dims == ("time", "v", "u")
+        assert dic["x"].dims == ("time", "point", "component")
+        assert ir.attrs["irdic_stage"] == "ingest-ir" and dic.attrs["irdic_stage"] == "ingest-dic"
+        # the demo's IR times start at 0 (first frame) and DIC times lie inside the IR span
+        assert float(ir.time[0]) == 0.0 and float(dic.time[-1]) <= float(ir.time[-1]) + 1e-9
+        truth = open_store(work / "resources" / "demo" / exp / "truth.zarr")
+        np.testing.assert_allclose(dic.time.values, truth.time.values, atol=1e-9)
+    cal = open_store(work / "results" / "setups" / "lab" / "calibration.zarr")
+    assert float(cal["rms_px"]) < 0.05
+    true_M = open_store(work / "resources" / "demo" / "setup" / "truth.zarr")["projection_matrix"].values
+    M = cal["projection_matrix"].values
+    # same camera: projections of points around the specimens agree to a few hundredths of a pixel
+    X = np.random.default_rng(0).uniform([-40, -30, -20], [40, 30, 20], (500, 3))
+    Xh = np.c_[X, np.ones(len(X))]
+    p_true = (Xh @ true_M.T)[:, :2] / (Xh @ true_M.T)[:, 2:]
+    p_cal = (Xh @ M.T)[:, :2] / (Xh @ M.T)[:, 2:]
+    assert np.sqrt(np.mean(np.sum((p_true - p_cal) ** 2, axis=1))) < 0.03
+    assert (work / "results" / "setups" / "lab" / "calibration.png").stat().st_size > 10_000
+    for log in ("logs/tube/ingest_ir.log", "logs/setups/lab/calibrate.log", "logs/demo.log"):
+        assert "done" in (work / "results" / log).read_text()
+
+
+def test_nothing_to_do_after_a_run(run):
+    work, cfg = run
+    res = _snakemake(work, "-n", "--quiet", "rules", config=cfg)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert _planned(res) == set()
+
+
+def test_parameter_change_reruns_only_dependent_stages(run):
+    work, cfg = run
+    changed = copy.deepcopy(cfg)
+    changed["calibration"]["distortion"] = "k1"
+    res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
+    assert _planned(res) == {"calibrate", "all"}
+    changed = copy.deepcopy(cfg)
+    changed["experiments"]["tube"]["ir"]["time_offset"] = 0.5
+    res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
+    assert _planned(res) == {"ingest_ir", "all"}
+    _snakemake(work, "-n", config=cfg)  # leave the config as the run had it
+
+
+def test_bad_config_is_reported_with_the_key(tmp_path):
+    cfg = _config(tmp_path)
+    cfg["calibration"]["polarty"] = "dark"
+    res = _snakemake(tmp_path, "-n", config=cfg)
+    assert res.returncode != 0
+    assert "calibration.polarty: unknown key" in res.stderr + res.stdout
