@@ -9,6 +9,8 @@ Examples
     irdic ingest-dic resources/demo/tube/dic results/tube/dic.zarr
     irdic calibrate --markers resources/demo/setup/markers.txt \\
         --target resources/demo/setup/target.txt --out results/setups/lab/calibration.zarr
+    irdic couple --dic results/tube/dic.zarr --ir results/tube/ir.zarr \\
+        --calibration results/setups/lab/calibration.zarr --out results/tube/points.zarr
     irdic run --config config/config.yaml
     irdic info results/tube/ir.zarr
 """
@@ -84,6 +86,13 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--distortion", choices=["none", "k1", "k1k2"], default="none")
     s.add_argument("--polarity", choices=["auto", "dark", "bright"], default="auto")
 
+    s = sub.add_parser("couple", help="temperatures at the DIC points -> points.zarr")
+    s.add_argument("--dic", required=True, help="dic.zarr")
+    s.add_argument("--ir", required=True, help="ir.zarr")
+    s.add_argument("--calibration", required=True, help="calibration.zarr")
+    s.add_argument("--out", required=True, help="points.zarr to write")
+    s.add_argument("--method", choices=["rbf", "bilinear", "cubic"], default="rbf")
+
     s = sub.add_parser("run", help="run all stages of a configuration without Snakemake")
     s.add_argument("--config", default="config/config.yaml")
     return p
@@ -114,6 +123,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             calibrate_setup(args.markers, args.target, args.out, args.figure,
                             distortion=args.distortion, polarity=args.polarity)
+            print(describe_store(args.out))
+        elif args.command == "couple":
+            from .couple import couple_stores
+
+            couple_stores(args.dic, args.ir, args.calibration, args.out, method=args.method)
             print(describe_store(args.out))
         elif args.command == "run":
             from .config import load_config

@@ -21,6 +21,7 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "demo": ("synthetic", "io", "store.py"),
     "ingest": ("io", "ingest.py", "store.py"),
     "calibrate": ("io", "camera.py", "markers.py", "calibrate.py", "plot.py", "store.py"),
+    "couple": ("camera.py", "calibrate.py", "footprint.py", "rbf.py", "couple.py", "store.py"),
 }
 
 

@@ -20,7 +20,7 @@ from .errors import ConfigError
 from .store import _jsonable
 from .ingest import ingest_dic, ingest_ir
 
-__all__ = ["make_demo", "ingest_experiment", "calibrate_setup", "run", "stage_paths"]
+__all__ = ["make_demo", "ingest_experiment", "calibrate_setup", "run", "stage_paths", "STAGES"]
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +99,10 @@ def calibrate_setup(markers: str | os.PathLike, target: Mapping | str | os.PathL
     return calibrate_from_files(markers, tpath, store, figure, target_format=tfmt, seeds=seeds, **settings)
 
 
-def run(config: Mapping, *, stages: tuple[str, ...] = ("demo", "ingest", "calibrate")) -> dict:
+STAGES = ("demo", "ingest", "calibrate", "couple")
+
+
+def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
     """Run the configured stages for every setup and experiment, in order.
 
     Parameters
@@ -114,9 +117,9 @@ def run(config: Mapping, *, stages: tuple[str, ...] = ("demo", "ingest", "calibr
     dict
         The output paths (see :func:`stage_paths`).
     """
-    unknown = set(stages) - {"demo", "ingest", "calibrate"}
+    unknown = set(stages) - set(STAGES)
     if unknown:
-        raise ConfigError(f"unknown stage(s) {sorted(unknown)}; expected demo, ingest, calibrate")
+        raise ConfigError(f"unknown stage(s) {sorted(unknown)}; expected {', '.join(STAGES)}")
     paths = stage_paths(config)
     demo = config.get("demo", {})
     if "demo" in stages and demo.get("enabled", False):
@@ -133,4 +136,11 @@ def run(config: Mapping, *, stages: tuple[str, ...] = ("demo", "ingest", "calibr
         for name, e in config["experiments"].items():
             p = paths["experiments"][name]
             ingest_experiment(e, p["dic"], p["ir"])
+    if "couple" in stages:
+        from .couple import couple_stores
+
+        for name, e in config["experiments"].items():
+            p = paths["experiments"][name]
+            cal = paths["setups"][e["setup"]]["calibration"]
+            couple_stores(p["dic"], p["ir"], cal, p["points"], **config.get("interpolation", {}))
     return paths

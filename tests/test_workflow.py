@@ -66,6 +66,9 @@ def test_demo_runs_end_to_end(run):
         assert float(ir.time[0]) == 0.0 and float(dic.time[-1]) <= float(ir.time[-1]) + 1e-9
         truth = open_store(work / "resources" / "demo" / exp / "truth.zarr")
         np.testing.assert_allclose(dic.time.values, truth.time.values, atol=1e-9)
+        pts = open_store(work / "results" / exp / "points.zarr")
+        err = (pts.temperature - truth.temperature.sel(point=pts.point)).values[pts.visible.values]
+        assert np.sqrt(np.mean(err**2)) < 0.1  # demo noise: 0.05 K in IR, 0.005 mm in DIC
     cal = open_store(work / "results" / "setups" / "lab" / "calibration.zarr")
     assert float(cal["rms_px"]) < 0.05
     true_M = open_store(work / "resources" / "demo" / "setup" / "truth.zarr")["projection_matrix"].values
@@ -93,11 +96,15 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["calibration"]["distortion"] = "k1"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"calibrate", "all"}
+    assert _planned(res) == {"calibrate", "couple", "all"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["ir"]["time_offset"] = 0.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"ingest_ir", "all"}
+    assert _planned(res) == {"ingest_ir", "couple", "all"}
+    changed = copy.deepcopy(cfg)
+    changed["interpolation"]["c_space"] = 1.5
+    res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
+    assert _planned(res) == {"couple", "all"}
     _snakemake(work, "-n", config=cfg)  # leave the config as the run had it
 
 
