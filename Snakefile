@@ -14,6 +14,7 @@ include: "workflow/rules/demo.smk"
 include: "workflow/rules/ingest.smk"
 include: "workflow/rules/calibrate.smk"
 include: "workflow/rules/couple.smk"
+include: "workflow/rules/fields.smk"
 
 
 rule all:

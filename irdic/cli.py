@@ -93,6 +93,12 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="points.zarr to write")
     s.add_argument("--method", choices=["rbf", "bilinear", "cubic"], default="rbf")
 
+    s = sub.add_parser("fields", help="gradient, rate and strain fields -> fields.zarr")
+    s.add_argument("--points", required=True, help="points.zarr")
+    s.add_argument("--calibration", required=True, help="calibration.zarr")
+    s.add_argument("--out", required=True, help="fields.zarr to write")
+    s.add_argument("--temperature-smoothing", default=None, help="none (default), gcv or a number >= 1")
+
     s = sub.add_parser("run", help="run all stages of a configuration without Snakemake")
     s.add_argument("--config", default="config/config.yaml")
     return p
@@ -128,6 +134,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .couple import couple_stores
 
             couple_stores(args.dic, args.ir, args.calibration, args.out, method=args.method)
+            print(describe_store(args.out))
+        elif args.command == "fields":
+            from .fields import fields_stores
+
+            sm = args.temperature_smoothing
+            sm = None if sm in (None, "none") else ("gcv" if sm == "gcv" else float(sm))
+            fields_stores(args.points, args.calibration, args.out, temperature_smoothing=sm)
             print(describe_store(args.out))
         elif args.command == "run":
             from .config import load_config

@@ -343,11 +343,19 @@ def _extrapolate(ir, t_ir, t_dic, local, masks, outside, theta, gu, gv, rate, ed
     todo = np.isfinite(pts[0]).all(axis=2)
     if not todo.any():
         return todo
+    # only the few points near the edge (at any time) go through the second pass
+    cols = np.flatnonzero(todo.any(axis=0))
+    Mc = cols.size
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IrdicWarning)  # the first pass already said which times are out of span
-        res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate(list(pts), axis=1), masks, **kw)
-    f = np.stack([res.theta[:, j * M:(j + 1) * M] for j in range(S)])  # (S, n_t, M)
-    gq_u, gq_v, rq = res.dtheta_du[:, :M], res.dtheta_dv[:, :M], res.dtheta_dt[:, :M]
+        res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate(list(pts[:, :, cols]), axis=1), masks, **kw)
+    f = np.full((S, n_t, M), np.nan)
+    gq_u = np.full((n_t, M), np.nan)
+    gq_v = np.full((n_t, M), np.nan)
+    rq = np.full((n_t, M), np.nan)
+    for j in range(S):
+        f[j][:, cols] = res.theta[:, j * Mc:(j + 1) * Mc]
+    gq_u[:, cols], gq_v[:, cols], rq[:, cols] = res.dtheta_du[:, :Mc], res.dtheta_dv[:, :Mc], res.dtheta_dt[:, :Mc]
     d = local - pts[0]
     L = np.linalg.norm(d, axis=2)
     e = d / np.maximum(L, 1e-12)[..., None]

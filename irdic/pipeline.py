@@ -99,7 +99,7 @@ def calibrate_setup(markers: str | os.PathLike, target: Mapping | str | os.PathL
     return calibrate_from_files(markers, tpath, store, figure, target_format=tfmt, seeds=seeds, **settings)
 
 
-STAGES = ("demo", "ingest", "calibrate", "couple")
+STAGES = ("demo", "ingest", "calibrate", "couple", "fields")
 
 
 def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
@@ -143,4 +143,11 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
             p = paths["experiments"][name]
             cal = paths["setups"][e["setup"]]["calibration"]
             couple_stores(p["dic"], p["ir"], cal, p["points"], **config.get("interpolation", {}))
+    if "fields" in stages:
+        from .fields import fields_stores
+
+        for name, e in config["experiments"].items():
+            p = paths["experiments"][name]
+            cal = paths["setups"][e["setup"]]["calibration"]
+            fields_stores(p["points"], cal, p["fields"], **config.get("fields", {}))
     return paths

@@ -69,6 +69,9 @@ def test_demo_runs_end_to_end(run):
         pts = open_store(work / "results" / exp / "points.zarr")
         err = (pts.temperature - truth.temperature.sel(point=pts.point)).values[pts.visible.values]
         assert np.sqrt(np.mean(err**2)) < 0.1  # demo noise: 0.05 K in IR, 0.005 mm in DIC
+        flds = open_store(work / "results" / exp / "fields.zarr")
+        assert flds.attrs["irdic_stage"] == "fields"
+        assert flds.temperature_gradient.dims == ("time", "point", "component")
     cal = open_store(work / "results" / "setups" / "lab" / "calibration.zarr")
     assert float(cal["rms_px"]) < 0.05
     true_M = open_store(work / "resources" / "demo" / "setup" / "truth.zarr")["projection_matrix"].values
@@ -96,15 +99,19 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["calibration"]["distortion"] = "k1"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"calibrate", "couple", "all"}
+    assert _planned(res) == {"calibrate", "couple", "fields", "all"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["ir"]["time_offset"] = 0.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"ingest_ir", "couple", "all"}
+    assert _planned(res) == {"ingest_ir", "couple", "fields", "all"}
     changed = copy.deepcopy(cfg)
     changed["interpolation"]["c_space"] = 1.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"couple", "all"}
+    assert _planned(res) == {"couple", "fields", "all"}
+    changed = copy.deepcopy(cfg)
+    changed["fields"]["temperature_smoothing"] = "gcv"
+    res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
+    assert _planned(res) == {"fields", "all"}
     _snakemake(work, "-n", config=cfg)  # leave the config as the run had it
 
 

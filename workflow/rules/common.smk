@@ -53,5 +53,5 @@ def setup_files(wildcards):
 def all_outputs():
     out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
     for e in EXPERIMENTS:
-        out += [f"{RESULTS}/{e}/dic.zarr", f"{RESULTS}/{e}/ir.zarr", f"{RESULTS}/{e}/points.zarr"]
+        out += [f"{RESULTS}/{e}/dic.zarr", f"{RESULTS}/{e}/ir.zarr", f"{RESULTS}/{e}/points.zarr", f"{RESULTS}/{e}/fields.zarr"]
     return out

@@ -1,0 +1,185 @@
+"""Fields stage: in-plane temperature gradient, temperature rate and strain on the surface.
+
+Input: ``points.zarr`` (temperatures, pixel gradients and local rates at the
+DIC points, plus their coordinates) and the setup's ``calibration.zarr``.
+The surface ``x(Ψ, t)`` is interpolated from the DIC points
+(:func:`irdic.surface.fit_surface`: IMQ RBF in the surface parameters Ψ,
+tensor product with time). With the tangents ``a_α`` and the projection
+Jacobian ``J`` (px/mm) the paper's relations give
+
+- ``grad Θ = (∂Θ/∂Ψ^α) a^α`` with ``∂Θ/∂Ψ^α = ∇_pix Θ · J a_α`` (eq. tempGrad),
+- ``Θ̇ = ∂Θ/∂t + (Jᵀ ∇_pix Θ) · ∂x/∂t`` (eq. tempVeloc), local and convective
+  parts stored separately,
+- the in-plane Green-Lagrange strain on the reference tangent plane, its
+  principal values and directions, and an equivalent strain.
+
+Beyond the paper (its own outlook for noisy IR data): with
+``temperature_smoothing`` ("gcv" or a number) the material rate is the time
+derivative of each point's temperature series after IMQ regression in time
+(the series is Lagrangian, so this is the material rate without pixel
+derivatives); the local part is then the difference of that rate and the
+convective part. ``surface_smoothing``/``surface_smoothing_time`` do the same
+for the coordinates. Interpolation (None) stays the default.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time as _time
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from .calibrate import load_camera
+from .errors import ConfigError, DataError
+from .store import open_store, write_dataset
+from .strain import strain
+from .surface import fit_surface, surface_geometry
+from .thermal import material_rate, rate_from_series, surface_gradient
+
+__all__ = ["fields", "fields_stores"]
+
+log = logging.getLogger(__name__)
+
+
+def _smoothing(name, value):
+    if value is None or value == "gcv":
+        return value
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 1:
+        return float(value)
+    raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv' or a number >= 1, got {value!r}")
+
+
+def _method_of(info) -> str:
+    return str(info.get("method")) if isinstance(info, dict) else str(info)
+
+
+def fields(
+    points: xr.Dataset,
+    calibration: xr.Dataset,
+    *,
+    c_space: float = 0.95,
+    R0_space: float = 1.0,
+    c_time: float = 1.0,
+    R0_time: float = 1.0,
+    parametrisation: str = "auto",
+    solver: str = "auto",
+    surface_smoothing=None,
+    surface_smoothing_time=None,
+    temperature_smoothing=None,
+) -> xr.Dataset:
+    """Gradient, rate and strain fields at the DIC points.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        ``points.zarr`` of the experiment.
+    calibration : xarray.Dataset
+        ``calibration.zarr`` of its setup.
+    c_space, R0_space : float
+        IMQ shape factor and distance normalisation (mm) in the surface
+        parameters (the paper: 0.969 / 0.9328, 1 mm).
+    c_time, R0_time : float
+        IMQ shape factor and normalisation (s) in time (the paper: 1, 1 s).
+    parametrisation : {"auto", "plane", "cylinder"}
+        Surface parameters: best-fit plane (the paper) or cylindrical
+        unwrapping; "auto" takes the cylinder where the plane would fold.
+    solver : {"auto", "global", "local"}
+        Spatial solver of the surface interpolation.
+    surface_smoothing, surface_smoothing_time : None, "gcv" or float >= 1
+        Regression instead of interpolation for the coordinates.
+    temperature_smoothing : None, "gcv" or float >= 1
+        Regression in time of the point temperatures for the material rate.
+
+    Returns
+    -------
+    xarray.Dataset
+        The content of ``fields.zarr`` (see README).
+    """
+    for name, v in (("surface_smoothing", surface_smoothing), ("surface_smoothing_time", surface_smoothing_time),
+                    ("temperature_smoothing", temperature_smoothing)):
+        _smoothing(name, v)
+    missing = [v for v in ("x", "temperature", "temperature_pixel_gradient", "temperature_local_rate")
+               if v not in points]
+    if missing:
+        raise DataError(f"points store lacks {missing}: is it the output of the couple stage?")
+    started = _time.perf_counter()
+    t = points["time"].values.astype(float)
+    x = points["x"].transpose("time", "point", "component").values.astype(float)
+    sf = fit_surface(x, t, c=c_space, R0=R0_space, c_t=c_time, R0_t=R0_time, smoothing=surface_smoothing,
+                     smoothing_t=surface_smoothing_time, solver=solver, parametrisation=parametrisation)
+    T, N = sf.x.shape[:2]
+    geo = surface_geometry(sf.tangents)
+    camera = load_camera(calibration)
+    flat = sf.x.reshape(-1, 3)
+    ok = np.isfinite(flat).all(axis=1)
+    J = np.full((T * N, 2, 3), np.nan)
+    J[ok] = camera.jacobian(flat[ok])
+    J = J.reshape(T, N, 2, 3)
+    g_pix = points["temperature_pixel_gradient"].transpose("time", "point", "axis").values.astype(float)
+    local = points["temperature_local_rate"].values.astype(float)
+    theta = points["temperature"].values.astype(float)
+    grad = surface_gradient(g_pix, J, sf.tangents)
+    rate = material_rate(local, g_pix, J, sf.velocity)
+    total, loc = rate.rate, rate.local
+    if temperature_smoothing is not None:
+        smoothed_rate, _ = rate_from_series(theta, t, smoothing=temperature_smoothing, c=c_time, R0=R0_time)
+        visible = np.isfinite(theta)
+        total = np.where(visible, smoothed_rate, np.nan)
+        loc = total - rate.convective
+    st = strain(sf.tangents, sf.ref_tangents, tensors=False)
+    log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
+             _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
+
+    comp = np.array(["x", "y", "z"], dtype=object)
+    ds = xr.Dataset(
+        {
+            "temperature_gradient": (("time", "point", "component"), grad,
+                                     {"units": "K/mm", "long_name": "in-plane temperature gradient (current configuration)"}),
+            "temperature_rate": (("time", "point"), total,
+                                 {"units": "K/s", "long_name": "material temperature rate"}),
+            "temperature_rate_local": (("time", "point"), loc,
+                                       {"units": "K/s", "long_name": "local part of the temperature rate (at the fixed pixel)"}),
+            "temperature_rate_convective": (("time", "point"), rate.convective,
+                                            {"units": "K/s", "long_name": "convective part of the temperature rate (motion of the point)"}),
+            "temperature": (("time", "point"), theta, {"units": "degC", "long_name": "temperature (from points.zarr)"}),
+            "x": (("time", "point", "component"), sf.x, {"units": "mm", "long_name": "position on the interpolated surface"}),
+            "velocity": (("time", "point", "component"), sf.velocity, {"units": "mm/s", "long_name": "velocity of the material point"}),
+            "normal": (("time", "point", "component"), geo.normal, {"units": "1", "long_name": "unit surface normal"}),
+            "strain": (("time", "point", "i", "j"), st.E2,
+                       {"units": "1", "long_name": "Green-Lagrange strain components in the reference basis (E_1, E_2)"}),
+            "reference_basis": (("point", "i", "component"), st.basis,
+                                {"units": "1", "long_name": "orthonormal reference tangent basis E_1 = A_1/|A_1|, E_2 = N x E_1"}),
+            "max_principal_strain": (("time", "point"), st.e_max, {"units": "1", "long_name": "maximum in-plane principal Green-Lagrange strain"}),
+            "min_principal_strain": (("time", "point"), st.e_min, {"units": "1", "long_name": "minimum in-plane principal Green-Lagrange strain"}),
+            "principal_direction": (("time", "point", "principal", "component"),
+                                    np.stack([st.direction_max, st.direction_min], axis=2),
+                                    {"units": "1", "long_name": "principal strain directions (reference configuration)"}),
+            "principal_direction_current": (("time", "point", "principal", "component"),
+                                            np.stack([st.direction_max_current, st.direction_min_current], axis=2),
+                                            {"units": "1", "long_name": "principal strain directions mapped to the current configuration"}),
+            "equivalent_strain": (("time", "point"), st.equivalent,
+                                  {"units": "1", "long_name": "equivalent (von Mises) logarithmic strain, plane, isochoric"}),
+            "surface_parameter": (("point", "param"), sf.psi, {"units": "mm", "long_name": "surface parameters Psi"}),
+            "surface_edge_distance": (("point",), sf.edge_distance,
+                                      {"units": "mm", "long_name": "distance to the edge of the point cloud in Psi"}),
+            "filled": (("time", "point"), sf.filled,
+                       {"long_name": "point missing in this DIC stage, position filled by the surface interpolant"}),
+        },
+        coords={"time": ("time", t, {"units": "s"}), "point": points["point"].values, "component": comp,
+                "i": np.array(["1", "2"], dtype=object), "j": np.array(["1", "2"], dtype=object),
+                "principal": np.array(["max", "min"], dtype=object), "param": np.array(["psi1", "psi2"], dtype=object)},
+        attrs={"parametrisation": _method_of(sf.info.get("parametrisation")), "surface_solver": str(sf.info.get("solver")),
+               "temperature_smoothing": str(temperature_smoothing)},
+    )
+    return ds
+
+
+def fields_stores(points_path, calibration_path, out, **params) -> Path:
+    """Run :func:`fields` on stores and write ``fields.zarr`` atomically."""
+    ds = fields(open_store(points_path), open_store(calibration_path), **params)
+    write_dataset(ds, out, stage="fields", params=params,
+                  inputs=[os.fspath(points_path), os.fspath(calibration_path)])
+    return Path(out)
