@@ -97,6 +97,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 import warnings
 from collections import OrderedDict
 from functools import lru_cache
@@ -1364,7 +1365,16 @@ def evaluate_series(
     Wd = temporal.weights(te[ks], 1) if ks.size else None
     row_of = np.full(n_times, -1, np.int64)
     row_of[ks] = np.arange(ks.size)
+    started = time.perf_counter()
+    done = 0
+    next_report = max(1, ks.size // 10)
     for ch in pieces:
+        done += ch.size
+        if done >= next_report or done == ks.size:
+            el = time.perf_counter() - started
+            log.info("evaluate_series: %d/%d times, %.1f times/s, ETA %.0f s", done, ks.size, done / max(el, 1e-9),
+                     (ks.size - done) * el / max(done, 1))
+            next_report = done + max(1, ks.size // 10)
         mi = int(mask_of[ch[0]])
         interp = interps.get(mi)
         if interp is None:

@@ -79,3 +79,37 @@ def test_framestore_checks(tmp_path):
         fs.close()
     fs.abort()
     assert not list(tmp_path.iterdir())
+
+
+def test_killed_stage_leaves_no_store_and_the_next_run_cleans_up(tmp_path):
+    """A stage killed while writing (SIGKILL, no clean-up code runs) leaves no
+    store under the final name; the next run removes the dead temporary."""
+    import signal
+    import subprocess
+    import sys
+    import textwrap
+    import time
+
+    script = textwrap.dedent(f"""
+        import time, numpy as np
+        from irdic.store import FrameStore
+        with FrameStore({str(tmp_path / 'ir.zarr')!r}, "temperature", 1000, ("v", "u"),
+                        {{"v": np.arange(64), "u": np.arange(64)}}) as fs:
+            for i in range(1000):
+                fs.write(i, float(i), np.full((64, 64), float(i)))
+                if i == 5:
+                    print("writing", flush=True)
+                time.sleep(0.01)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "writing"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    time.sleep(0.1)
+    names = [p.name for p in tmp_path.iterdir()]
+    assert "ir.zarr" not in names  # nothing a later stage could take for a result
+    assert any(n.startswith(".ir.zarr.tmp-") for n in names)  # the dead job's temporary
+    with pytest.raises(DataError, match="not found"):
+        open_store(tmp_path / "ir.zarr")
+    write_dataset(_ds(), tmp_path / "ir.zarr", stage="rerun")
+    assert [p.name for p in tmp_path.iterdir()] == ["ir.zarr"]
