@@ -110,6 +110,9 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
+from ._checks import float_array as _float_array
+from ._checks import increasing_times as _increasing_times
+from ._checks import positive as _positive
 from .errors import ConfigError, DataError, IrdicWarning
 
 __all__ = [
@@ -204,16 +207,6 @@ def imq_dr(r, c=2.0):
 # --------------------------------------------------------------------------
 
 
-def _positive(name, value):
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a positive number, got {value!r}") from None
-    if isinstance(value, bool) or not (math.isfinite(v) and v > 0):
-        raise ConfigError(f"{name} must be a positive finite number, got {value!r}")
-    return v
-
-
 def _integer(name, value, lo):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise ConfigError(f"{name} must be an integer >= {lo}, got {value!r}")
@@ -226,13 +219,6 @@ def _method(value):
     if value not in METHODS:
         raise ConfigError(f"method must be one of {', '.join(map(repr, METHODS))}, got {value!r}")
     return value
-
-
-def _float_array(name, value):
-    try:
-        return np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{name} must be an array of numbers: {exc}") from None
 
 
 def _check_mask(mask, name="mask"):
@@ -333,24 +319,11 @@ class TemporalInterpolant:
     def __init__(self, times, *, c=1.0, R0=1.0):
         self.c = _positive("c", c)
         self.R0 = _positive("R0", R0)
-        t = _float_array("times", times)
-        if t.ndim != 1:
-            raise ConfigError(f"times must be 1-D (n_frames,), got shape {t.shape}")
+        t = _increasing_times("times", times, "n_frames")
         if t.size < 2:
             raise DataError(
                 f"times: {t.size} frame time(s); the temporal interpolant with monomials "
                 "{1, t} needs at least 2 frames"
-            )
-        bad = np.flatnonzero(~np.isfinite(t))
-        if bad.size:
-            raise DataError(f"times: non-finite frame time at index {bad[0]} ({t[bad[0]]})")
-        step = np.diff(t)
-        bad = np.flatnonzero(step <= 0)
-        if bad.size:
-            i = bad[0]
-            raise DataError(
-                f"times must be strictly increasing: times[{i}] = {float(t[i])!r} s is followed by "
-                f"times[{i + 1}] = {float(t[i + 1])!r} s ({bad.size} such step(s))"
             )
         self.times = t
         self._t_mid = 0.5 * (t[0] + t[-1])

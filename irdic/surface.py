@@ -110,6 +110,9 @@ import scipy.linalg
 from scipy import sparse
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
+from ._checks import float_array as _float_array
+from ._checks import increasing_times as _increasing_times
+from ._checks import positive as _positive
 from .errors import ConfigError, DataError, GeometryError, IrdicWarning
 
 __all__ = [
@@ -156,25 +159,6 @@ _BLOCK_BYTES = 64 * 2**20
 # --------------------------------------------------------------------------
 
 
-def _positive(name, value):
-    if isinstance(value, bool):
-        raise ConfigError(f"{name} must be a positive number, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a positive number, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ConfigError(f"{name} must be a positive finite number, got {value!r}")
-    return v
-
-
-def _float_array(name, value):
-    try:
-        return np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{name} must be an array of numbers: {exc}") from None
-
-
 def _choice(name, value, options):
     if not isinstance(value, str) or value not in options:
         raise ConfigError(f"{name} must be one of {', '.join(map(repr, options))}, got {value!r}")
@@ -216,21 +200,7 @@ def _psi_array(name, psi):
 
 
 def _check_times(times, name="times"):
-    t = _float_array(name, times)
-    if t.ndim != 1:
-        raise ConfigError(f"{name} must be 1-D (stages,), got shape {t.shape}")
-    bad = np.flatnonzero(~np.isfinite(t))
-    if bad.size:
-        raise DataError(f"{name}: non-finite time at index {bad[0]} ({float(t[bad[0]])})")
-    step = np.diff(t)
-    bad = np.flatnonzero(step <= 0)
-    if bad.size:
-        i = bad[0]
-        raise DataError(
-            f"{name} must be strictly increasing: {name}[{i}] = {float(t[i])!r} s is followed by "
-            f"{name}[{i + 1}] = {float(t[i + 1])!r} s ({bad.size} such step(s))"
-        )
-    return t
+    return _increasing_times(name, times, "stages")
 
 
 # --------------------------------------------------------------------------

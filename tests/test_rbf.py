@@ -142,7 +142,7 @@ def test_temporal_bad_arguments():
         TemporalInterpolant([0.0, 0.5, 1.0, 1.0, 2.0])
     with pytest.raises(DataError, match="at least 2 frames"):
         TemporalInterpolant([1.0])
-    with pytest.raises(DataError, match="non-finite frame time at index 1"):
+    with pytest.raises(DataError, match=r"times: non-finite time at index 1"):
         TemporalInterpolant([0.0, np.nan, 1.0])
     with pytest.raises(ConfigError, match="times must be 1-D"):
         TemporalInterpolant(np.zeros((2, 2)))
