@@ -22,6 +22,8 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "ingest": ("io", "ingest.py", "store.py"),
     "calibrate": ("io", "camera.py", "markers.py", "calibrate.py", "plot.py", "store.py"),
     "couple": ("camera.py", "calibrate.py", "footprint.py", "rbf.py", "couple.py", "store.py"),
+    "figures": ("plot.py", "export.py", "pipeline.py", "store.py"),
+    "export": ("export.py", "pipeline.py", "store.py"),
     "fields": ("camera.py", "calibrate.py", "surface.py", "thermal.py", "strain.py", "fields.py", "store.py"),
 }
 

@@ -20,7 +20,8 @@ from .errors import ConfigError
 from .store import _jsonable
 from .ingest import ingest_dic, ingest_ir
 
-__all__ = ["make_demo", "ingest_experiment", "calibrate_setup", "run", "stage_paths", "STAGES"]
+__all__ = ["make_demo", "ingest_experiment", "calibrate_setup", "make_figures", "export_experiment", "run",
+           "stage_paths", "STAGES"]
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +100,7 @@ def calibrate_setup(markers: str | os.PathLike, target: Mapping | str | os.PathL
     return calibrate_from_files(markers, tpath, store, figure, target_format=tfmt, seeds=seeds, **settings)
 
 
-STAGES = ("demo", "ingest", "calibrate", "couple", "fields")
+STAGES = ("demo", "ingest", "calibrate", "couple", "fields", "figures", "export")
 
 
 def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
@@ -150,4 +151,56 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
             p = paths["experiments"][name]
             cal = paths["setups"][e["setup"]]["calibration"]
             fields_stores(p["points"], cal, p["fields"], **config.get("fields", {}))
+    if "figures" in stages or "export" in stages:
+        for name, e in config["experiments"].items():
+            p = paths["experiments"][name]
+            rep = e.get("report", {})
+            if "figures" in stages:
+                make_figures(p["points"], p["fields"], Path(p["points"]).parent / "figures", experiment=name,
+                             times=rep.get("times"), point_ids=rep.get("points"))
+            if "export" in stages:
+                ex = config.get("export", {})
+                export_experiment(p["points"], p["fields"], Path(p["points"]).parent / "paraview",
+                                  Path(p["points"]).parent / "points.csv", experiment=name,
+                                  point_ids=rep.get("points"), csv_points=ex.get("csv_points", "selected"),
+                                  precision=ex.get("paraview_precision", "float32"), every=ex.get("paraview_every", 1))
     return paths
+
+
+def _open_optional(path):
+    from .store import open_store
+
+    return open_store(path) if path is not None and Path(path).exists() else None
+
+
+def make_figures(points_path, fields_path, outputs, *, experiment: str, times=None, point_ids=None) -> dict:
+    """Figures of one experiment (``fields.zarr`` optional) -> PNG paths.
+
+    ``outputs`` is a folder or a mapping ``{figure name: path}``; ``times``
+    (s) and ``point_ids`` as in ``experiments.<name>.report`` of the configuration.
+    """
+    from .export import select_points, select_times
+    from .plot import plot_experiment
+    from .store import open_store
+
+    points = open_store(points_path)
+    fields = _open_optional(fields_path)
+    key = f"experiments.{experiment}.report"
+    t = points["time"].values
+    sel_t = t[select_times(t, list(times) if times else None, name=f"{key}.times")]
+    ids = select_points(points, list(point_ids) if point_ids else None, name=f"{key}.points")
+    return plot_experiment(points, outputs, fields=fields, times=sel_t, point_ids=ids, experiment=experiment)
+
+
+def export_experiment(points_path, fields_path, paraview_dir, csv_path, *, experiment: str, point_ids=None,
+                      csv_points: str = "selected", precision: str = "float32", every: int = 1) -> None:
+    """ParaView time series (.pvd + .vtu) and CSV of selected points of one experiment."""
+    from .export import select_points, write_csv, write_paraview
+    from .store import open_store
+
+    points = open_store(points_path)
+    fields = _open_optional(fields_path)
+    ids = "all" if csv_points == "all" else select_points(points, list(point_ids) if point_ids else None,
+                                                         name=f"experiments.{experiment}.report.points")
+    write_paraview(points, paraview_dir, fields=fields, dtype=precision, every=every)
+    write_csv(points, csv_path, fields=fields, point_ids=ids)

@@ -99,20 +99,41 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["calibration"]["distortion"] = "k1"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"calibrate", "couple", "fields", "all"}
+    assert _planned(res) == {"calibrate", "couple", "fields", "all", "figures", "export"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["ir"]["time_offset"] = 0.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"ingest_ir", "couple", "fields", "all"}
+    assert _planned(res) == {"ingest_ir", "couple", "fields", "all", "figures", "export"}
     changed = copy.deepcopy(cfg)
     changed["interpolation"]["c_space"] = 1.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"couple", "fields", "all"}
+    assert _planned(res) == {"couple", "fields", "all", "figures", "export"}
     changed = copy.deepcopy(cfg)
     changed["fields"]["temperature_smoothing"] = "gcv"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"fields", "all"}
+    assert _planned(res) == {"fields", "all", "figures", "export"}
+    changed = copy.deepcopy(cfg)
+    changed["experiments"]["tube"]["report"] = {"times": [1.0], "points": []}
+    res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
+    assert _planned(res) == {"figures", "all"}
+    changed = copy.deepcopy(cfg)
+    changed["export"] = {"paraview_every": 2}
+    res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
+    assert _planned(res) == {"export", "all"}
     _snakemake(work, "-n", config=cfg)  # leave the config as the run had it
+
+
+def test_figures_exports_and_report(run):
+    work, cfg = run
+    for exp in ("halfshell", "tube"):
+        for name in ("temperature", "gradient", "rate", "history", "strain"):
+            assert (work / "results" / exp / "figures" / f"{name}.png").stat().st_size > 10_000
+        assert (work / "results" / exp / "paraview" / "points.pvd").exists()
+        assert (work / "results" / exp / "points.csv").stat().st_size > 1_000
+    res = _snakemake(work, "--report", str(work / "report.html"), config=cfg)
+    assert res.returncode == 0, res.stderr[-3000:]
+    html = (work / "report.html").read_text(encoding="utf-8")
+    assert "In-plane temperature gradient of experiment <strong>tube</strong>" in html
 
 
 def test_bad_config_is_reported_with_the_key(tmp_path):

@@ -6,7 +6,13 @@ rule calibrate:
         unpack(setup_files),
     output:
         store=directory(f"{RESULTS}/setups/{{setup}}/calibration.zarr"),
-        figure=f"{RESULTS}/setups/{{setup}}/calibration.png",
+        figure=report(
+            f"{RESULTS}/setups/{{setup}}/calibration.png",
+            caption="../report/calibration.rst",
+            category="Calibration",
+            subcategory="{setup}",
+            labels={"setup": "{setup}", "figure": "calibration"},
+        ),
     params:
         markers=lambda wc: config["setups"][wc.setup]["markers"]["path"],
         target=lambda wc: config["setups"][wc.setup]["target_image"],

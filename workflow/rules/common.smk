@@ -50,8 +50,18 @@ def setup_files(wildcards):
     }
 
 
+def experiment_results(wildcards):
+    """points.zarr of an experiment, and fields.zarr when the workflow has a fields rule."""
+    out = {"points": f"{RESULTS}/{wildcards.experiment}/points.zarr"}
+    if workflow.is_rule("fields"):
+        out["fields"] = f"{RESULTS}/{wildcards.experiment}/fields.zarr"
+    return out
+
+
 def all_outputs():
     out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
     for e in EXPERIMENTS:
         out += [f"{RESULTS}/{e}/dic.zarr", f"{RESULTS}/{e}/ir.zarr", f"{RESULTS}/{e}/points.zarr", f"{RESULTS}/{e}/fields.zarr"]
+        out += [f"{RESULTS}/{e}/figures/{name}.png" for name in FIGURES]
+        out += [f"{RESULTS}/{e}/paraview", f"{RESULTS}/{e}/points.csv"]
     return out

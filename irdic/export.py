@@ -1,0 +1,492 @@
+"""Export of the point results: ParaView time series and CSV tables.
+
+* :func:`write_paraview` writes one VTK unstructured grid (``.vtu``) per DIC
+  time with one vertex cell per point and every per-point variable of
+  ``points.zarr`` (and ``fields.zarr``) as point data, plus a ParaView data
+  collection (``.pvd``) that lists the files with their times. Open the
+  ``.pvd`` in ParaView and the time slider steps through the DIC stages.
+* :func:`write_csv` writes selected points over time in long format, one
+  row per (time, point), a header with units.
+* :func:`select_times`, :func:`select_points` and :func:`central_point`
+  turn configured times (s) and point IDs into indices and IDs, with the
+  defaults used by the figures and the export alike.
+
+Variable names are those of the stores. In the ``.vtu`` files vectors keep
+their components (``x``, ``temperature_gradient``: 3; ``pixel``: 2), a
+2 x 2 tensor is flattened row by row to 4 components (``strain``: E11, E12,
+E21, E22), booleans become 0/1 (uint8), and a variable with a ``principal``
+dimension is split into ``<name>_max`` and ``<name>_min``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+import xarray as xr
+
+from .errors import ConfigError, DataError
+from .store import atomic_directory
+
+__all__ = [
+    "select_times",
+    "select_points",
+    "central_point",
+    "point_variables",
+    "write_paraview",
+    "write_pvd",
+    "write_csv",
+]
+
+log = logging.getLogger(__name__)
+
+#: copies of points.zarr variables in fields.zarr: taken from points.zarr
+_COPIED = ("x", "temperature")
+
+
+# --------------------------------------------------------------------------- selection
+
+
+def _require(ds, names, what):
+    missing = [n for n in names if n not in ds.variables]
+    if missing:
+        raise DataError(f"{what} lacks {', '.join(missing)}: is it the output of the couple stage?")
+
+
+def select_times(times, requested=None, *, name: str = "times") -> np.ndarray:
+    """Indices of the stored times nearest to the requested ones.
+
+    Parameters
+    ----------
+    times : array_like, shape (T,)
+        Stored times, s, increasing.
+    requested : sequence of float or None
+        Wanted times, s. None or empty: the stored times nearest 1/3 and 2/3
+        of the series' span (one time if the series has one).
+    name : str
+        Name of the setting, for error messages (``report.times``).
+
+    Returns
+    -------
+    ndarray of int, shape (K,)
+        Increasing, distinct indices into ``times``.
+
+    Raises
+    ------
+    ConfigError
+        A requested time is not a finite number or lies outside the stored
+        span by more than half the median step.
+    """
+    t = np.asarray(times, dtype=float)
+    if t.ndim != 1 or t.size == 0 or not np.isfinite(t).all():
+        raise DataError(f"the store has no usable time axis (got {t.size} times, all finite: {np.isfinite(t).all()})")
+    if requested is None or (not isinstance(requested, str) and len(requested) == 0):
+        if t.size == 1:
+            return np.array([0])
+        want = t[0] + np.array([1.0, 2.0]) / 3.0 * (t[-1] - t[0])
+    else:
+        if isinstance(requested, (str, bytes)) or not isinstance(requested, Iterable):
+            raise ConfigError(f"{name} must be a list of times in s, got {requested!r}")
+        bad = [r for r in requested
+               if isinstance(r, bool) or not isinstance(r, (int, float, np.integer, np.floating))
+               or not math.isfinite(float(r))]
+        if bad:
+            raise ConfigError(f"{name} must be finite numbers (s); got {', '.join(map(repr, bad))}")
+        want = np.asarray(requested, dtype=float)
+        tol = 0.5 * float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        out = want[(want < t[0] - tol) | (want > t[-1] + tol)]
+        if out.size:
+            raise ConfigError(f"{name}: {', '.join(f'{v:g}' for v in out)} s outside the stored times "
+                              f"{t[0]:g} .. {t[-1]:g} s")
+    idx = np.abs(t[None, :] - want[:, None]).argmin(axis=1)
+    for w, i in zip(want, idx):
+        if not np.isclose(w, t[i], rtol=0, atol=1e-9 * max(1.0, abs(w))):
+            log.info("%s: %g s -> nearest stored time %g s", name, w, t[i])
+    return np.unique(idx)
+
+
+def central_point(points: xr.Dataset) -> int:
+    """The visible point nearest the centre of the point cloud.
+
+    Candidates are the points visible at nearly every time (at least 90 % of
+    the largest visible count); among those visible at the middle time the
+    one nearest (3-D) to the centroid of the visible points there is taken.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        ``points.zarr``: ``x(time, point, component)`` mm, ``visible(time, point)``.
+
+    Returns
+    -------
+    int
+        The point ID.
+    """
+    _require(points, ("x", "visible"), "the points store")
+    vis = np.asarray(points["visible"].transpose("time", "point").values, dtype=bool)
+    count = vis.sum(axis=0)
+    if count.max(initial=0) == 0:
+        raise DataError("no point is visible at any time: there is no point to show")
+    steady = count >= 0.9 * count.max()
+    ids = points["point"].values
+    # the time with the most steady visible points near the middle of the series
+    n_t = vis.shape[0]
+    order = np.argsort(np.abs(np.arange(n_t) - (n_t - 1) / 2.0), kind="stable")
+    k = next((i for i in order if (vis[i] & steady).any()), order[0])
+    x = np.asarray(points["x"].isel(time=int(k)).transpose("point", "component").values, dtype=float)
+    cand = vis[k] & steady & np.isfinite(x).all(axis=1)
+    if not cand.any():
+        cand = steady & np.isfinite(x).all(axis=1)
+    centre = x[vis[k] & np.isfinite(x).all(axis=1)].mean(axis=0)
+    d = np.where(cand, np.linalg.norm(x - centre, axis=1), np.inf)
+    return int(ids[int(np.argmin(d))])
+
+
+def select_points(points: xr.Dataset, ids=None, *, name: str = "points") -> np.ndarray:
+    """Validated point IDs, in the given order without repeats.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        A store with a ``point`` coordinate.
+    ids : sequence of int, "all" or None
+        Point IDs. None or empty: :func:`central_point`; "all": every point.
+    name : str
+        Name of the setting, for error messages.
+
+    Returns
+    -------
+    ndarray of int64
+
+    Raises
+    ------
+    ConfigError
+        An ID is not an integer or not in the store (all unknown IDs are named).
+    """
+    known = np.asarray(points["point"].values)
+    if isinstance(ids, str):
+        if ids != "all":
+            raise ConfigError(f"{name} must be a list of point IDs or 'all', got {ids!r}")
+        return known.astype(np.int64)
+    if ids is None or len(ids) == 0:
+        return np.array([central_point(points)], dtype=np.int64)
+    bad = [i for i in ids if isinstance(i, bool) or not isinstance(i, (int, np.integer))]
+    if bad:
+        raise ConfigError(f"{name} must be integer point IDs; got {', '.join(map(repr, bad))}")
+    req = np.asarray(ids, dtype=np.int64)
+    unknown = req[~np.isin(req, known)]
+    if unknown.size:
+        shown = ", ".join(map(str, unknown[:20])) + (f" and {unknown.size - 20} more" if unknown.size > 20 else "")
+        raise ConfigError(f"{name}: point ID{'s' if unknown.size > 1 else ''} {shown} not in the store "
+                          f"({known.size} points, IDs {known.min()} .. {known.max()})")
+    _, first = np.unique(req, return_index=True)
+    return req[np.sort(first)]
+
+
+# --------------------------------------------------------------------------- variables
+
+
+def _aligned_fields(points: xr.Dataset, fields: xr.Dataset | None) -> xr.Dataset | None:
+    """``fields`` on the time and point axes of ``points`` (DataError if they differ)."""
+    if fields is None:
+        return None
+    tp, tf = points["time"].values, fields["time"].values
+    if tp.shape != tf.shape or not np.allclose(tp, tf, rtol=0, atol=1e-9):
+        raise DataError(f"fields store has {tf.size} times, points store {tp.size} (or different values): "
+                        "were they computed from the same couple result?")
+    pp, pf = points["point"].values, fields["point"].values
+    if not np.array_equal(pp, pf):
+        if np.setxor1d(pp, pf).size:
+            raise DataError(f"fields store has {pf.size} points, points store {pp.size}, "
+                            f"{np.setxor1d(pp, pf).size} IDs in only one of them")
+        fields = fields.sel(point=pp)
+    return fields.assign_coords(time=points["time"].values)
+
+
+def point_variables(points: xr.Dataset, fields: xr.Dataset | None = None) -> dict[str, xr.DataArray]:
+    """Every per-point variable of the stores, by export name.
+
+    Variables whose dimensions start with ``("time", "point")`` or are
+    ``("point", ...)`` are taken; ``fields.zarr``'s copies of ``x`` and
+    ``temperature`` are left out, other name clashes get the prefix
+    ``fields_``.
+
+    Returns
+    -------
+    dict of str to xarray.DataArray
+        In store order, points first.
+    """
+    out: dict[str, xr.DataArray] = {}
+    fields = _aligned_fields(points, fields)
+    for source, ds in (("points", points), ("fields", fields)):
+        if ds is None:
+            continue
+        for name, da in ds.data_vars.items():
+            dims = da.dims
+            if not (dims[:2] == ("time", "point") or dims[:1] == ("point",)):
+                continue
+            if da.dtype.kind not in "biuf":
+                log.info("export: %s.%s (dtype %s) left out: not numeric", source, name, da.dtype)
+                continue
+            key = str(name)
+            if source == "fields" and key in out:
+                if key in _COPIED:
+                    continue
+                key = f"fields_{key}"
+            out[key] = da
+    return out
+
+
+def _vtk_arrays(name: str, a: np.ndarray, dims: tuple, labels: dict, dtype) -> dict[str, np.ndarray]:
+    """VTK point-data arrays ((N,) or (N, k)) of one time slice ``a`` with dimensions ``("point", ...)``."""
+    if a.dtype == bool:
+        a = a.astype(np.uint8)
+    elif a.dtype.kind == "f" and a.dtype.itemsize > np.dtype(dtype).itemsize:
+        a = a.astype(dtype)  # only down: float32 data stay float32 with dtype="float64"
+    extra = dims[1:]
+    if "principal" in extra:
+        ax = extra.index("principal") + 1
+        names = labels.get("principal") or [str(k) for k in range(a.shape[ax])]
+        res = {}
+        for j, lab in enumerate(names):
+            res.update(_vtk_arrays(f"{name}_{lab}", np.take(a, j, axis=ax), dims[:ax] + dims[ax + 1:], labels, dtype))
+        return res
+    if a.ndim > 2:
+        a = a.reshape(a.shape[0], -1)
+    return {name: np.ascontiguousarray(a)}
+
+
+#: bytes of variables loaded at once while writing the time series
+_BLOCK_BYTES = 256 * 2**20
+
+
+# --------------------------------------------------------------------------- ParaView
+
+
+def write_pvd(path, files: Sequence[str], times: Sequence[float]) -> Path:
+    """A ParaView data collection listing ``files`` (relative to ``path``) at ``times`` (s).
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.pvd`` to write.
+    files : sequence of str
+        Data files, relative to the folder of ``path``.
+    times : sequence of float
+        Time of each file, s.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    if len(files) != len(times):
+        raise ConfigError(f"write_pvd: {len(files)} files but {len(times)} times")
+    root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
+    coll = ET.SubElement(root, "Collection")
+    for f, t in zip(files, times):
+        # repr: the shortest text that reads back as the same float
+        ET.SubElement(coll, "DataSet", timestep=repr(float(t)), group="", part="0", file=str(f))
+    ET.indent(root)
+    p = Path(path)
+    ET.ElementTree(root).write(p, encoding="utf-8", xml_declaration=True)
+    return p
+
+
+def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None = None, times=None,
+                   every: int = 1, name: str = "points", compression: str | None = "zlib", dtype: str = "float32") -> Path:
+    """One ``.vtu`` per time with every point variable, and a ``.pvd`` collection.
+
+    Points whose coordinates are missing at a time (DIC correlation failed
+    there) are left out of that time's file; the ``point_id`` array keeps the
+    DIC point IDs, so ParaView selections by ID work across times.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        ``points.zarr`` (``x(time, point, component)`` mm and the per-point
+        variables).
+    directory : path-like
+        Output folder, replaced as a whole (written to a temporary sibling
+        first): ``<name>.pvd`` and ``<name>_<index>.vtu``.
+    fields : xarray.Dataset, optional
+        ``fields.zarr`` of the same experiment.
+    times : sequence of float, optional
+        Times to write, s (nearest stored); None: every stored time.
+    every : int
+        Write every ``every``-th of those times (the first always): long
+        series at full resolution make large folders (about 0.25 kB per
+        point and time with every variable of both stores, float32).
+    name : str
+        File name stem.
+    compression : {"zlib", "lzma", None}
+        Compression of the binary arrays in the ``.vtu`` files.
+    dtype : {"float32", "float64"}
+        Type of the floating-point point data (coordinates stay float64):
+        float32 halves the files and keeps 7 significant digits, plenty for
+        viewing; float64 keeps the stored values exactly (float32 variables
+        are never widened).
+
+    Returns
+    -------
+    pathlib.Path
+        The ``.pvd`` file.
+    """
+    import meshio
+
+    _require(points, ("x",), "the points store")
+    if not isinstance(name, str) or not name or any(c in name for c in '/\\:*?"<>|'):
+        raise ConfigError(f"name must be a plain file name stem, got {name!r}")
+    if compression not in ("zlib", "lzma", None):
+        raise ConfigError(f"compression must be 'zlib', 'lzma' or None, got {compression!r}")
+    if dtype not in ("float32", "float64"):
+        raise ConfigError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise ConfigError(f"every must be an integer >= 1, got {every!r}")
+    t_all = points["time"].values.astype(float)
+    idx = np.arange(t_all.size) if times is None else select_times(t_all, times, name="times")
+    idx = idx[::every]
+    variables = point_variables(points, fields)
+    ids = points["point"].values.astype(np.int64)
+    width = max(4, len(str(t_all.size - 1)))
+    labels = {d: [str(v) for v in ds[d].values] for ds in (points, fields) if ds is not None
+              for d in ds.dims if d in ds.coords}
+    static = {k: (np.asarray(da.transpose("point", ...).values), da.transpose("point", ...).dims)
+              for k, da in variables.items() if "time" not in da.dims}
+    varying = {k: da.transpose("time", "point", ...) for k, da in variables.items() if "time" in da.dims}
+    per_time = sum(da.dtype.itemsize * da.size // max(da.sizes["time"], 1) for da in varying.values())
+    block = max(1, int(_BLOCK_BYTES // max(per_time, 1)))
+    directory = Path(directory)
+    files = []
+    with atomic_directory(directory) as tmp:
+        tmp.mkdir(parents=True)
+        # a block of times at a time: zarr chunks span many times, reading them once per time would be quadratic
+        for start in range(0, idx.size, block):
+            chunk = idx[start:start + block]
+            loaded = {k: np.asarray(da.isel(time=chunk).values) for k, da in varying.items()}
+            for j, i in enumerate(chunk):
+                x = loaded["x"][j].astype(float)
+                keep = np.isfinite(x).all(axis=1)
+                data = {"point_id": ids[keep]}
+                for vname, da in varying.items():
+                    if vname != "x":
+                        data.update(_vtk_arrays(vname, loaded[vname][j][keep], da.dims[1:], labels, dtype))
+                for vname, (a, dims) in static.items():
+                    data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
+                mesh = meshio.Mesh(points=x[keep], cells=[("vertex", np.arange(int(keep.sum()))[:, None])],
+                                   point_data=data)
+                fname = f"{name}_{int(i):0{width}d}.vtu"
+                meshio.vtu.write(os.fspath(tmp / fname), mesh, binary=True, compression=compression)
+                files.append(fname)
+        write_pvd(tmp / f"{name}.pvd", files, t_all[idx])
+    log.info("paraview: %d times x %d point variables -> %s", len(files), len(variables), directory / f"{name}.pvd")
+    return directory / f"{name}.pvd"
+
+
+# --------------------------------------------------------------------------- CSV
+
+
+def _units(da: xr.DataArray) -> str:
+    return str(da.attrs.get("units", "")).strip()
+
+
+def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, point_ids=None,
+              times=None, variables: Sequence[str] | None = None) -> Path:
+    """Selected points over time, long format: one row per (time, point).
+
+    Columns: ``time [s]``, ``point``, ``x [mm]``, ``y [mm]``, ``z [mm]``,
+    then every per-point variable (or ``variables``) with its unit in
+    brackets; vector and tensor components get the component label
+    (``temperature_gradient_x [K/mm]``, ``strain_12 [1]``,
+    ``principal_direction_max_x [1]``). Decimal point, comma separator, UTF-8,
+    missing values empty.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        ``points.zarr``.
+    path : path-like
+        CSV file to write.
+    fields : xarray.Dataset, optional
+        ``fields.zarr`` of the same experiment.
+    point_ids : sequence of int, "all" or None
+        Points to write; None: :func:`central_point`.
+    times : sequence of float or None
+        Times (s, nearest stored); None: every stored time.
+    variables : sequence of str, optional
+        Export names (see :func:`point_variables`) to include; default all.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    import pandas as pd
+
+    _require(points, ("x",), "the points store")
+    ids = select_points(points, point_ids, name="point_ids")
+    t_all = points["time"].values.astype(float)
+    idx = np.arange(t_all.size) if times is None else select_times(t_all, times, name="times")
+    avail = point_variables(points, fields)
+    if variables is None:
+        chosen = [v for v in avail if v != "x"]
+    else:
+        if isinstance(variables, str):
+            raise ConfigError(f"variables must be a list of names, got {variables!r}")
+        unknown = [v for v in variables if v not in avail]
+        if unknown:
+            raise ConfigError(f"variables: {', '.join(map(repr, unknown))} not in the stores; "
+                              f"available: {', '.join(avail)}")
+        chosen = [v for v in variables if v != "x"]
+    pos = {int(p): k for k, p in enumerate(points["point"].values)}
+    sel = np.array([pos[int(p)] for p in ids])
+    n_t, n_p = idx.size, sel.size
+    cols: dict[str, np.ndarray] = {
+        "time [s]": np.repeat(t_all[idx], n_p),
+        "point": np.tile(ids, n_t),
+    }
+
+    def take(da):
+        if "time" in da.dims:
+            da = da.isel(time=xr.DataArray(idx, dims="time_sel"), point=xr.DataArray(sel, dims="point_sel"))
+            da = da.transpose("time_sel", "point_sel", ...)
+        else:
+            da = da.isel(point=xr.DataArray(sel, dims="point_sel"))
+            da = da.expand_dims(time_sel=n_t).transpose("time_sel", "point_sel", ...)
+        return da
+
+    x = take(avail["x"]).values
+    for k, c in enumerate("xyz"):
+        cols[f"{c} [{_units(avail['x']) or 'mm'}]"] = x[..., k].ravel()
+    for v in chosen:
+        da = take(avail[v])
+        a = da.values
+        extra = da.dims[2:]
+        unit = _units(avail[v])
+        suffix = f" [{unit}]" if unit else ""
+        if not extra:
+            cols[v + suffix] = a.ravel()
+            continue
+        labels = [[str(s) for s in (da[d].values if d in da.coords else range(1, da.sizes[d] + 1))] for d in extra]
+        flat = a.reshape(n_t * n_p, -1)
+        combos = np.array(np.meshgrid(*[np.arange(len(lb)) for lb in labels], indexing="ij")).reshape(len(extra), -1).T
+        # tensor components: index labels joined without separator (strain_12)
+        joiner = "" if all(len(s) == 1 and s.isdigit() for lb in labels for s in lb) else "_"
+        for j, combo in enumerate(combos):
+            lab = joiner.join(labels[d][c] for d, c in enumerate(combo))
+            cols[f"{v}_{lab}{suffix}"] = flat[:, j]
+    frame = pd.DataFrame(cols)
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(f".{p.name}.tmp-{os.getpid()}")
+    try:
+        frame.to_csv(tmp, index=False, encoding="utf-8", lineterminator="\n")
+        os.replace(tmp, p)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    log.info("csv: %d points x %d times, %d columns -> %s", n_p, n_t, frame.shape[1], p)
+    return p

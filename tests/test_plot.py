@@ -1,0 +1,134 @@
+"""Figures of an experiment (irdic.plot) from fabricated stores with the contract layout."""
+
+import warnings
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from irdic.errors import ConfigError, DataError, IrdicWarning
+from irdic.plot import (FIGURES, plot_experiment, plot_gradient, plot_history, plot_rate, plot_strain,
+                        plot_temperature, view_basis)
+
+from .test_export import contract_stores
+
+pytestmark = pytest.mark.filterwarnings("error::UserWarning:matplotlib.*")
+
+
+@pytest.fixture(scope="module")
+def stores():
+    return contract_stores()
+
+
+def _check_png(path, min_kb=10, min_ink=0.15):
+    """A real picture: PNG, not tiny, and a good part of it not white."""
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert path.stat().st_size > min_kb * 1024, path.stat().st_size
+    img = imread(path)[..., :3]
+    ink = (img < 0.95).any(axis=2).mean()
+    assert ink > min_ink, ink
+    return img
+
+
+def test_view_basis_follows_the_image_axes(stores):
+    points, _ = stores
+    right, up, centre = view_basis(points)
+    # u = 500 + 10 x, v = 400 - 10 y: right is +x, up is +y
+    np.testing.assert_allclose(right, [1.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(up, [0.0, 1.0, 0.0], atol=1e-12)
+    x = points["x"].values[int(np.argmax(points["visible"].values.sum(axis=1)))]
+    np.testing.assert_allclose(centre, np.nanmean(x, axis=0), atol=1e-12)
+
+
+def test_view_basis_without_pixels_uses_the_main_axes(stores):
+    points, _ = stores
+    right, up, _ = view_basis(points.drop_vars("pixel"))
+    # arc (40 mm chord) is wider than the height (30 mm): first axis along x, second along y
+    assert abs(right[0]) > 0.999 and abs(up[1]) > 0.999
+
+
+@pytest.mark.parametrize("func", [plot_temperature, plot_rate])
+def test_map_figures_are_written(stores, tmp_path, func):
+    points, fields = stores
+    kw = {} if func is plot_temperature else {"fields": fields}
+    out = func(points, tmp_path / "sub" / "f.png", times=[0.5, 1.5], experiment="fab", **kw)
+    assert out == tmp_path / "sub" / "f.png"
+    _check_png(out)
+
+
+def test_gradient_arrows_from_fields_and_from_pixels(stores, tmp_path):
+    points, fields = stores
+    a = _check_png(plot_gradient(points, tmp_path / "g1.png", fields=fields))
+    b = _check_png(plot_gradient(points, tmp_path / "g2.png"))
+    assert a.shape == b.shape and not np.array_equal(a, b)  # titles differ at least
+
+
+def test_strain_figure_draws_directions(stores, tmp_path):
+    points, fields = stores
+    with_dirs = _check_png(plot_strain(fields, tmp_path / "s1.png", points=points, times=[2.0]))
+    without = _check_png(plot_strain(fields.drop_vars("principal_direction"), tmp_path / "s2.png", points=points,
+                                     times=[2.0]))
+    # black segments: many more near-black pixels where directions are drawn
+    dark = lambda img: (img.max(axis=2) < 0.15).mean()  # noqa: E731
+    assert dark(with_dirs) > dark(without) + 0.002
+
+
+def test_strain_needs_fields_and_3d_directions(stores, tmp_path):
+    points, fields = stores
+    with pytest.raises(DataError, match="needs fields.zarr"):
+        plot_strain(None, tmp_path / "s.png", points=points)
+    d2 = fields["principal_direction"].isel(component=slice(0, 2)).rename(component="basis").drop_vars("basis")
+    with pytest.warns(IrdicWarning, match=r"2 components \(basis\), expected 3"):
+        plot_strain(fields.assign(principal_direction=d2), tmp_path / "s.png", points=points)
+
+
+def test_history_figure(stores, tmp_path):
+    points, fields = stores
+    _check_png(plot_history(points, tmp_path / "h1.png", fields=fields), min_ink=0.08)
+    _check_png(plot_history(points, tmp_path / "h2.png", point_ids=[1000, 1025, 1086]), min_ink=0.08)
+
+
+def test_experiment_figures_with_and_without_fields(stores, tmp_path):
+    points, fields = stores
+    done = plot_experiment(points, tmp_path / "a", fields=fields, experiment="fab")
+    assert list(done) == list(FIGURES)
+    for name, p in done.items():
+        _check_png(p, min_ink=0.08 if name == "history" else 0.15)
+    done = plot_experiment(points, tmp_path / "b")
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["gradient.png", "history.png", "rate.png",
+                                                                  "temperature.png"]
+    done = plot_experiment(points, {"temperature": tmp_path / "c" / "t.png"})
+    assert list(done) == ["temperature"] and (tmp_path / "c" / "t.png").exists()
+
+
+def test_points_without_temperature_are_drawn_grey(stores, tmp_path):
+    points, _ = stores
+    p = points.copy(deep=True)
+    p["temperature"][:, : 9 * 7 // 2] = np.nan  # left half of the patch hidden at all times
+    img = _check_png(plot_temperature(p, tmp_path / "t.png", times=[1.0]))
+    grey = (np.abs(img - 0.82).max(axis=2) < 0.02).mean()
+    assert grey > 0.05
+
+
+def test_bad_arguments(stores, tmp_path):
+    points, fields = stores
+    with pytest.raises(ConfigError, match=r"times: 99 s outside the stored times 0 \.\. 2 s"):
+        plot_temperature(points, tmp_path / "x.png", times=[99.0])
+    with pytest.raises(ConfigError, match="point IDs 1, 2 not in the store"):
+        plot_history(points, tmp_path / "x.png", point_ids=[1, 2])
+    with pytest.raises(ConfigError, match="at most 8 points"):
+        plot_history(points, tmp_path / "x.png", point_ids=[*range(1000, 1007), 1010, 1011])
+    with pytest.raises(ConfigError, match="arrows must be an integer in 2 .. 200, got 0"):
+        plot_gradient(points, tmp_path / "x.png", arrows=0)
+    with pytest.raises(ConfigError, match="unknown figure.*'heat'"):
+        plot_experiment(points, tmp_path, names=["heat"])
+    with pytest.raises(DataError, match="nothing to draw"):
+        plot_temperature(points.assign(x=points["x"] * np.nan), tmp_path / "x.png")
+    assert not list(tmp_path.glob("*.png"))
+
+
+def test_no_matplotlib_layout_warnings(stores, tmp_path):
+    points, fields = stores
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plot_experiment(points, tmp_path, fields=fields, times=[0.0, 1.0, 2.0])

@@ -1,0 +1,61 @@
+# points.zarr (+ fields.zarr) -> figures for `snakemake --report`, a ParaView time series and a CSV table.
+# Include after fields.smk: without a fields rule the figures and the export use points.zarr alone
+# (experiment_results() in common.smk) and there is no strain figure.
+
+FIGURES = ["temperature", "gradient", "rate", "history"] + (["strain"] if workflow.is_rule("fields") else [])
+
+
+rule figures:
+    input:
+        unpack(experiment_results),
+    output:
+        **{
+            name: report(
+                f"{RESULTS}/{{experiment}}/figures/{name}.png",
+                caption=f"../report/{name}.rst",
+                category="{experiment}",
+                subcategory="figures",
+                labels={"experiment": "{experiment}", "figure": name},
+            )
+            for name in FIGURES
+        },
+    params:
+        times=lambda wc: config["experiments"][wc.experiment].get("report", {}).get("times", []),
+        points=lambda wc: config["experiments"][wc.experiment].get("report", {}).get("points", []),
+        code=code_hash("figures"),
+    log:
+        f"{RESULTS}/logs/{{experiment}}/figures.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/{{experiment}}/figures.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        "../envs/irdic.yaml"
+    script:
+        "../../scripts/figures.py"
+
+
+rule export:
+    input:
+        unpack(experiment_results),
+    output:
+        paraview=directory(f"{RESULTS}/{{experiment}}/paraview"),
+        csv=f"{RESULTS}/{{experiment}}/points.csv",
+    params:
+        points=lambda wc: config["experiments"][wc.experiment].get("report", {}).get("points", []),
+        csv_points=config.get("export", {}).get("csv_points", "selected"),
+        precision=config.get("export", {}).get("paraview_precision", "float32"),
+        every=config.get("export", {}).get("paraview_every", 1),
+        code=code_hash("export"),
+    log:
+        f"{RESULTS}/logs/{{experiment}}/export.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/{{experiment}}/export.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        "../envs/irdic.yaml"
+    script:
+        "../../scripts/export.py"
