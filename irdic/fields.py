@@ -69,6 +69,7 @@ def fields(
     surface_smoothing=None,
     surface_smoothing_time=None,
     temperature_smoothing=None,
+    temperature_smoothing_space=None,
 ) -> xr.Dataset:
     """Gradient, rate and strain fields at the DIC points.
 
@@ -92,6 +93,10 @@ def fields(
         Regression instead of interpolation for the coordinates.
     temperature_smoothing : None, "gcv" or float >= 1
         Regression in time of the point temperatures for the material rate.
+    temperature_smoothing_space : None, "gcv" or float >= 1
+        Regression in space (surface parameters) of the point temperatures of
+        each time for the in-plane gradient, ``grad Θ = (∂Θ/∂Ψ^α) a^α`` with
+        ``∂Θ/∂Ψ^α`` from the regressed field instead of the pixel gradients.
 
     Returns
     -------
@@ -99,7 +104,8 @@ def fields(
         The content of ``fields.zarr`` (see README).
     """
     for name, v in (("surface_smoothing", surface_smoothing), ("surface_smoothing_time", surface_smoothing_time),
-                    ("temperature_smoothing", temperature_smoothing)):
+                    ("temperature_smoothing", temperature_smoothing),
+                    ("temperature_smoothing_space", temperature_smoothing_space)):
         _smoothing(name, v)
     missing = [v for v in ("x", "temperature", "temperature_pixel_gradient", "temperature_local_rate")
                if v not in points]
@@ -129,6 +135,8 @@ def fields(
         visible = np.isfinite(theta)
         total = np.where(visible, smoothed_rate, np.nan)
         loc = total - rate.convective
+    if temperature_smoothing_space is not None:
+        grad = _regressed_gradient(theta, sf.psi, geo.dual, temperature_smoothing_space, c=c_space, R0=R0_space)
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
              _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
@@ -175,6 +183,39 @@ def fields(
                "temperature_smoothing": str(temperature_smoothing)},
     )
     return ds
+
+
+def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
+    """In-plane gradient from a spatial regression of the point temperatures of each time.
+
+    Missing values of a time are filled from that time's visible points first;
+    times with fewer than 6 visible points stay NaN.
+    """
+    from .surface import SpatialInterpolant, gcv_spatial
+
+    T, N = theta.shape
+    grad = np.full((T, N, 3), np.nan)
+    have = np.isfinite(psi).all(axis=1)
+    visible = np.isfinite(theta) & have
+    times = np.flatnonzero(visible.sum(axis=1) >= 6)
+    if times.size == 0:
+        log.warning("temperature_smoothing_space: no time with 6 or more visible points; gradient left NaN")
+        return grad
+    p = psi[have]
+    filled, _ = SpatialInterpolant(p, c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
+    if smoothing == "gcv":
+        sample = filled[np.linspace(0, times.size - 1, min(times.size, 8)).astype(int)].T
+        k, _ = gcv_spatial(p, sample, c=c, R0=R0)
+        log.info("temperature_smoothing_space: GCV chose a centre spacing of %.1f point spacings", k)
+    else:
+        k = float(smoothing)
+    _, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=False)
+    g = d1.T[..., None] * dual[np.ix_(times, have)][:, :, 0] + d2.T[..., None] * dual[np.ix_(times, have)][:, :, 1]
+    out = np.full((times.size, N, 3), np.nan)
+    out[:, have] = g
+    grad[times] = out
+    grad[~visible] = np.nan
+    return grad
 
 
 def fields_stores(points_path, calibration_path, out, **params) -> Path:

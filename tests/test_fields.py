@@ -72,11 +72,20 @@ def test_smoothing_reduces_rate_error_with_noise():
     e_exact = _rms((exact.temperature_rate.values - r_true)[m])
     e_smooth = _rms((smooth.temperature_rate.values - r_true)[m])
     assert e_smooth * 3 <= e_exact, (e_exact, e_smooth)
+    # and the spatial regression of the temperatures does the same for the gradient
+    g_true = truth.temperature_gradient.values
+    g_smooth = fields(pts, cal, temperature_smoothing_space="gcv").temperature_gradient.values
+    ge_exact = _rms(np.linalg.norm(exact.temperature_gradient.values - g_true, axis=-1)[m])
+    ge_smooth = _rms(np.linalg.norm(g_smooth - g_true, axis=-1)[m])
+    assert ge_smooth * 3 <= ge_exact, (ge_exact, ge_smooth)
+    assert ge_smooth <= 0.02 * np.linalg.norm(g_true[pts.visible.values], axis=-1).max()
 
 
 def test_bad_arguments(case):
     _, pts, cal, _ = case
     with pytest.raises(ConfigError, match="temperature_smoothing"):
         fields(pts, cal, temperature_smoothing=-1)
+    with pytest.raises(ConfigError, match="temperature_smoothing_space"):
+        fields(pts, cal, temperature_smoothing_space="yes")
     with pytest.raises(DataError, match="couple stage"):
         fields(pts.drop_vars("temperature_local_rate"), cal)
