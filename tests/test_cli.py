@@ -1,0 +1,54 @@
+"""The irdic command line and the Snakemake-free pipeline."""
+
+import numpy as np
+import pytest
+import yaml
+
+from irdic.cli import main
+from irdic.config import validate_config
+from irdic.pipeline import run
+from irdic.store import open_store
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    assert main(["demo", str(d / "demo"), "--scale", "tiny"]) == 0
+    return d
+
+
+def test_ingest_and_info(demo, capsys):
+    assert main(["ingest-ir", str(demo / "demo/tube/ir"), str(demo / "ir.zarr")]) == 0
+    out = capsys.readouterr().out
+    assert "temperature" in out and "degC" in out and "stage: ingest-ir" in out
+    assert main(["info", str(demo / "ir.zarr")]) == 0
+    assert "dimensions: time=" in capsys.readouterr().out
+
+
+def test_errors_are_one_line_and_exit_2(demo, capsys):
+    (demo / "empty").mkdir()
+    assert main(["ingest-dic", str(demo / "empty"), str(demo / "dic.zarr")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("irdic: error: ") and "folder contains no DIC exports" in err
+    assert "Traceback" not in err
+    assert main(["info", str(demo / "nothing.zarr")]) == 2
+    assert "store not found" in capsys.readouterr().err
+
+
+def test_pipeline_runs_without_snakemake(demo, monkeypatch):
+    monkeypatch.chdir(demo)
+    cfg = {
+        "demo": {"enabled": False},
+        "setups": {"lab": {"markers": {"path": "demo/setup/markers.txt"},
+                           "target_image": {"path": "demo/setup/target.txt"}}},
+        "experiments": {"tube": {"setup": "lab", "dic": {"path": "demo/tube/dic"}, "ir": {"path": "demo/tube/ir"}}},
+    }
+    paths = run(validate_config(cfg))
+    f = open_store(paths["experiments"]["tube"]["fields"])
+    assert np.isfinite(f.temperature_gradient.values).any()
+    for name in ("temperature", "gradient", "rate", "history", "strain"):
+        assert (demo / "results/tube/figures" / f"{name}.png").exists()
+    assert (demo / "results/tube/paraview/points.pvd").exists()
+    assert (demo / "results/tube/points.csv").exists()
