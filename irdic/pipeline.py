@@ -38,6 +38,10 @@ def stage_paths(config: Mapping) -> dict:
     return out
 
 
+#: what :func:`make_demo` writes into its folder
+_DEMO_ENTRIES = {"setup", "halfshell", "tube", "manifest.yaml"}
+
+
 def make_demo(outdir: str | os.PathLike, *, scale: str = "demo", ir_noise: float = 0.05,
               dic_noise: float = 0.005, seed: int = 0, manifest: str | os.PathLike | None = None) -> Path:
     """Generate the synthetic demo (raw exports + truth) under ``outdir``.
@@ -50,11 +54,19 @@ def make_demo(outdir: str | os.PathLike, *, scale: str = "demo", ir_noise: float
 
     out = Path(outdir)
     if out.exists():
+        # only ever delete what an earlier demo wrote, never a user's folder
+        foreign = [p.name for p in out.iterdir() if p.name not in _DEMO_ENTRIES and not p.name.startswith(".")]
+        if foreign:
+            raise ConfigError(
+                f"{out}: folder exists and holds {', '.join(sorted(foreign)[:5])}, which the demo did not write; "
+                "choose an empty or new folder for the demo"
+            )
         shutil.rmtree(out)
     out.mkdir(parents=True)
     written = synthetic.make_demo(out, scale=scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
     man = Path(manifest) if manifest is not None else out / "manifest.yaml"
-    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and ".zarr" not in p.parts[-2:])
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*")
+                   if p.is_file() and not any(part.endswith(".zarr") for part in p.parts))
     with open(man, "w", encoding="utf-8") as fh:
         yaml.safe_dump({"scale": scale, "ir_noise": ir_noise, "dic_noise": dic_noise, "seed": seed,
                         "n_files": len(files), "contents": _jsonable(written)},

@@ -19,6 +19,14 @@ def demo(tmp_path_factory):
     return d
 
 
+def test_demo_never_deletes_a_foreign_folder(tmp_path, capsys):
+    (tmp_path / "mydata").mkdir()
+    (tmp_path / "mydata" / "specimen.txt").write_text("precious")
+    assert main(["demo", str(tmp_path / "mydata"), "--scale", "tiny"]) == 2
+    assert "which the demo did not write" in capsys.readouterr().err
+    assert (tmp_path / "mydata" / "specimen.txt").read_text() == "precious"
+
+
 def test_ingest_and_info(demo, capsys):
     assert main(["ingest-ir", str(demo / "demo/tube/ir"), str(demo / "ir.zarr")]) == 0
     out = capsys.readouterr().out
