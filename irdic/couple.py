@@ -318,10 +318,15 @@ def _extrapolate(ir, t_ir, t_dic, local, masks, outside, theta, gu, gv, rate, ed
     """
     n_t, M = outside.shape
     S = _EXTRAP_SAMPLES
-    pts = np.full((S, n_t, M, 2), np.nan)
-    for k in np.flatnonzero(outside.any(axis=1)):
-        idx = np.flatnonzero(outside[k])
-        p = local[k, idx]
+    # only the few points near the edge (at any time) take part: work on their columns
+    cols = np.flatnonzero(outside.any(axis=0))
+    Mc = cols.size
+    out_c = outside[:, cols]
+    local_c = local[:, cols]
+    pts = np.full((S, n_t, Mc, 2), np.nan)
+    for k in np.flatnonzero(out_c.any(axis=1)):
+        idx = np.flatnonzero(out_c[k])
+        p = local_c[k, idx]
         _, (iv, iu) = ndimage.distance_transform_edt(~masks[k], return_indices=True)
         r = np.clip(np.rint(p[:, 1]).astype(int), 0, masks.shape[1] - 1)
         c = np.clip(np.rint(p[:, 0]).astype(int), 0, masks.shape[2] - 1)
@@ -341,22 +346,15 @@ def _extrapolate(ir, t_ir, t_dic, local, masks, outside, theta, gu, gv, rate, ed
             on[inside] &= masks[k][rj[inside], cj[inside]]
             pts[j, k, idx[on]] = qj[on]
     todo = np.isfinite(pts[0]).all(axis=2)
+    done_full = np.zeros((n_t, M), dtype=bool)
     if not todo.any():
-        return todo
-    # only the few points near the edge (at any time) go through the second pass
-    cols = np.flatnonzero(todo.any(axis=0))
-    Mc = cols.size
+        return done_full
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IrdicWarning)  # the first pass already said which times are out of span
-        res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate(list(pts[:, :, cols]), axis=1), masks, **kw)
-    f = np.full((S, n_t, M), np.nan)
-    gq_u = np.full((n_t, M), np.nan)
-    gq_v = np.full((n_t, M), np.nan)
-    rq = np.full((n_t, M), np.nan)
-    for j in range(S):
-        f[j][:, cols] = res.theta[:, j * Mc:(j + 1) * Mc]
-    gq_u[:, cols], gq_v[:, cols], rq[:, cols] = res.dtheta_du[:, :Mc], res.dtheta_dv[:, :Mc], res.dtheta_dt[:, :Mc]
-    d = local - pts[0]
+        res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate(list(pts), axis=1), masks, **kw)
+    f = np.stack([res.theta[:, j * Mc:(j + 1) * Mc] for j in range(S)])  # (S, n_t, Mc)
+    gq_u, gq_v, rq = res.dtheta_du[:, :Mc], res.dtheta_dv[:, :Mc], res.dtheta_dt[:, :Mc]
+    d = local_c - pts[0]
     L = np.linalg.norm(d, axis=2)
     e = d / np.maximum(L, 1e-12)[..., None]
     lin_slope = gq_u * e[..., 0] + gq_v * e[..., 1]
@@ -372,14 +370,17 @@ def _extrapolate(ir, t_ir, t_dic, local, masks, outside, theta, gu, gv, rate, ed
         c0[sel], c1[sel], c2[sel] = coef
     th = c0 + c1 * L + c2 * L**2
     done = todo & np.isfinite(th)
-    theta[done] = th[done]
     # the gradient at p: along e from the parabola, across e as interpolated at q
     along = c1 + 2 * c2 * L
-    gu[done] = (gq_u + (along - lin_slope) * e[..., 0])[done]
-    gv[done] = (gq_v + (along - lin_slope) * e[..., 1])[done]
-    rate[done] = rq[done]
-    edge[done] = -L[done]
-    return done
+    tt, pp = np.nonzero(done)
+    full = cols[pp]
+    theta[tt, full] = th[done]
+    gu[tt, full] = (gq_u + (along - lin_slope) * e[..., 0])[done]
+    gv[tt, full] = (gq_v + (along - lin_slope) * e[..., 1])[done]
+    rate[tt, full] = rq[done]
+    edge[tt, full] = -L[done]
+    done_full[tt, full] = True
+    return done_full
 
 
 def couple_stores(dic_path, ir_path, calibration_path, out, **params) -> Path:
