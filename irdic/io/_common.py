@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import FormatError
 
-__all__ = ["check_file", "read_text", "head_bytes"]
+__all__ = ["check_file", "decode_text", "read_text", "head_bytes"]
 
 
 def check_file(path: str | os.PathLike) -> Path:
@@ -40,6 +40,16 @@ def head_bytes(path: str | os.PathLike, n: int = 4096) -> bytes:
         return fh.read(n)
 
 
+def decode_text(raw: bytes) -> str:
+    """Text of an export: UTF-8 (BOM dropped) when valid, else cp1252 (never fails)."""
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("cp1252", errors="replace")
+
+
 def read_text(path: str | os.PathLike) -> str:
     """Read a text export whatever its encoding.
 
@@ -47,10 +57,4 @@ def read_text(path: str | os.PathLike) -> str:
     usually cp1252/latin-1 (the ``°`` sign), which is the fallback and never
     fails. CRLF and CR line ends are kept; use ``str.splitlines``.
     """
-    raw = check_file(path).read_bytes()
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        return raw.decode("cp1252", errors="replace")
+    return decode_text(check_file(path).read_bytes())

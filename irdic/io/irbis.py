@@ -56,7 +56,7 @@ import numpy as np
 import xarray as xr
 
 from ..errors import ConfigError, FormatError, IrdicWarning
-from ._common import check_file
+from ._common import check_file, decode_text
 from .stack import check_temperatures, normalise_unit, temperature_dataarray, to_celsius
 
 __all__ = ["read_irbis", "read_irbis_header", "write_irbis", "parse_irbis"]
@@ -73,16 +73,6 @@ _MAX_PIXELS = 100_000  # bound on image sizes and sensor positions (px)
 # ----------------------------------------------------------------------------
 # header
 # ----------------------------------------------------------------------------
-def _decode(raw: bytes) -> str:
-    """Header text: UTF-8 when it is valid UTF-8, else cp1252 (never fails)."""
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        return raw.decode("cp1252", errors="replace")
-
-
 def _find_data_marker(raw: bytes) -> int:
     """Byte offset of the ``[Data]`` line (at a line start), or -1."""
     pos = 0
@@ -282,7 +272,7 @@ def read_irbis_header(path: str | os.PathLike) -> dict:
                 break
     if i < 0:
         raise FormatError("no [Data] section found; expected an IRBIS 3 text export", p)
-    return _interpret_header(_parse_header_text(_decode(head[:i])), p)
+    return _interpret_header(_parse_header_text(decode_text(head[:i])), p)
 
 
 # ----------------------------------------------------------------------------
@@ -636,7 +626,7 @@ def parse_irbis(raw: bytes, path: str | os.PathLike | None = None, *,
     i = _find_data_marker(raw)
     if i < 0:
         raise FormatError("no [Data] section found; expected an IRBIS 3 text export", where)
-    head_text = _decode(raw[:i])
+    head_text = decode_text(raw[:i])
     header = _interpret_header(_parse_header_text(head_text), where)
     marker_line = head_text.count("\n") + 1 if "\n" in head_text else head_text.count("\r") + 1
     m = _LINE_END.search(raw, i)
