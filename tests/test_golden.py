@@ -1,0 +1,113 @@
+"""The tiny demo's results stay what they were (refactoring guard).
+
+``tests/data/golden_tiny.npz`` holds every numeric variable of the stores the
+pipeline writes for the tiny demo (with its default noise, and once more with
+all three regression options on). A change that is meant to keep behaviour
+(a refactoring, a speed-up) must reproduce them to 1e-9 relative.
+
+A change that is *meant* to change results regenerates the file, and says so
+in its commit message::
+
+    python -m tests.test_golden --write
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+GOLDEN = Path(__file__).resolve().parent / "data" / "golden_tiny.npz"
+RTOL = 1e-9
+
+pytestmark = pytest.mark.slow
+
+_STORES = {
+    "calibration": ("setups", "lab", "calibration.zarr"),
+    "points": ("{e}", "points.zarr"),
+    "fields": ("{e}", "fields.zarr"),
+}
+
+
+def _config(smoothing: bool) -> dict:
+    from irdic.config import validate_config
+
+    cfg = {
+        "demo": {"enabled": False},
+        "setups": {"lab": {"markers": {"path": "demo/setup/markers.txt"},
+                           "target_image": {"path": "demo/setup/target.txt"}}},
+        "experiments": {e: {"setup": "lab", "dic": {"path": f"demo/{e}/dic"}, "ir": {"path": f"demo/{e}/ir"}}
+                        for e in ("halfshell", "tube")},
+    }
+    if smoothing:
+        cfg["fields"] = {"temperature_smoothing": "gcv", "temperature_smoothing_space": "gcv",
+                         "surface_smoothing": "gcv"}
+    return validate_config(cfg)
+
+
+def golden_arrays(workdir: Path) -> dict[str, np.ndarray]:
+    """Run the tiny demo through :func:`irdic.pipeline.run` and collect its numbers."""
+    import os
+
+    from irdic.pipeline import make_demo, run
+    from irdic.store import open_store
+
+    workdir = Path(workdir)
+    make_demo(workdir / "demo", scale="tiny")
+    out: dict[str, np.ndarray] = {}
+    cwd = os.getcwd()
+    os.chdir(workdir)
+    try:
+        for label, smoothing in (("default", False), ("gcv", True)):
+            cfg = _config(smoothing)
+            cfg["results"] = f"results-{label}"
+            run(cfg, stages=("ingest", "calibrate", "couple", "fields"))
+            res = Path(cfg["results"])
+            for e in ("halfshell", "tube"):
+                for store in ("points", "fields") + (("calibration",) if e == "halfshell" else ()):
+                    parts = [p.format(e=e) for p in _STORES[store]]
+                    ds = open_store(res.joinpath(*parts))
+                    for name, var in {**ds.data_vars, **ds.coords}.items():
+                        if var.dtype.kind in "fiub":
+                            out[f"{label}/{e if store != 'calibration' else 'lab'}/{store}/{name}"] = var.values
+    finally:
+        os.chdir(cwd)
+    return out
+
+
+@pytest.fixture(scope="module")
+def current(tmp_path_factory):
+    return golden_arrays(tmp_path_factory.mktemp("golden"))
+
+
+def test_demo_results_unchanged(current):
+    if not GOLDEN.exists():
+        pytest.fail(f"{GOLDEN} is missing; create it with `python -m tests.test_golden --write`")
+    with np.load(GOLDEN) as ref:
+        expected = {k: ref[k] for k in ref.files}
+    assert sorted(current) == sorted(expected), "the stores hold other variables than the golden file"
+    for key, want in expected.items():
+        got = current[key]
+        assert got.shape == want.shape, key
+        if want.dtype.kind == "f":
+            scale = np.nanmax(np.abs(want)) if np.isfinite(want).any() else 0.0
+            np.testing.assert_array_equal(np.isnan(got), np.isnan(want), err_msg=key)
+            np.testing.assert_allclose(got, want, rtol=RTOL, atol=RTOL * scale, equal_nan=True, err_msg=key)
+        else:
+            np.testing.assert_array_equal(got, want, err_msg=key)
+
+
+if __name__ == "__main__":
+    import tempfile
+
+    if "--write" not in sys.argv:
+        sys.exit("usage: python -m tests.test_golden --write")
+    from threadpoolctl import threadpool_limits
+
+    with tempfile.TemporaryDirectory() as tmp, threadpool_limits(1):
+        arrays = golden_arrays(Path(tmp))
+    GOLDEN.parent.mkdir(exist_ok=True)
+    np.savez_compressed(GOLDEN, **arrays)
+    print(f"wrote {GOLDEN}: {len(arrays)} arrays, {GOLDEN.stat().st_size / 1e6:.2f} MB")
