@@ -26,7 +26,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 from skimage.morphology import convex_hull_image
 
-from .camera import CameraModel, dlt, leave_one_out, planarity
+from .camera import CameraModel, degeneracy, dlt, leave_one_out, planarity
 from .errors import CalibrationError, ConfigError, DataError, IrdicWarning
 
 __all__ = [
@@ -759,8 +759,23 @@ def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: f
     tol = seed_tolerance_px if seed_tolerance_px is not None else max(3.0, 0.25 * spacing)
     if len(D):
         d, j = cKDTree(D).query(suv)
+        # a seed a whole marker spacing away from every blob points at no
+        # marker at all (off the target, u and v swapped, a typo): say so
+        # rather than letting the DLT report the seeds as degenerate
+        far = np.flatnonzero(d > max(spacing, 3.0)) if len(D) > 1 else np.zeros(0, int)
+        if far.size:
+            names = "; ".join(f"seed for marker {keys[f]!r} at ({suv[f, 0]:.1f}, {suv[f, 1]:.1f}) is {d[f]:.1f} px "
+                              "from any detected blob" for f in far[:5])
+            raise ConfigError(
+                f"{names} (detections are {spacing:.1f} px apart); give the pixel position (u = column, v = row) "
+                "of a detected marker, read off the detection figure"
+            )
         snap = d <= 0.5 * spacing
         suv = np.where(snap[:, None], D[j], suv)
+    line = degeneracy(X[idx], "seed markers")
+    if line is not None and "coplanar" not in line:
+        raise ConfigError(f"{line}, so they do not determine a camera; choose seeds spread over both wings of "
+                          "the target")
     thick = planarity(X[idx])
     if thick < 1e-3:
         raise ConfigError(

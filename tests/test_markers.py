@@ -249,3 +249,32 @@ def test_too_many_nan_pixels_are_refused_naming_the_image(target):
     with pytest.raises(CalibrationError, match=r"target_0001\.txt: target image has 10\.\d% invalid \(NaN\) pixels, "
                                                r"more than the 5% accepted"):
         detect_markers(da)
+
+
+def test_far_off_seed_is_named_with_its_distance(target, detections):
+    ids = target.markers.marker.values
+    x = target.markers.x.values
+    pix = target.truth.marker_pixel.values
+    D = uv_of(detections)
+    pick = [0, 9, 23, 44, 61, 80]
+    seeds = {int(ids[i]): pix[i].tolist() for i in pick}
+    k = int(ids[44])
+    seeds[k] = [1000.0, 760.0]  # far outside the target
+    d = np.hypot(*(D - [1000.0, 760.0]).T).min()
+    with pytest.raises(ConfigError, match=rf"seed for marker {k} at \(1000\.0, 760\.0\) is {d:.1f} px from any "
+                                          r"detected blob \(detections are \d+\.\d px apart\)") as exc:
+        match_seeds(D, x, ids, seeds)
+    assert "coplanar" not in str(exc.value) and "rank" not in str(exc.value)
+
+
+def test_collinear_seed_markers_are_called_collinear(target, detections):
+    ids = target.markers.marker.values
+    D = uv_of(detections)
+    # six markers of the target moved onto one line in the DIC frame (e.g. a wrong column in the export)
+    x = target.markers.x.values.copy()
+    pick = [0, 9, 23, 44, 61, 80]
+    x[pick] = np.array([1.0, 2.0, 3.0]) * np.arange(6)[:, None]
+    seeds = {int(ids[i]): D[np.argmin(np.hypot(*(D - target.truth.marker_pixel.values[i]).T))].tolist()
+             for i in pick}
+    with pytest.raises(ConfigError, match=r"the 6 seed markers are \(nearly\) collinear"):
+        match_seeds(D, x, ids, seeds)
