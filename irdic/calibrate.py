@@ -22,7 +22,7 @@ import numpy as np
 import xarray as xr
 
 from . import camera as _camera
-from .camera import CameraModel, fit_dlt, leave_one_out, planarity
+from .camera import CameraModel, degeneracy, fit_dlt, leave_one_out, planarity
 from .errors import CalibrationError, ConfigError, IrdicWarning
 from .markers import (check_ids, detect_markers, image_array, match_lattice, match_seeds, perspective_bias,
                       plane_normals)
@@ -173,6 +173,10 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     if measured.sum() < 6:
         raise CalibrationError(f"only {measured.sum()} markers have finite coordinates; the calibration needs 6")
     thick = planarity(X_all[measured])
+    line = degeneracy(X_all[measured], "markers")
+    if line is not None and "coplanar" not in line:
+        raise CalibrationError(f"{line}: markers on a line do not determine a camera. Use a 3-D target (open "
+                               "book) and export the markers of both wings")
     if thick < 1e-3:
         raise CalibrationError(
             f"the {measured.sum()} markers are coplanar (thickness ratio s3/s1 = {thick:.1e} of the centred marker "

@@ -43,6 +43,7 @@ __all__ = [
     "refine",
     "leave_one_out",
     "planarity",
+    "degeneracy",
     "PHYSICAL_PARAMETERS",
     "MATRIX_PARAMETERS",
 ]
@@ -134,6 +135,42 @@ def planarity(x) -> float:
     return float(s[2] / s[0]) if s[0] > 0 else 0.0
 
 
+def degeneracy(x, what: str = "markers", tol: float = 1e-3) -> str | None:
+    """Say how a point cloud falls short of spanning 3-D (or 2-D) space; None if it does not.
+
+    Parameters
+    ----------
+    x : array_like, shape (N, d), d = 2 or 3
+        Points (mm or px).
+    what : str
+        Plural noun for the message (``"markers"``, ``"seed markers"``, ...).
+    tol : float
+        Smallest accepted ratio of a singular value to the largest one.
+
+    Returns
+    -------
+    str or None
+        ``"the N markers are (nearly) collinear (...)"``, ``"... coplanar ..."``
+        or ``"all N markers are at one position"``.
+
+    Notes
+    -----
+    With singular values :math:`s_1 \\ge s_2 \\ge s_3` of the centred points,
+    :math:`s_1 = 0` means one position, :math:`s_2 / s_1 <` ``tol`` a line and
+    (in 3-D) :math:`s_3 / s_1 <` ``tol`` a plane.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = len(x)
+    s = np.linalg.svd(x - x.mean(axis=0), compute_uv=False) if n else np.zeros(1)
+    if n == 0 or s[0] == 0 or not np.isfinite(s[0]):
+        return f"all {n} {what} are at one position"
+    if len(s) > 1 and s[1] / s[0] < tol:
+        return f"the {n} {what} are (nearly) collinear (singular value ratio s2/s1 = {s[1] / s[0]:.2e})"
+    if x.shape[1] == 3 and len(s) > 2 and s[2] / s[0] < tol:
+        return f"the {n} {what} are coplanar or nearly so (thickness ratio s3/s1 = {s[2] / s[0]:.2e})"
+    return None
+
+
 def _normalise_M(M: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(M[2, :3])
     if not np.isfinite(n) or n == 0:
@@ -205,10 +242,22 @@ def dlt(x, uv, weights=None, *, min_planarity: float = 1e-3) -> np.ndarray:
     w = _weights(weights, n)
     ratio = planarity(x)
     if ratio < min_planarity:
+        line = degeneracy(x, "markers", min_planarity)
+        if line is not None and "coplanar" not in line:
+            raise CalibrationError(
+                f"{line}: a line of markers does not determine a camera. Use a 3-D target (open book) with "
+                "markers spread over both wings"
+            )
         raise CalibrationError(
             f"the {n} markers are coplanar or nearly so (thickness ratio s3/s1 = {ratio:.2e} of the centred "
             f"marker cloud, below {min_planarity:g}): the DLT is degenerate for a planar target. Use a 3-D "
             "target (open book) with markers on both wings visible"
+        )
+    flat = degeneracy(uv, "pixel positions")
+    if flat is not None:
+        raise CalibrationError(
+            f"{flat}: the image of markers spread in 3-D cannot be a line or a point; check the pixel positions "
+            "(u = column, v = row) and the correspondence"
         )
     T3, xn = _hartley(x)
     T2, uvn = _hartley(uv)

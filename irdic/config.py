@@ -20,9 +20,85 @@ import yaml
 
 from .errors import ConfigError
 
-__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config"]
+__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config", "MAX_ALIAS_NODES", "MAX_REPR"]
 
 SCHEMA_PATH = Path(str(resources.files("irdic") / "schemas" / "config.schema.yaml"))
+
+#: Most YAML nodes that aliases (``*name``) may add to a configuration once
+#: expanded. A real configuration repeats a setup or two (a few hundred
+#: nodes); nested aliases ("billion laughs") reach billions from one kilobyte.
+MAX_ALIAS_NODES = 10_000
+
+#: Longest repr of a value quoted in a configuration error message (chars).
+MAX_REPR = 300
+
+
+def _clip(text: str, limit: int = MAX_REPR) -> str:
+    """``text`` cut to ``limit`` characters, saying how much was left out."""
+    if len(text) <= limit:
+        return text
+    return text[:limit] + f"... ({len(text) - limit} more characters)"
+
+
+class _AliasBomb(yaml.YAMLError):
+    """Raised by :class:`_ConfigLoader`; turned into a ConfigError naming the file."""
+
+
+class _ConfigLoader(yaml.SafeLoader):
+    """A SafeLoader that refuses recursive aliases and alias expansion bombs.
+
+    Aliases share the anchored node, so loading itself stays cheap; the cost
+    comes later, when validation walks (and error messages print) the
+    expanded document. Each alias is therefore charged the number of nodes
+    its anchor expands to, and loading stops once the total passes
+    :data:`MAX_ALIAS_NODES`.
+    """
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._expanded: dict[int, int] = {}
+        self._open_anchors: set[str] = set()
+        self._alias_nodes = 0
+
+    def _size(self, node: yaml.Node) -> int:
+        # Memoised per node: anchored subtrees are shared, so this is linear in
+        # the written document even when the expansion is exponential.
+        key = id(node)
+        if key not in self._expanded:
+            if isinstance(node, yaml.SequenceNode):
+                n = 1 + sum(self._size(c) for c in node.value)
+            elif isinstance(node, yaml.MappingNode):
+                n = 1 + sum(self._size(k) + self._size(v) for k, v in node.value)
+            else:
+                n = 1
+            self._expanded[key] = n
+        return self._expanded[key]
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            line = event.start_mark.line + 1
+            if event.anchor in self._open_anchors:
+                raise _AliasBomb(f"line {line}: alias *{event.anchor} refers to a value that contains it (recursive alias)")
+            if event.anchor in self.anchors:
+                self._alias_nodes += self._size(self.anchors[event.anchor])
+                if self._alias_nodes > MAX_ALIAS_NODES:
+                    raise _AliasBomb(
+                        f"line {line}: alias *{event.anchor} makes the aliases expand to more than "
+                        f"{MAX_ALIAS_NODES} values; write the repeated values out instead of nesting aliases"
+                    )
+            return super().compose_node(parent, index)
+        anchor = None
+        for kind in (yaml.ScalarEvent, yaml.SequenceStartEvent, yaml.MappingStartEvent):
+            if self.check_event(kind):
+                anchor = self.peek_event().anchor
+        if anchor is None:
+            return super().compose_node(parent, index)
+        self._open_anchors.add(anchor)
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._open_anchors.discard(anchor)
 
 
 def load_schema() -> dict:
@@ -58,16 +134,17 @@ def _message(error: jsonschema.ValidationError) -> str:
     where = _where(error)
     if error.validator == "additionalProperties" and isinstance(error.instance, dict):
         allowed = sorted(error.schema.get("properties", {}))
-        extra = sorted(set(error.instance) - set(allowed))
+        # Keys may be numbers or dates in YAML; sort by repr so mixed types compare.
+        extra = sorted((str(e) for e in set(error.instance) - set(allowed)), key=str)
         if allowed:
-            keys = ", ".join(repr(e) for e in extra)
+            keys = _clip(", ".join(repr(e) for e in extra))
             prefix = f"{where}." if where != "(top level)" else ""
-            return f"{prefix}{extra[0] if len(extra) == 1 else '{' + keys + '}'}: unknown key; allowed here: {', '.join(allowed)}"
+            return f"{prefix}{_clip(extra[0]) if len(extra) == 1 else '{' + keys + '}'}: unknown key; allowed here: {', '.join(allowed)}"
     if error.validator == "required":
         return f"{where}: {error.message}"
     if error.validator == "enum":
-        return f"{where}: {error.instance!r} is not one of {', '.join(map(repr, error.validator_value))}"
-    return f"{where}: {error.message}"
+        return f"{where}: {_clip(repr(error.instance))} is not one of {', '.join(map(repr, error.validator_value))}"
+    return f"{where}: {_clip(error.message)}"
 
 
 def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) -> dict:
@@ -126,7 +203,7 @@ def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) 
         for key in seeds:
             try:
                 int(key)
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 raise ConfigError(f"setups.{name}.seeds: marker ID {key!r} is not an integer") from None
     return config
 
@@ -136,11 +213,17 @@ def load_config(path: str | os.PathLike) -> dict:
     p = Path(path)
     try:
         with open(p, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
+            data = yaml.load(fh, Loader=_ConfigLoader)
     except FileNotFoundError:
         raise ConfigError(f"{p}: configuration file not found") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{p}: not a UTF-8 text file (byte {exc.start} cannot be decoded)") from None
+    except _AliasBomb as exc:
+        raise ConfigError(f"{p}, {exc}") from None
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML ({exc})") from None
+        raise ConfigError(f"{p}: not valid YAML ({_clip(str(exc), 2 * MAX_REPR)})") from None
+    except RecursionError:
+        raise ConfigError(f"{p}: not valid YAML (nested too deeply)") from None
     if data is None:
         raise ConfigError(f"{p}: configuration file is empty")
     try:

@@ -115,8 +115,14 @@ def specimen_mask(
         return mask
     try:
         tri = Delaunay(p)
-    except QhullError as exc:
-        raise GeometryError(f"the projected points are degenerate (all on a line?): {exc}") from None
+    except QhullError:
+        # Qhull's own report (options, input statistics) means nothing to the user
+        span = p.max(axis=0) - p.min(axis=0)
+        raise GeometryError(
+            f"the {p.shape[0]} DIC points seen by the IR camera are degenerate: their projections are collinear "
+            f"or coincide (they span {span[0]:.3g} x {span[1]:.3g} px), so they cover no area of the image; check "
+            "that the DIC export holds a surface (not a line of points) and that the camera looks at it"
+        ) from None
     spacing = np.median(cKDTree(p).query(p, k=2)[0][:, 1])
     corners = p[tri.simplices]
     edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)

@@ -105,11 +105,22 @@ def frame_times(
     n = len(file_times)
     labels = list(labels) if labels is not None else [f"{what} {i}" for i in range(n)]
     if time_source == "file":
-        missing = [labels[i] for i, t in enumerate(file_times) if t is None or not np.isfinite(t)]
+        has = [t is not None and np.isfinite(t) for t in file_times]
+        missing = [labels[i] for i in range(n) if not has[i]]
+        if missing and len(missing) < n:
+            # Some files carry a stamp and some do not: the usual cause is a file
+            # from another export in the folder. Numbering the stages by a frame
+            # rate would then shift every time silently, so do not offer that.
+            dated = labels[has.index(True)]
+            raise DataError(
+                f"{missing[0]}: no time stamp in the file, but {dated} has one ({len(missing)} of {n} {what}s "
+                "lack one); check that every file belongs to this series (same software, same export) and "
+                "remove the ones that do not"
+            )
         if missing:
             if frame_rate is None:
                 raise DataError(
-                    f"{missing[0]}: no time stamp in the file ({len(missing)} of {n} {what}s lack one); "
+                    f"{missing[0]}: no time stamp in the file (none of the {n} {what}s has one); "
                     "set frame_rate (Hz) for this series in the configuration"
                 )
             log.warning("%d %ss carry no time stamp; using frame_rate = %g Hz", len(missing), what, frame_rate)
@@ -285,6 +296,90 @@ def _as_files(source, what: str) -> list[Path]:
 
 # ---------------------------------------------------------------------------- DIC
 
+def _dic_formats(files: Sequence[Path]) -> list[str]:
+    """The detected format of every file; all must be the same.
+
+    Raises
+    ------
+    DataError
+        The files are of two or more formats (named, with an example file each).
+    """
+    formats = [_io.detect_dic_format(f) for f in files]
+    # the most common format first: it is most likely the series the user meant
+    kinds = sorted(set(formats), key=lambda k: (-formats.count(k), formats.index(k)))
+    if len(kinds) > 1:
+        parts = []
+        for k in kinds:
+            mine = [f.name for f, fk in zip(files, formats) if fk == k]
+            parts.append(f"{len(mine)} {k} file{'s' if len(mine) > 1 else ''} (e.g. {mine[0]})")
+        raise DataError(
+            f"{files[0].parent}: the DIC series mixes export formats: {' and '.join(parts)}; one series must "
+            "come from one export of one DIC software; move the files that do not belong out of the folder"
+        )
+    return formats
+
+
+def _match_row_points(stages: list[xr.Dataset], files: Sequence[Path]) -> list[xr.Dataset]:
+    """Give points of exports without an ID column (VIC-3D, DICe without SUBSET_ID) stable IDs.
+
+    Such readers number points by row. Rows only identify points if every
+    stage lists the same points in the same order, which a stage with a row
+    more or less breaks (every later point would take its neighbour's place).
+    Points are therefore matched by what the software writes for them in
+    every stage: the reference-image subset centre (``attrs["point_key"]``,
+    e.g. VIC's ``x, y`` or DICe's ``COORDINATE_X/Y``). A point keeps its row
+    number in the first stage; points absent from it are numbered after.
+
+    Raises
+    ------
+    DataError
+        A stage has no such key columns and a different number of rows than
+        the first stage, or a key occurs twice in one stage.
+    """
+    rows = [i for i, s in enumerate(stages) if s.attrs.get("point_id_source") == "row"]
+    if not rows:
+        return stages
+    keyed = [i for i in rows if _point_key(stages[i])]
+    if len(keyed) == len(rows):
+        table: dict[tuple, int] = {}
+        out = list(stages)
+        for i in rows:
+            s = stages[i]
+            names = _point_key(s)
+            pairs = list(zip(*(s[n].values.tolist() for n in names)))
+            ids = np.empty(len(pairs), dtype=np.int64)
+            seen: set[tuple] = set()
+            for r, key in enumerate(pairs):
+                if key in seen:
+                    raise DataError(
+                        f"{files[i].name}: two rows have the same reference image position "
+                        f"({', '.join(names)} = {', '.join(f'{v:g}' for v in key)}); cannot tell the points apart"
+                    )
+                seen.add(key)
+                if key not in table:
+                    table[key] = len(table)
+                ids[r] = table[key]
+            out[i] = s.assign_coords(point=("point", ids, s["point"].attrs))
+        return out
+    n0 = stages[rows[0]].sizes["point"]
+    for i in rows:
+        n = stages[i].sizes["point"]
+        if n != n0:
+            raise DataError(
+                f"{files[i].name}: {n} rows, but {files[rows[0]].name} has {n0}; this export has no point IDs "
+                "nor reference image coordinates, so points are identified by their row and every stage must "
+                "list the same points in the same order; export the image coordinates (VIC-3D: x, y; "
+                "DICe: COORDINATE_X/Y or SUBSET_ID) so that points can be matched"
+            )
+    return stages
+
+
+def _point_key(ds: xr.Dataset) -> tuple[str, ...]:
+    """Names of the variables that identify a point of ``ds`` without an ID column (may be empty)."""
+    names = tuple(n for n in str(ds.attrs.get("point_key", "")).split(",") if n)
+    return names if names and all(n in ds for n in names) else ()
+
+
 def ingest_dic(
     source: str | os.PathLike | Sequence[str | os.PathLike],
     out: str | os.PathLike,
@@ -321,14 +416,16 @@ def ingest_dic(
     files = _as_files(source, "DIC exports")
     log.info("ingest DIC: %d stages", len(files))
     kwargs = {"columns": columns} if (format == "table" and columns) else {}
+    formats = _dic_formats(files) if format == "auto" else [format] * len(files)
     stages: list[xr.Dataset] = []
     started = _time.perf_counter()
-    for i, f in enumerate(files):
-        ds = _io.read_dic(f, format=format, **kwargs)
+    for i, (f, fmt) in enumerate(zip(files, formats)):
+        ds = _io.read_dic(f, format=fmt, **kwargs)
         stages.append(ds)
         if (i + 1) % 100 == 0 or i + 1 == len(files):
             el = _time.perf_counter() - started
             log.info("  %d/%d stages, %.1f stages/s", i + 1, len(files), (i + 1) / el)
+    stages = _match_row_points(stages, files)
     ids = np.unique(np.concatenate([s["point"].values for s in stages]))
     n_t, n_p = len(stages), ids.size
     x = np.full((n_t, n_p, 3), np.nan)

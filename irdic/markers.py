@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import warnings
 from typing import Mapping
 
 import numpy as np
@@ -25,8 +26,8 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 from skimage.morphology import convex_hull_image
 
-from .camera import CameraModel, dlt, leave_one_out, planarity
-from .errors import CalibrationError, ConfigError, DataError
+from .camera import CameraModel, degeneracy, dlt, leave_one_out, planarity
+from .errors import CalibrationError, ConfigError, DataError, IrdicWarning
 
 __all__ = [
     "detect_markers",
@@ -38,6 +39,7 @@ __all__ = [
     "plane_normals",
     "perspective_bias",
     "SEEDS_HINT",
+    "MAX_INVALID_FRACTION",
 ]
 
 log = logging.getLogger(__name__)
@@ -48,6 +50,12 @@ SEEDS_HINT = (
     "(read u = column and v = row off the detection figure)"
 )
 
+
+#: Largest fraction of NaN (invalid) pixels accepted in a calibration target
+#: image. Markers whose measurement window touches a NaN pixel are left out;
+#: beyond a few percent of scattered NaN pixels that leaves too few markers,
+#: or markers in a biased part of the image, for a trustworthy camera.
+MAX_INVALID_FRACTION = 0.05
 
 # ----------------------------------------------------------------------------- image
 
@@ -102,10 +110,23 @@ def _noise_sigma(img: np.ndarray) -> float:
     return float(np.median(np.abs(d - np.median(d))) / 0.6745 / np.sqrt(2.0))
 
 
-def _check_image(img: np.ndarray, min_contrast_k: float) -> tuple[np.ndarray, dict]:
+def _check_image(img: np.ndarray, min_contrast_k: float, where: str = "") -> tuple[np.ndarray, dict, np.ndarray]:
+    """Refuse blank or invalid images; fill NaN pixels for the morphology only.
+
+    Returns the image with NaN pixels set to the median (the top-hat needs a
+    value everywhere), the clipping statistics and the mask of NaN pixels,
+    which :func:`_measure` uses to reject every marker that touches one.
+    """
     finite = np.isfinite(img)
     if finite.mean() < 0.5:
-        raise CalibrationError(f"target image is mostly invalid: only {finite.mean():.0%} of its pixels are finite")
+        raise CalibrationError(f"{where}target image is mostly invalid: only {finite.mean():.0%} of its pixels are finite")
+    bad_frac = 1.0 - float(finite.mean())
+    if bad_frac > MAX_INVALID_FRACTION:
+        raise CalibrationError(
+            f"{where}target image has {bad_frac:.1%} invalid (NaN) pixels, more than the {MAX_INVALID_FRACTION:.0%} "
+            "accepted; markers touching invalid pixels cannot be measured, so record the target again (or export "
+            "it without masked or dead pixels)"
+        )
     vals = img[finite]
     lo, hi = np.percentile(vals, [0.1, 99.9])
     if hi - lo < min_contrast_k:
@@ -117,7 +138,7 @@ def _check_image(img: np.ndarray, min_contrast_k: float) -> tuple[np.ndarray, di
                    for name, level in (("maximum", vals.max()), ("minimum", vals.min()))}
     if not finite.all():
         img = np.where(finite, img, np.median(vals))
-    return img, return_clip
+    return img, return_clip, ~finite
 
 
 def _saturation_error(clip: dict) -> CalibrationError | None:
@@ -159,7 +180,7 @@ def _plane_fit(uu, vv, vals):
     return coef
 
 
-def _measure(img, sign, lab_mask, sl, others_mask, noise, max_radius_px):
+def _measure(img, sign, lab_mask, sl, others_mask, noise, max_radius_px, invalid=None):
     """Sub-pixel centre and shape of one candidate blob; None when it cannot be measured."""
     H, W = img.shape
     rr, cc = np.nonzero(lab_mask[sl])
@@ -183,6 +204,9 @@ def _measure(img, sign, lab_mask, sl, others_mask, noise, max_radius_px):
     u_lo, u_hi = int(np.floor(uc)) - half, int(np.ceil(uc)) + half + 1
     if v_lo < 0 or u_lo < 0 or v_hi > H or u_hi > W:
         return None, "border"
+    if invalid is not None and invalid[v_lo:v_hi, u_lo:u_hi].any():
+        # the filled value would bias the background plane and the centroid
+        return None, "invalid"
     patch = img[v_lo:v_hi, u_lo:u_hi]
     vv, uu = np.mgrid[v_lo:v_hi, u_lo:u_hi].astype(np.float64)
     dist = np.hypot(uu - uc, vv - vc)
@@ -269,12 +293,12 @@ _FIELDS = {
 }
 
 
-def _detect_polarity(img, sign, *, size, thr, noise, min_r, max_r, min_contrast, max_ecc, min_sol):
+def _detect_polarity(img, sign, *, size, thr, noise, min_r, max_r, min_contrast, max_ecc, min_sol, invalid=None):
     labels, n = _candidates(img, sign, size, thr)
     slices = ndimage.find_objects(labels)
     others = labels > 0
     others = ndimage.binary_dilation(others, iterations=2)
-    rows, rejected = [], {"size": 0, "shape": 0, "contrast": 0, "border": 0, "crowded": 0}
+    rows, rejected = [], {"size": 0, "shape": 0, "contrast": 0, "border": 0, "crowded": 0, "invalid": 0}
     min_area = max(1, int(np.floor(0.25 * np.pi * min_r**2)))
     for lab, sl in enumerate(slices, start=1):
         if sl is None:
@@ -288,7 +312,7 @@ def _detect_polarity(img, sign, *, size, thr, noise, min_r, max_r, min_contrast,
         # the annulus must not see other blobs (the blob's own dilation is allowed)
         other = others.copy()
         other[sl] &= ~ndimage.binary_dilation(own, iterations=2)
-        m, why = _measure(img, sign, lab_mask, sl, other, noise, max_r)
+        m, why = _measure(img, sign, lab_mask, sl, other, noise, max_r, invalid)
         if m is None:
             rejected[why] += 1
             continue
@@ -348,7 +372,20 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     Raises
     ------
     CalibrationError
-        Blank, saturated or mostly invalid image, or no marker-like blob.
+        Blank or saturated image, more than :data:`MAX_INVALID_FRACTION` NaN
+        pixels, or no marker-like blob.
+
+    Warns
+    -----
+    IrdicWarning
+        The image has NaN pixels (their fraction and the number of marker
+        candidates left out because their measurement window touches one).
+
+    Notes
+    -----
+    NaN pixels are never measured: they are filled with the image median for
+    the top-hat only, and a candidate whose window (blob, blur margin and
+    background annulus) contains one is rejected (``n_rejected_invalid``).
     """
     if polarity not in ("auto", "dark", "bright"):
         raise ConfigError(f"`polarity` must be 'auto', 'dark' or 'bright', got {polarity!r}")
@@ -361,12 +398,16 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     img, u0, v0 = image_array(image)
     if min(img.shape) < 8:
         raise ConfigError(f"target image is too small ({img.shape[0]} x {img.shape[1]} px)")
-    img, clip = _check_image(img, min_contrast_k)
-    noise = _noise_sigma(img)
+    source = getattr(image, "attrs", {}).get("source")
+    where = f"{source}: " if source else ""
+    img, clip, invalid = _check_image(img, min_contrast_k, where)
+    n_invalid = int(invalid.sum())
+    noise = _noise_sigma(np.where(invalid, np.nan, img) if n_invalid else img)
     thr = max(threshold_sigma * noise, 0.5 * min_contrast_k)
     size = 2 * int(np.ceil(max_radius_px)) + 3
     kw = dict(size=size, thr=thr, noise=noise, min_r=min_radius_px, max_r=max_radius_px,
-              min_contrast=min_contrast_k, max_ecc=max_eccentricity, min_sol=min_solidity)
+              min_contrast=min_contrast_k, max_ecc=max_eccentricity, min_sol=min_solidity,
+              invalid=invalid if n_invalid else None)
     signs = {"dark": -1.0, "bright": 1.0}
     results = {}
     for pol in (["dark", "bright"] if polarity == "auto" else [polarity]):
@@ -378,6 +419,11 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     else:
         pol = polarity
     rows, rejected, n_cand = results[pol]
+    if n_invalid:
+        warnings.warn(
+            f"{where}target image has {n_invalid} invalid (NaN) pixels ({n_invalid / invalid.size:.2%}); "
+            f"{rejected['invalid']} marker candidate(s) touching them were left out",
+            IrdicWarning, stacklevel=2)
     if not rows:
         sat = _saturation_error(clip)
         if sat is not None:
@@ -713,8 +759,23 @@ def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: f
     tol = seed_tolerance_px if seed_tolerance_px is not None else max(3.0, 0.25 * spacing)
     if len(D):
         d, j = cKDTree(D).query(suv)
+        # a seed a whole marker spacing away from every blob points at no
+        # marker at all (off the target, u and v swapped, a typo): say so
+        # rather than letting the DLT report the seeds as degenerate
+        far = np.flatnonzero(d > max(spacing, 3.0)) if len(D) > 1 else np.zeros(0, int)
+        if far.size:
+            names = "; ".join(f"seed for marker {keys[f]!r} at ({suv[f, 0]:.1f}, {suv[f, 1]:.1f}) is {d[f]:.1f} px "
+                              "from any detected blob" for f in far[:5])
+            raise ConfigError(
+                f"{names} (detections are {spacing:.1f} px apart); give the pixel position (u = column, v = row) "
+                "of a detected marker, read off the detection figure"
+            )
         snap = d <= 0.5 * spacing
         suv = np.where(snap[:, None], D[j], suv)
+    line = degeneracy(X[idx], "seed markers")
+    if line is not None and "coplanar" not in line:
+        raise ConfigError(f"{line}, so they do not determine a camera; choose seeds spread over both wings of "
+                          "the target")
     thick = planarity(X[idx])
     if thick < 1e-3:
         raise ConfigError(

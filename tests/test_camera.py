@@ -256,3 +256,22 @@ def test_dataset_round_trip(k1):
     np.testing.assert_allclose(back.projection_uncertainty(x), m.projection_uncertainty(x), rtol=1e-6)
     with pytest.raises(DataError, match="not a camera calibration"):
         CameraModel.from_dataset(ds.drop_vars("projection_matrix"))
+
+
+def test_collinear_markers_are_called_collinear():
+    t = np.linspace(0, 1, 8)[:, None]
+    x = np.array([0.0, 0.0, 500.0]) + t * np.array([40.0, 10.0, 5.0])
+    uv = np.column_stack([100 + 300 * t[:, 0], 200 + 50 * t[:, 0] ** 2])
+    with pytest.raises(CalibrationError, match=r"the 8 markers are \(nearly\) collinear .*line of markers") as exc:
+        dlt(x, uv)
+    assert "coplanar" not in str(exc.value) and "rank-deficient" not in str(exc.value)
+
+
+def test_collinear_pixel_positions_are_named():
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-20, 20, (10, 3)) + [0, 0, 500]
+    t = np.linspace(0, 1, 10)
+    uv = np.column_stack([100 + 300 * t, 200 + 60 * t])
+    with pytest.raises(CalibrationError, match=r"the 10 pixel positions are \(nearly\) collinear") as exc:
+        dlt(x, uv)
+    assert "rank-deficient" not in str(exc.value)

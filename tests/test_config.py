@@ -54,3 +54,98 @@ def test_load_config_errors(tmp_path):
     (tmp_path / "bad.yaml").write_text("a: [1,\n")
     with pytest.raises(ConfigError, match="not valid YAML"):
         load_config(tmp_path / "bad.yaml")
+
+
+# --- data safety: alias bombs, long messages, fuzzing -------------------------
+
+import time
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from irdic.config import MAX_REPR
+
+_LAUGHS = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
+    f"{chr(ord('a') + i)}: &{chr(ord('a') + i)} [" + ", ".join([f"*{chr(ord('a') + i - 1)}"] * 9) + "]\n"
+    for i in range(1, 9)
+)
+
+
+def test_alias_bomb_is_refused_quickly_naming_file_and_line(tmp_path):
+    p = tmp_path / "laughs.yaml"
+    p.write_text(_LAUGHS)
+    assert len(_LAUGHS) < 1000
+    t0 = time.perf_counter()
+    with pytest.raises(ConfigError, match=r"laughs\.yaml, line \d+: alias \*\w expands?|laughs\.yaml, line \d+: alias") as exc:
+        load_config(p)
+    assert time.perf_counter() - t0 < 2.0
+    assert "write the repeated values out" in str(exc.value)
+    assert len(str(exc.value)) < 400
+
+
+def test_recursive_alias_is_refused(tmp_path):
+    p = tmp_path / "rec.yaml"
+    p.write_text("a: &x [1, *x]\n")
+    with pytest.raises(ConfigError, match=r"rec\.yaml, line 1: alias \*x refers to a value that contains it"):
+        load_config(p)
+
+
+def test_modest_aliases_still_work(tmp_path):
+    text = (ROOT / "config" / "config.yaml").read_text()
+    cfg = yaml.safe_load(text)
+    cfg["setups"]["lab2"] = cfg["setups"]["lab"]  # dumped as an anchor + alias
+    p = tmp_path / "alias.yaml"
+    p.write_text(yaml.safe_dump(cfg))
+    assert "*id" in p.read_text()
+    c = load_config(p)
+    assert c["setups"]["lab2"] == c["setups"]["lab"]
+
+
+def test_huge_value_is_quoted_short(tmp_path, cfg):
+    cfg["calibration"]["polarity"] = "x" * 100_000
+    cfg["results"] = list(range(100_000))
+    p = tmp_path / "big.yaml"
+    p.write_text(yaml.safe_dump(cfg))
+    with pytest.raises(ConfigError) as exc:
+        load_config(p)
+    msg = str(exc.value)
+    assert "more characters" in msg
+    assert len(msg) < 5 * (MAX_REPR + 200)
+
+
+def test_undecodable_file_is_a_config_error(tmp_path):
+    p = tmp_path / "latin.yaml"
+    p.write_bytes(b"results: r\xe9sultats\n")
+    with pytest.raises(ConfigError, match=r"latin\.yaml: not a UTF-8 text file"):
+        load_config(p)
+
+
+_SHIPPED = (ROOT / "config" / "config.yaml").read_bytes()
+_YAMLISH = st.sampled_from(
+    [b"&a ", b"*a", b"[", b"]", b"{", b"}", b": ", b"- ", b"\n", b"  ", b"!!python/object ", b"<<: *a\n",
+     b"\xff", b"~", b"1e999", b".inf", b"2020-01-01", b"'", b'"', b"#", b"? ", b"|\n", b"%YAML 1.1\n", b"---\n"]
+)
+
+
+@st.composite
+def _edited_config(draw):
+    data = bytearray(_SHIPPED)
+    for _ in range(draw(st.integers(1, 4))):
+        pos = draw(st.integers(0, len(data)))
+        cut = draw(st.integers(0, 20))
+        ins = draw(st.one_of(_YAMLISH, st.binary(max_size=8)))
+        data[pos : pos + cut] = ins
+    return bytes(data)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.one_of(_edited_config(), st.binary(max_size=200)))
+def test_fuzzed_config_is_valid_or_config_error(tmp_path, data):
+    p = tmp_path / "fuzz.yaml"
+    p.write_bytes(data)
+    try:
+        cfg = load_config(p)
+    except ConfigError as exc:
+        assert len(str(exc)) < 3000
+    else:
+        assert isinstance(cfg, dict)

@@ -66,3 +66,13 @@ def test_edge_distance_signed():
     assert d[1] == pytest.approx(0.5)
     assert d[2] < 0
     assert np.isnan(d[3])
+
+
+@pytest.mark.parametrize("pts", [np.column_stack([np.arange(10.0), 2.0 * np.arange(10.0) + 1]),
+                                 np.tile([[4.0, 5.0]], (6, 1))])
+def test_collinear_points_say_so_without_a_qhull_dump(pts):
+    with pytest.raises(GeometryError, match=r"the \d+ DIC points seen by the IR camera are degenerate: their "
+                                            r"projections are collinear or coincide") as exc:
+        specimen_mask(pts, np.arange(30), np.arange(30))
+    msg = str(exc.value)
+    assert "QH" not in msg and "qhull" not in msg.lower() and len(msg) < 400

@@ -144,3 +144,21 @@ def test_ingest_dic_bad_file_in_series(tmp_path):
     with pytest.raises(IrdicError, match=r"spec_0_1\.txt"):
         ingest_dic(tmp_path / "dic", tmp_path / "dic.zarr")
     assert not (tmp_path / "dic.zarr").exists()
+
+
+def test_mixed_dic_formats_are_refused_naming_both(tmp_path):
+    from irdic.io.dice import write_dice
+
+    _write_dic_series(tmp_path / "dic")
+    write_dice(tmp_path / "dic" / "DICe_solution_0.txt", np.arange(3), np.ones((3, 3)), np.zeros((3, 3)))
+    with pytest.raises(DataError, match=r"mixes export formats: 3 nodemap files \(e\.g\. spec_0_0\.txt\) and "
+                                        r"1 dice file \(e\.g\. DICe_solution_0\.txt\)") as exc:
+        ingest_dic(tmp_path / "dic", tmp_path / "dic.zarr", time_source="file", frame_rate=2.0)
+    assert "frame_rate" not in str(exc.value)
+    assert not (tmp_path / "dic.zarr").exists()
+
+
+def test_some_stages_without_time_stamp_do_not_suggest_frame_rate():
+    with pytest.raises(DataError, match=r"b: no time stamp in the file, but a has one") as exc:
+        frame_times([1.0, None, 3.0], None, labels=["a", "b", "c"], frame_rate=2.0)
+    assert "frame_rate" not in str(exc.value)

@@ -217,3 +217,64 @@ def test_match_lattice_on_an_asymmetric_target(target):
     true_mi, true_di = assign(target.truth.marker_pixel.values[keep], uv_of(det), 1.0)
     assert len(mi) == 78
     assert mi.tolist() == true_mi.tolist() and di.tolist() == true_di.tolist()
+
+
+def test_nan_pixels_reject_the_markers_they_touch_and_warn(target, detections):
+    from irdic.errors import IrdicWarning
+
+    img = target.image.values.astype(np.float64).copy()
+    cen = target.truth.marker_centroid.values
+    # a dead block over one marker: its window must not be measured on filled values
+    u, v = np.round(cen[10]).astype(int)
+    img[v - 2 : v + 3, u - 2 : u + 3] = np.nan
+    da = target.image.copy(data=img.astype(np.float32))
+    da.attrs["source"] = "target_0001.txt"
+    with pytest.warns(IrdicWarning, match=r"target_0001\.txt: target image has 25 invalid \(NaN\) pixels .*"
+                                          r"1 marker candidate\(s\) touching them were left out"):
+        det = detect_markers(da)
+    assert det.sizes["detection"] == 83 and det.attrs["n_rejected_invalid"] == 1
+    assert np.hypot(det.u.values - cen[10, 0], det.v.values - cen[10, 1]).min() > 5
+    # the other markers are measured exactly as in the clean image
+    mi, di = assign(uv_of(detections), uv_of(det), 0.5)
+    assert len(mi) == 83
+    np.testing.assert_allclose(uv_of(det)[di], uv_of(detections)[mi], atol=1e-9)
+
+
+def test_too_many_nan_pixels_are_refused_naming_the_image(target):
+    rng = np.random.default_rng(3)
+    img = target.image.values.astype(np.float64).copy()
+    img[rng.random(img.shape) < 0.10] = np.nan
+    da = target.image.copy(data=img.astype(np.float32))
+    da.attrs["source"] = "target_0001.txt"
+    with pytest.raises(CalibrationError, match=r"target_0001\.txt: target image has 10\.\d% invalid \(NaN\) pixels, "
+                                               r"more than the 5% accepted"):
+        detect_markers(da)
+
+
+def test_far_off_seed_is_named_with_its_distance(target, detections):
+    ids = target.markers.marker.values
+    x = target.markers.x.values
+    pix = target.truth.marker_pixel.values
+    D = uv_of(detections)
+    pick = [0, 9, 23, 44, 61, 80]
+    seeds = {int(ids[i]): pix[i].tolist() for i in pick}
+    k = int(ids[44])
+    seeds[k] = [1000.0, 760.0]  # far outside the target
+    d = np.hypot(*(D - [1000.0, 760.0]).T).min()
+    with pytest.raises(ConfigError, match=rf"seed for marker {k} at \(1000\.0, 760\.0\) is {d:.1f} px from any "
+                                          r"detected blob \(detections are \d+\.\d px apart\)") as exc:
+        match_seeds(D, x, ids, seeds)
+    assert "coplanar" not in str(exc.value) and "rank" not in str(exc.value)
+
+
+def test_collinear_seed_markers_are_called_collinear(target, detections):
+    ids = target.markers.marker.values
+    D = uv_of(detections)
+    # six markers of the target moved onto one line in the DIC frame (e.g. a wrong column in the export)
+    x = target.markers.x.values.copy()
+    pick = [0, 9, 23, 44, 61, 80]
+    x[pick] = np.array([1.0, 2.0, 3.0]) * np.arange(6)[:, None]
+    seeds = {int(ids[i]): D[np.argmin(np.hypot(*(D - target.truth.marker_pixel.values[i]).T))].tolist()
+             for i in pick}
+    with pytest.raises(ConfigError, match=r"the 6 seed markers are \(nearly\) collinear"):
+        match_seeds(D, x, ids, seeds)

@@ -65,7 +65,9 @@ def detect_dic_format(path: str | os.PathLike) -> str:
     low = head.lower()
     if lines and lines[0].startswith("#") and ("x_undef" in low or "current_stage" in low):
         return "nodemap"
-    if lines and (lines[0].startswith("***") or "subset_id" in low and "model_coordinates" in low):
+    # DICe may be exported without SUBSET_ID; its MODEL_* column pair is specific enough
+    if lines and (lines[0].startswith("***") or "model_coordinates" in low
+                  and ("subset_id" in low or "model_displacement" in low)):
         return "dice"
     if lines and lines[0].startswith('"') and "sigma" in low:
         return "vic"

@@ -52,7 +52,10 @@ def read_dice(path: str | os.PathLike) -> xr.Dataset:
         ``x_ref`` = MODEL_COORDINATES (mm), NaN rows where SIGMA is negative
         (DICe writes -1 for failed subsets) or a value is NaN. Coordinate
         ``point`` = SUBSET_ID (the row index when the column was not
-        exported, ``attrs["point_id_source"] = "row"``). The other columns
+        exported, ``attrs["point_id_source"] = "row"``; then, when
+        COORDINATE_X/Y are present, ``attrs["point_key"]`` names them so that
+        :func:`irdic.ingest.ingest_dic` matches subsets between frames by
+        their reference image position rather than by row). The other columns
         (SIGMA, GAMMA, image coordinates, ...) as ``(point)`` variables.
         ``attrs["frame_index"]`` from the file name. No time: DICe does not
         write one.
@@ -102,6 +105,9 @@ def read_dice(path: str | os.PathLike) -> xr.Dataset:
     skip = [*j_model] + [j for j in (j_id,) if j is not None]
     extras = extra_columns(rows, skip, strict=True)
     attrs: dict[str, Any] = {}
+    if id_source == "row" and {"COORDINATE_X", "COORDINATE_Y"} <= {e[0] for e in extras}:
+        # the subset centroid in the reference image names a subset in every frame
+        attrs["point_key"] = "COORDINATE_X,COORDINATE_Y"
     m = _FRAME_IN_NAME.search(p.stem)
     if m:
         attrs["frame_index"] = int(m.group(1))

@@ -10,7 +10,8 @@ Upper-case ``X, Y, Z`` are the reference 3-D coordinates and ``U, V, W`` the
 displacement (mm); lower-case ``x, y, u, v`` are image coordinates and
 displacements in px, so names are matched case-sensitively. Spacing and
 quoting differ between versions. Invalid points keep their grid row with
-``sigma = -1``. There is no point ID column: points are numbered by row.
+``sigma = -1``. There is no point ID column: points are numbered by row and
+matched between frames by their reference image position ``x, y``.
 """
 
 from __future__ import annotations
@@ -57,8 +58,11 @@ def read_vic(path: str | os.PathLike) -> xr.Dataset:
         ``x(point, component)`` = (X+U, Y+V, Z+W) and ``x_ref`` = (X, Y, Z), mm,
         NaN rows where ``sigma`` is negative (VIC writes -1) or a value is
         NaN. Coordinate ``point`` = row index (``attrs["point_id_source"] =
-        "row"``): VIC has no ID column, but its grid rows are stable between
-        frames of one analysis. Other columns as ``(point)`` variables; the
+        "row"``): VIC has no ID column. When the image columns ``x, y`` (the
+        subset centre in the reference image) are present,
+        ``attrs["point_key"] = "x_image,y_image"`` tells
+        :func:`irdic.ingest.ingest_dic` to match points between frames by
+        them rather than by row. Other columns as ``(point)`` variables; the
         image columns x, y, u, v are renamed ``x_image``, ``y_image``,
         ``u_image``, ``v_image``.
 
@@ -98,7 +102,12 @@ def read_vic(path: str | os.PathLike) -> xr.Dataset:
         log.info("%s: no sigma column; only NaN values mark invalid points", p)
     extras = extra_columns(rows, j_all, strict=True, rename=_IMAGE_NAMES, suffix="_image")
     ids = np.arange(len(rows), dtype=np.int64)
-    return stage_dataset(ids, x, x_ref, path=p, fmt="vic", valid=valid, extras=extras, point_id_source="row")
+    attrs = {}
+    if {"x_image", "y_image"} <= {e[0] for e in extras}:
+        # the subset centre in the reference image names a grid point in every frame
+        attrs["point_key"] = "x_image,y_image"
+    return stage_dataset(ids, x, x_ref, path=p, fmt="vic", valid=valid, extras=extras, attrs=attrs,
+                         point_id_source="row")
 
 
 def write_vic(path: str | os.PathLike, x_ref: Any, displacement: Any, *, sigma: Any = None,

@@ -126,3 +126,35 @@ def test_write_read_round_trip(tmp_path):
     np.testing.assert_allclose(ds.x.values[ok], (mc + md)[ok], rtol=0, atol=5e-5 * 20 + 5e-5 * 1)
     assert np.isnan(ds.x.values[7]).all() and ds.SIGMA.values[7] == -1
     np.testing.assert_array_equal(ds.point.values, np.arange(100, 100 + n))
+
+
+def _dice_no_ids(path, rows, shift):
+    head = ("COORDINATE_X,COORDINATE_Y,MODEL_COORDINATES_X,MODEL_COORDINATES_Y,MODEL_COORDINATES_Z,"
+            "MODEL_DISPLACEMENT_X,MODEL_DISPLACEMENT_Y,MODEL_DISPLACEMENT_Z,SIGMA\n")
+    body = "".join(f"{5.55e2 + 20 * r:.4E},{9.3e2:.4E},{2.0 * r:.4E},0,0,{shift:.4E},0,0,1.0E-02\n" for r in rows)
+    path.write_text(head + body)
+
+
+def test_stage_without_subset_ids_and_a_row_fewer_matches_by_coordinates(tmp_path):
+    from irdic.ingest import ingest_dic
+    from irdic.store import open_store
+
+    src = tmp_path / "dice"
+    src.mkdir()
+    _dice_no_ids(src / "DICe_solution_0.txt", range(4), 0.0)
+    _dice_no_ids(src / "DICe_solution_1.txt", [1, 2, 3], 0.5)  # subset 0 dropped from this file
+    ds0 = read_dice(src / "DICe_solution_0.txt")
+    assert ds0.attrs["point_key"] == "COORDINATE_X,COORDINATE_Y"
+    ds = open_store(ingest_dic(src, tmp_path / "dic.zarr", time_source="frame_rate", frame_rate=1.0))
+    np.testing.assert_allclose(ds.x.values[1, :, 0] - ds.x.values[0, :, 0], [np.nan, 0.5, 0.5, 0.5], atol=1e-12)
+
+
+def test_duplicate_reference_position_without_ids_is_refused(tmp_path):
+    from irdic.ingest import ingest_dic
+
+    src = tmp_path / "dice"
+    src.mkdir()
+    _dice_no_ids(src / "DICe_solution_0.txt", [0, 1, 1], 0.0)
+    with pytest.raises(DataError, match=r"DICe_solution_0\.txt: two rows have the same reference image position "
+                                        r"\(COORDINATE_X, COORDINATE_Y = 575, 930\)"):
+        ingest_dic(src, tmp_path / "dic.zarr", time_source="frame_rate", frame_rate=1.0)

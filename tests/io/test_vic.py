@@ -82,3 +82,38 @@ def test_round_trip(tmp_path):
         ok = np.arange(40) != 11
         np.testing.assert_allclose(ds.x.values[ok], (xr_ + d)[ok], rtol=0, atol=1e-6 + 1e-12)
         assert np.isnan(ds.x.values[11]).all()
+
+
+def _vic_frame(path, rows, shift):
+    """A VIC-3D frame holding the grid ``rows`` (indices into a 1-D grid) displaced by ``shift`` mm."""
+    head = '"X", "Y", "Z", "U", "V", "W", "sigma", "x", "y"\n'
+    body = "".join(f"{2.0 * r:.3f}, {0.5 * r:.3f}, 0.1, {shift}, 0, 0, 0.01, {500 + 15 * r}, 384\n" for r in rows)
+    path.write_text(head + body)
+
+
+def test_frame_with_a_row_fewer_keeps_points_on_their_own_positions(tmp_path):
+    from irdic.ingest import ingest_dic
+    from irdic.store import open_store
+
+    src = tmp_path / "vic"
+    src.mkdir()
+    _vic_frame(src / "spec_0.csv", range(5), 0.0)
+    _vic_frame(src / "spec_1.csv", [0, 2, 3, 4], 1.0)  # grid point 1 not written in this frame
+    ds = open_store(ingest_dic(src, tmp_path / "dic.zarr", time_source="frame_rate", frame_rate=1.0))
+    np.testing.assert_array_equal(ds.point.values, np.arange(5))
+    # each point moves by exactly the 1 mm shift; none lands on its neighbour (2 mm away)
+    np.testing.assert_allclose(ds.x.values[1, :, 0] - ds.x.values[0, :, 0], [1, np.nan, 1, 1, 1], atol=1e-12)
+    assert np.isnan(ds.x.values[1, 1]).all()
+
+
+def test_frames_without_image_columns_and_different_rows_are_refused(tmp_path):
+    from irdic.errors import DataError
+    from irdic.ingest import ingest_dic
+
+    src = tmp_path / "vic"
+    src.mkdir()
+    for name, n in (("spec_0.csv", 3), ("spec_1.csv", 2)):
+        write_vic(src / name, np.ones((n, 3)), np.zeros((n, 3)))
+    with pytest.raises(DataError, match=r"spec_1\.csv: 2 rows, but spec_0\.csv has 3; .* identified by their row"):
+        ingest_dic(src, tmp_path / "dic.zarr", time_source="frame_rate", frame_rate=1.0)
+    assert not (tmp_path / "dic.zarr").exists()
