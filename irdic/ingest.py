@@ -27,6 +27,7 @@ import xarray as xr
 
 from . import io as _io
 from .errors import DataError, FormatError, IrdicError
+from .io._common import non_regular_kind as _non_regular_kind
 from .store import FrameStore, provenance, write_dataset
 
 __all__ = ["list_inputs", "ingest_ir", "ingest_dic", "frame_times"]
@@ -40,30 +41,48 @@ def _natural_key(p: Path):
     return [int(tok) if tok.isdigit() else tok.lower() for tok in re.split(r"(\d+)", p.name)]
 
 
+def _special_file(f: Path) -> str | None:
+    """What ``f`` is when it exists but is neither a regular file nor a folder, else None."""
+    try:
+        kind = _non_regular_kind(f.stat().st_mode)
+    except OSError:  # vanished or a broken link: the reader says so when it opens it
+        return None
+    return None if kind == "a folder" else kind
+
+
 def list_inputs(path: str | os.PathLike, *, what: str = "exports") -> list[Path]:
     """Files of a series: a folder (all regular files in it), a glob or one file.
 
     Files are returned in natural order (``frame_2`` before ``frame_10``);
-    hidden files and pictures/notes next to the exports are skipped.
+    hidden files, sub-folders and pictures/notes next to the exports are
+    skipped.
 
     Raises
     ------
     DataError
-        Nothing matches.
+        Nothing matches, or a named pipe, device or socket is among the
+        inputs (reading one would block or never end; skipping it could
+        silently drop frames).
     """
     p = Path(path)
     if p.is_dir():
-        files = [f for f in p.iterdir() if f.is_file() and not f.name.startswith(".")
-                 and f.suffix.lower() not in _IGNORED_SUFFIXES]
-        if not files:
-            raise DataError(f"{p}: folder contains no {what}")
+        candidates = [f for f in p.iterdir() if not f.name.startswith(".")
+                      and f.suffix.lower() not in _IGNORED_SUFFIXES]
     elif any(ch in str(path) for ch in "*?["):
-        files = [Path(f) for f in glob.glob(str(path)) if Path(f).is_file()]
-        if not files:
-            raise DataError(f"{path}: pattern matches no {what}")
-    elif p.is_file():
-        files = [p]
+        candidates = [Path(f) for f in glob.glob(str(path))]
     else:
+        candidates = [p]
+    for f in candidates:
+        kind = _special_file(f)
+        if kind is not None:
+            raise DataError(f"{f}: is {kind}, not a regular file; expected {what} stored as files "
+                            "(remove it from the input or copy the data into a file)")
+    files = [f for f in candidates if f.is_file()]
+    if not files:
+        if p.is_dir():
+            raise DataError(f"{p}: folder contains no {what}")
+        if candidates != [p]:
+            raise DataError(f"{path}: pattern matches no {what}")
         raise DataError(f"{p}: no such file or folder (expected {what})")
     return sorted(files, key=_natural_key)
 
