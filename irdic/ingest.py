@@ -174,20 +174,31 @@ def _iter_ir_frames(files: Sequence[Path], fmt: str) -> Iterator[tuple[str, xr.D
             yield f.name, da
 
 
-def _count_ir_frames(files: Sequence[Path], fmt: str) -> int:
+def _count_ir_frames(files: Sequence[Path], fmt: str) -> tuple[int, list | None]:
+    """Number of frames, and ``(label, time, frame number)`` of each when every file is ``.irb``.
+
+    ``.irb`` frames are counted and timed from their image headers, without
+    decoding pixels.
+    """
     n = 0
+    stamps: list | None = []
     for f in files:
         ffmt = _io.detect_ir_format(f) if fmt == "auto" else fmt
-        if ffmt == "irbis":
-            n += 1
-        elif ffmt == "irb":
+        if ffmt == "irb":
             from .io import irb
 
-            n += irb.count_irb_frames(f)
+            for i, info in enumerate(irb.iter_irb_headers(f)):
+                if stamps is not None:
+                    stamps.append((f"{f.name}[{i}]", irb.unix_time(info), int(info["frame_index"])))
+                n += 1
+            continue
+        stamps = None
+        if ffmt == "irbis":
+            n += 1
         else:
             da = _io.read_ir(f, format=ffmt)
             n += da.sizes.get("time", 1)
-    return n
+    return n, stamps
 
 
 def ingest_ir(
@@ -221,8 +232,14 @@ def ingest_ir(
         and ``source_file`` per frame.
     """
     files = _as_files(source, "IR exports")
-    n = _count_ir_frames(files, format)
+    n, stamps = _count_ir_frames(files, format)
     log.info("ingest IR: %d frames from %d files", n, len(files))
+    if stamps:
+        # the time axis from the headers: duplicate or decreasing time stamps
+        # are refused before hours of frames are decoded and written
+        labels0, times0, numbers0 = zip(*stamps)
+        frame_times(times0, numbers0, time_source=time_source, frame_rate=frame_rate,
+                    time_origin=time_origin, time_offset=time_offset, labels=labels0, what="IR frame")
     started = _time.perf_counter()
     it = _iter_ir_frames(files, format)
     label0, first = next(it)
