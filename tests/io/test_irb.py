@@ -270,7 +270,7 @@ def test_writer_argument_errors(tmp_path, kwargs, match):
 
 
 def _forged_directory(tmp_path, offsets, name="forged.irb"):
-    """An IRB file whose directory lists image blocks at ``offsets`` (relative to the first of two copies of one block)."""
+    """An IRB file listing image blocks at ``offsets`` (from the first of two copies of one block)."""
     one = _small(tmp_path, 1)
     block_off, block_size = struct.unpack_from("<ii", one, 64 + 12)
     block = one[block_off:block_off + block_size]
