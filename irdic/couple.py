@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import time as _time
 import warnings
 from pathlib import Path
@@ -126,6 +127,33 @@ def _masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle):
     log.info("specimen masks: %d built for %d DIC times, %d to %d px", rebuilt, n_t,
              int(both.sum(axis=(1, 2)).min()), int(both.sum(axis=(1, 2)).max()))
     return both, facing
+
+
+_LOCAL_PIXEL = re.compile(r"(?:in frame (\d+) )?at pixel \(u=(\d+), v=(\d+)\)")
+
+
+def _raise_in_sensor_pixels(exc: DataError, u: np.ndarray, v: np.ndarray, t_ir: np.ndarray) -> None:
+    """Raise the interpolator's error with its frame-array pixel named in full-sensor pixels (u, v).
+
+    Returns (and the caller re-raises ``exc``) when the message names no pixel.
+
+    The interpolator works on the frame array, whose pixel (0, 0) is the
+    crop window's corner; users know the sensor pixels of their exports.
+    """
+    def sensor(m: re.Match) -> str:
+        iu, iv = int(m.group(2)), int(m.group(3))
+        if not (0 <= iu < u.size and 0 <= iv < v.size):
+            return m.group(0)
+        when = ""
+        if m.group(1) is not None and int(m.group(1)) < t_ir.size:
+            k = int(m.group(1))
+            when = f"in IR frame {k} (t = {t_ir[k]:g} s) "
+        return f"{when}at sensor pixel (u={u[iu]}, v={v[iv]})"
+
+    text, n = _LOCAL_PIXEL.subn(sensor, str(exc))
+    if n:
+        raise DataError(f"ir: {text}; NaN temperatures under the specimen cannot be coupled (see the NaN "
+                        "fraction reported by ingest-ir)") from exc
 
 
 def couple(
@@ -223,8 +251,12 @@ def couple(
     seen = in_frame & facing
     query = np.where(seen[..., None], local, np.nan)
 
-    res = evaluate_series(ir["temperature"], t_ir, t_dic, query, masks, method=method, c=c_space, R0=R0_space,
-                          c_time=c_time, R0_time=R0_time, halo=halo)
+    try:
+        res = evaluate_series(ir["temperature"], t_ir, t_dic, query, masks, method=method, c=c_space, R0=R0_space,
+                              c_time=c_time, R0_time=R0_time, halo=halo)
+    except DataError as exc:
+        _raise_in_sensor_pixels(exc, u, v, t_ir)
+        raise
     theta, gu, gv, rate, edge = (np.array(a, dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)
@@ -351,7 +383,11 @@ def _extrapolate(ir, t_ir, t_dic, local, masks, outside, theta, gu, gv, rate, ed
         return done_full
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IrdicWarning)  # the first pass already said which times are out of span
-        res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate(list(pts), axis=1), masks, **kw)
+        try:
+            res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate(list(pts), axis=1), masks, **kw)
+        except DataError as exc:
+            _raise_in_sensor_pixels(exc, ir["u"].values, ir["v"].values, t_ir)
+            raise
     f = np.stack([res.theta[:, j * Mc:(j + 1) * Mc] for j in range(S)])  # (S, n_t, Mc)
     gq_u, gq_v, rq = res.dtheta_du[:, :Mc], res.dtheta_dv[:, :Mc], res.dtheta_dt[:, :Mc]
     d = local_c - pts[0]

@@ -27,11 +27,19 @@ import xarray as xr
 
 from . import io as _io
 from .errors import DataError, FormatError, IrdicError
+from .io._common import non_regular_kind as _non_regular_kind
 from .store import FrameStore, provenance, write_dataset
 
 __all__ = ["list_inputs", "ingest_ir", "ingest_dic", "frame_times"]
 
 log = logging.getLogger(__name__)
+
+#: Above this fraction of NaN pixels in one IR frame, ingest refuses the series
+#: (an all-NaN frame, or a mask that hides most of the sensor, is a broken
+#: export, not a measurement).
+MAX_NAN_FRACTION = 0.5
+#: Above this fraction of NaN pixel values over the whole series, ingest warns.
+WARN_NAN_FRACTION = 0.01
 
 _IGNORED_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".pdf", ".yaml", ".yml", ".json", ".md", ".log", ".zarr"}
 
@@ -40,30 +48,48 @@ def _natural_key(p: Path):
     return [int(tok) if tok.isdigit() else tok.lower() for tok in re.split(r"(\d+)", p.name)]
 
 
+def _special_file(f: Path) -> str | None:
+    """What ``f`` is when it exists but is neither a regular file nor a folder, else None."""
+    try:
+        kind = _non_regular_kind(f.stat().st_mode)
+    except OSError:  # vanished or a broken link: the reader says so when it opens it
+        return None
+    return None if kind == "a folder" else kind
+
+
 def list_inputs(path: str | os.PathLike, *, what: str = "exports") -> list[Path]:
     """Files of a series: a folder (all regular files in it), a glob or one file.
 
     Files are returned in natural order (``frame_2`` before ``frame_10``);
-    hidden files and pictures/notes next to the exports are skipped.
+    hidden files, sub-folders and pictures/notes next to the exports are
+    skipped.
 
     Raises
     ------
     DataError
-        Nothing matches.
+        Nothing matches, or a named pipe, device or socket is among the
+        inputs (reading one would block or never end; skipping it could
+        silently drop frames).
     """
     p = Path(path)
     if p.is_dir():
-        files = [f for f in p.iterdir() if f.is_file() and not f.name.startswith(".")
-                 and f.suffix.lower() not in _IGNORED_SUFFIXES]
-        if not files:
-            raise DataError(f"{p}: folder contains no {what}")
+        candidates = [f for f in p.iterdir() if not f.name.startswith(".")
+                      and f.suffix.lower() not in _IGNORED_SUFFIXES]
     elif any(ch in str(path) for ch in "*?["):
-        files = [Path(f) for f in glob.glob(str(path)) if Path(f).is_file()]
-        if not files:
-            raise DataError(f"{path}: pattern matches no {what}")
-    elif p.is_file():
-        files = [p]
+        candidates = [Path(f) for f in glob.glob(str(path))]
     else:
+        candidates = [p]
+    for f in candidates:
+        kind = _special_file(f)
+        if kind is not None:
+            raise DataError(f"{f}: is {kind}, not a regular file; expected {what} stored as files "
+                            "(remove it from the input or copy the data into a file)")
+    files = [f for f in candidates if f.is_file()]
+    if not files:
+        if p.is_dir():
+            raise DataError(f"{p}: folder contains no {what}")
+        if candidates != [p]:
+            raise DataError(f"{path}: pattern matches no {what}")
         raise DataError(f"{p}: no such file or folder (expected {what})")
     return sorted(files, key=_natural_key)
 
@@ -166,20 +192,31 @@ def _iter_ir_frames(files: Sequence[Path], fmt: str) -> Iterator[tuple[str, xr.D
             yield f.name, da
 
 
-def _count_ir_frames(files: Sequence[Path], fmt: str) -> int:
+def _count_ir_frames(files: Sequence[Path], fmt: str) -> tuple[int, list | None]:
+    """Number of frames, and ``(label, time, frame number)`` of each when every file is ``.irb``.
+
+    ``.irb`` frames are counted and timed from their image headers, without
+    decoding pixels.
+    """
     n = 0
+    stamps: list | None = []
     for f in files:
         ffmt = _io.detect_ir_format(f) if fmt == "auto" else fmt
-        if ffmt == "irbis":
-            n += 1
-        elif ffmt == "irb":
+        if ffmt == "irb":
             from .io import irb
 
-            n += irb.count_irb_frames(f)
+            for i, info in enumerate(irb.iter_irb_headers(f)):
+                if stamps is not None:
+                    stamps.append((f"{f.name}[{i}]", irb.unix_time(info), int(info["frame_index"])))
+                n += 1
+            continue
+        stamps = None
+        if ffmt == "irbis":
+            n += 1
         else:
             da = _io.read_ir(f, format=ffmt)
             n += da.sizes.get("time", 1)
-    return n
+    return n, stamps
 
 
 def ingest_ir(
@@ -211,10 +248,33 @@ def ingest_ir(
         ``out``; the store holds ``temperature(time, v, u)`` float32 °C chunked
         by frame, ``time`` (s), full-sensor ``u``/``v`` (px), ``frame_index``
         and ``source_file`` per frame.
+
+    Raises
+    ------
+    DataError
+        Frames of different sizes or crop windows; times that do not
+        increase (for ``.irb`` series found from the image headers, before
+        any frame is decoded); a frame with more than
+        :data:`MAX_NAN_FRACTION` (50 %) NaN pixels.
+    FormatError
+        An unreadable file (named).
+
+    Notes
+    -----
+    NaN pixels (masked pixels of TIFF/``.npy`` stacks) are kept; more than
+    :data:`WARN_NAN_FRACTION` (1 %) NaN values over the series are logged
+    as a warning with the fraction, since the coupling needs finite values
+    at every pixel under the specimen.
     """
     files = _as_files(source, "IR exports")
-    n = _count_ir_frames(files, format)
+    n, stamps = _count_ir_frames(files, format)
     log.info("ingest IR: %d frames from %d files", n, len(files))
+    if stamps:
+        # the time axis from the headers: duplicate or decreasing time stamps
+        # are refused before hours of frames are decoded and written
+        labels0, times0, numbers0 = zip(*stamps)
+        frame_times(times0, numbers0, time_source=time_source, frame_rate=frame_rate,
+                    time_origin=time_origin, time_offset=time_offset, labels=labels0, what="IR frame")
     started = _time.perf_counter()
     it = _iter_ir_frames(files, format)
     label0, first = next(it)
@@ -228,6 +288,7 @@ def ingest_ir(
     file_times: list[float | None] = []
     numbers: list[int | None] = []
     labels: list[str] = []
+    nan_total, first_nan = 0, None
     with FrameStore(
         out, "temperature", n, ("v", "u"), frame_coords, dtype=np.float32,
         var_attrs={"units": "degC", "long_name": "temperature"},
@@ -245,12 +306,17 @@ def ingest_ir(
                     f"but the first frame ({label0}) covers u {_span(first['u'])}, v {_span(first['v'])} "
                     f"(shape {first.shape}); all frames of a series must have the same size and crop window"
                 )
+            values = frame.values.astype(np.float32, copy=False)
+            n_nan = _check_nan(label, frame, values)
+            nan_total += n_nan
+            if n_nan and first_nan is None:
+                first_nan = (label, n_nan / values.size)
             t = float(frame["time"]) if "time" in frame.coords else None
             file_times.append(t)
             fi = frame.attrs.get("frame_index")
             numbers.append(int(fi) if fi is not None else None)
             labels.append(label)
-            fs.write(i, 0.0, frame.values.astype(np.float32, copy=False), frame_index=-1 if fi is None else int(fi))
+            fs.write(i, 0.0, values, frame_index=-1 if fi is None else int(fi))
             if (i + 1) % 100 == 0 or i + 1 == n:
                 el = _time.perf_counter() - started
                 log.info("  %d/%d frames, %.1f frames/s, ETA %.0f s", i + 1, n, (i + 1) / el, (n - i - 1) * el / (i + 1))
@@ -259,8 +325,33 @@ def ingest_ir(
         t = frame_times(file_times, numbers, time_source=time_source, frame_rate=frame_rate,
                         time_origin=time_origin, time_offset=time_offset, labels=labels, what="IR frame")
         fs.set_times(t)
+        frac = nan_total / (n * first.size)
+        if frac > WARN_NAN_FRACTION:
+            log.warning("IR: %.2f %% of all pixel values are NaN (no temperature), first in %s (%.2f %% of "
+                        "that frame); the coupling cannot use NaN pixels inside the specimen's footprint",
+                        100 * frac, first_nan[0], 100 * first_nan[1])
+        elif nan_total:
+            log.info("IR: %d NaN pixel values (%.3f %%), kept as NaN", nan_total, 100 * frac)
     _log_gaps("IR", t, numbers)
     return Path(out)
+
+
+def _check_nan(label: str, frame: xr.DataArray, values: np.ndarray) -> int:
+    """Number of NaN pixels of one frame; DataError when more than MAX_NAN_FRACTION of it is NaN."""
+    nan = np.isnan(values)
+    n_nan = int(nan.sum())
+    if n_nan > MAX_NAN_FRACTION * values.size:
+        rows, cols = np.nonzero(~nan)
+        if rows.size == 0:
+            what = "every pixel is NaN (no temperature at all)"
+        else:
+            u, v = frame["u"].values, frame["v"].values
+            what = (f"{100 * n_nan / values.size:.1f} % of the pixels are NaN; the valid ones lie in "
+                    f"u {u[cols.min()]}..{u[cols.max()]}, v {v[rows.min()]}..{v[rows.max()]} (full-sensor px)")
+        raise DataError(
+            f"{label}: {what}; irdic accepts at most {100 * MAX_NAN_FRACTION:.0f} % NaN per frame. Check the "
+            "export (wrong unit or range, a mask that covers the specimen), or leave such frames out of the series")
+    return n_nan
 
 
 def _chain(first, label0, it):

@@ -124,3 +124,20 @@ def test_couple_stores_writes_points_zarr(demo):
     assert ds.attrs["irdic_stage"] == "couple" and '"method": "bilinear"' in ds.attrs["irdic_parameters"]
     assert {"temperature", "pixel", "temperature_pixel_gradient", "temperature_local_rate", "visible",
             "edge_distance", "x", "status"} <= set(ds.data_vars)
+
+
+def test_nan_under_the_specimen_is_named_in_sensor_pixels(demo, coupled):
+    # the message used to name the pixel of the cropped frame array (u=.., v=.. from 0)
+    dic, ir, _ = demo["halfshell"]
+    ds = coupled["halfshell"]
+    vis = np.argwhere(ds.status.values == 0)
+    k, j = vis[len(vis) // 2]
+    pu, pv = np.rint(ds.pixel.values[k, j]).astype(int)
+    u0, v0 = int(ir.u[0]), int(ir.v[0])
+    assert u0 > 0 and v0 > 0  # a crop window, so array and sensor pixels differ
+    temp = ir.temperature.values.copy()
+    temp[3, pv - v0, pu - u0] = np.nan
+    bad = ir.assign(temperature=(ir.temperature.dims, temp))
+    with pytest.raises(DataError, match=rf"ir: frames: 1 non-finite value\(s\) at masked pixels, first in IR frame 3 "
+                                        rf"\(t = {float(ir.time[3]):g} s\) at sensor pixel \(u={pu}, v={pv}\)"):
+        couple(dic, bad, demo["cal"])

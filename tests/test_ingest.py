@@ -162,3 +162,104 @@ def test_some_stages_without_time_stamp_do_not_suggest_frame_rate():
     with pytest.raises(DataError, match=r"b: no time stamp in the file, but a has one") as exc:
         frame_times([1.0, None, 3.0], None, labels=["a", "b", "c"], frame_rate=2.0)
     assert "frame_rate" not in str(exc.value)
+
+
+def _npy_stack(path, frames):
+    np.save(path, np.asarray(frames, dtype=np.float32))
+    return path
+
+
+def test_all_nan_stack_is_refused_at_ingest(tmp_path):
+    # used to ingest with an INFO line and fail only at couple
+    src = tmp_path / "ir"
+    src.mkdir()
+    _npy_stack(src / "stack.npy", np.full((3, 4, 5), np.nan))
+    with pytest.raises(DataError, match=r"stack\.npy\[0\]: every pixel is NaN \(no temperature at all\); "
+                                        r"irdic accepts at most 50 % NaN per frame"):
+        ingest_ir(src, tmp_path / "ir.zarr", frame_rate=10.0)
+    assert not (tmp_path / "ir.zarr").exists()
+
+
+def test_mostly_nan_frame_names_its_valid_sensor_window(tmp_path):
+    src = tmp_path / "ir"
+    src.mkdir()
+    frames = np.full((2, 6, 8), 21.0)
+    frames[1, :, :] = np.nan
+    frames[1, 2:4, 5:7] = 22.0  # 4 of 48 pixels valid
+    _npy_stack(src / "stack.npy", frames)
+    with pytest.raises(DataError, match=r"stack\.npy\[1\]: 91\.7 % of the pixels are NaN; the valid ones lie in "
+                                        r"u 5\.\.6, v 2\.\.3 \(full-sensor px\)"):
+        ingest_ir(src, tmp_path / "ir.zarr", frame_rate=10.0)
+
+
+def test_nan_check_names_full_sensor_pixels_of_a_cropped_frame():
+    from irdic.ingest import _check_nan
+    from irdic.io.stack import temperature_dataarray
+
+    x = np.full((6, 8), np.nan)
+    x[0, 0] = 20.0
+    da = temperature_dataarray(x, u0=300, v0=200)  # a crop export's sensor position
+    with pytest.raises(DataError, match=r"f\.txt: 97\.9 % of the pixels are NaN; the valid ones lie in "
+                                        r"u 300\.\.300, v 200\.\.200 \(full-sensor px\)"):
+        _check_nan("f.txt", da, da.values)
+
+
+def test_some_nan_pixels_warn_with_their_fraction(tmp_path, caplog):
+    src = tmp_path / "ir"
+    src.mkdir()
+    frames = np.full((2, 10, 10), 21.0)
+    frames[1, 0, :5] = np.nan  # 5 of 200 values: 2.5 %
+    _npy_stack(src / "stack.npy", frames)
+    with caplog.at_level("WARNING", logger="irdic.ingest"):
+        ingest_ir(src, tmp_path / "ir.zarr", frame_rate=10.0)
+    assert "IR: 2.50 % of all pixel values are NaN (no temperature), first in stack.npy[1] (5.00 % of that frame)" \
+        in caplog.text
+    ds = open_store(tmp_path / "ir.zarr")
+    assert int(np.isnan(ds["temperature"].values).sum()) == 5
+
+
+def test_duplicate_irb_time_stamps_are_refused_before_decoding(tmp_path, monkeypatch):
+    import irdic.io.irb as irb
+
+    src = tmp_path / "ir"
+    src.mkdir()
+    irb.write_irb(src / "seq.irb", 20 + np.zeros((3, 3, 4)), [0.0, 0.5, 0.5])
+
+    def no_decoding(path):
+        raise AssertionError("frames decoded before the time stamps were checked")
+
+    monkeypatch.setattr(irb, "iter_irb_frames", no_decoding)
+    with pytest.raises(DataError, match=r"IR frame times must increase: seq\.irb\[2\] \(t = 0\.5 s\) does not come "
+                                        r"after seq\.irb\[1\] \(t = 0\.5 s\)"):
+        ingest_ir(src, tmp_path / "ir.zarr")
+    assert not (tmp_path / "ir.zarr").exists()
+
+
+def test_irb_series_still_ingests(tmp_path):
+    from irdic.io.irb import write_irb
+
+    src = tmp_path / "ir"
+    src.mkdir()
+    write_irb(src / "a.irb", 20 + np.arange(24.0).reshape(2, 3, 4), [0.0, 0.5])
+    write_irb(src / "b.irb", 20 + np.arange(12.0).reshape(1, 3, 4), [1.0])
+    ingest_ir(src, tmp_path / "ir.zarr")
+    ds = open_store(tmp_path / "ir.zarr")
+    np.testing.assert_allclose(ds["time"].values, [0.0, 0.5, 1.0])
+
+
+def test_named_pipe_in_the_input_folder_is_refused(tmp_path):
+    import os
+
+    src = _write_ir_series(tmp_path / "ir", [0, 1])
+    os.mkfifo(src / "spec_00002.txt")  # opening it would block for ever
+    with pytest.raises(DataError, match=r"spec_00002\.txt: is a named pipe \(FIFO\), not a regular file"):
+        list_inputs(src)
+    with pytest.raises(DataError, match=r"spec_00002\.txt: is a named pipe"):
+        ingest_ir(src, tmp_path / "ir.zarr")
+    with pytest.raises(DataError, match=r"spec_00002\.txt: is a named pipe"):
+        list_inputs(src / "spec_*.txt")
+    with pytest.raises(DataError, match=r"spec_00002\.txt: is a named pipe"):
+        list_inputs(src / "spec_00002.txt")
+    (src / "sub").mkdir()  # sub-folders are still skipped
+    os.remove(src / "spec_00002.txt")
+    assert [p.name for p in list_inputs(src)] == ["spec_00000.txt", "spec_00001.txt"]

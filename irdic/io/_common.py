@@ -3,28 +3,56 @@
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 from ..errors import FormatError
 
-__all__ = ["check_file", "decode_text", "read_text", "head_bytes"]
+__all__ = ["check_file", "decode_text", "read_text", "head_bytes", "non_regular_kind"]
+
+
+def non_regular_kind(mode: int) -> str | None:
+    """What a non-regular file is, in words, from its ``st_mode``; None for a regular file."""
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a named pipe (FIFO)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
 
 
 def check_file(path: str | os.PathLike) -> Path:
     """Return ``path`` as a Path if it is a readable, non-empty regular file.
 
+    Every reader opens its file through here, so pipes, devices and sockets
+    are refused before anything opens them: opening a FIFO blocks until a
+    writer appears, and a device such as ``/dev/zero`` never ends.
+
     Raises
     ------
     FormatError
-        The file is missing, a directory, empty or unreadable.
+        The file is missing, a directory, a pipe/device/socket, empty or
+        unreadable.
     """
     p = Path(path)
-    if not p.exists():
-        raise FormatError("file not found", p)
-    if p.is_dir():
-        raise FormatError("is a folder, expected a file", p)
     try:
-        size = p.stat().st_size
+        st = p.stat()  # follows links: a link to a regular file is fine
+    except (FileNotFoundError, NotADirectoryError):
+        raise FormatError("file not found", p) from None
+    except OSError as exc:
+        raise FormatError(f"cannot read the file ({exc.strerror})", p) from exc
+    kind = non_regular_kind(st.st_mode)
+    if kind == "a folder":
+        raise FormatError("is a folder, expected a file", p)
+    if kind is not None:
+        raise FormatError(f"is {kind}, not a regular file; irdic reads exports stored as files on disk", p)
+    try:
+        size = st.st_size
         with open(p, "rb") as fh:
             fh.read(1)
     except OSError as exc:

@@ -54,7 +54,8 @@ from ..errors import ConfigError, DataError, FormatError, IrdicWarning
 from ._common import check_file
 from .stack import check_temperatures, temperature_dataarray
 
-__all__ = ["read_irb", "iter_irb_frames", "iter_irb_dataarrays", "count_irb_frames", "write_irb"]
+__all__ = ["read_irb", "iter_irb_frames", "iter_irb_headers", "iter_irb_dataarrays", "count_irb_frames",
+           "unix_time", "write_irb"]
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +69,7 @@ PIXEL_OFFSET = 1728  # 60 + 1024 + 644
 BLOCK_IMAGE, BLOCK_HEADER = 1, 4
 KELVIN = 273.15
 OLE_EPOCH = _dt.datetime(1899, 12, 30)
+_UNIX_EPOCH_OLE = (_dt.datetime(1970, 1, 1) - OLE_EPOCH).total_seconds()
 _MAX_SIDE = 16384
 _MERGE_SEARCH = 1 << 16  # bytes searched for the next embedded file after one ends
 
@@ -98,8 +100,38 @@ def _file_header(fh, base: int, size: int, path) -> tuple[str, int, int]:
     return ftype, block_offset, block_count
 
 
+def _check_disjoint(images: list[dict], path) -> None:
+    """Refuse image blocks that share bytes.
+
+    Each image block of a real file holds its own pixels. A directory that
+    lists one block many times (or blocks that overlap) would make a small
+    file decode to any number of frames; with disjoint blocks, and the
+    embedded files of a VarioCAM HD file following one another, the decoded
+    float32 frames take at most twice the file's size (2-byte codes ->
+    4-byte floats).
+    """
+    if len(images) < 2:
+        return
+    order = sorted(range(len(images)), key=lambda k: images[k]["offset"])
+    for a, b in zip(order, order[1:]):
+        first, second = images[a], images[b]
+        if second["offset"] < first["offset"] + max(first["size"], 1):
+            same = second["offset"] == first["offset"]
+            raise FormatError(
+                f"the IRB block directory lists image blocks {a} and {b} "
+                + (f"at the same byte {first['offset']}" if same else
+                   f"at bytes {first['offset']} (+{first['size']} bytes) and {second['offset']}, which overlap")
+                + "; every image block of an IRB file holds its own pixels (damaged or forged directory)",
+                path)
+
+
 def _walk(fh, path, size: int) -> Iterator[dict]:
-    """Image blocks of the file in order: ``{frame_index, offset, size, file_type, subfile}``."""
+    """Image blocks of the file in order: ``{frame_index, offset, size, file_type, subfile}``.
+
+    The directory of each embedded file is read completely before its first
+    block is yielded, so that blocks listed twice or overlapping are refused
+    before any pixel is decoded.
+    """
     base = 0
     subfile = 0
     while True:
@@ -107,6 +139,7 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
         raw = _read_at(fh, base + block_offset, ENTRY_SIZE * block_count, path, "IRB block directory")
         pending = [np.frombuffer(raw, "<i4").reshape(block_count, 8)]
         seen_headers: set[int] = set()
+        images: list[dict] = []
         sub_end = base + block_offset + ENTRY_SIZE * block_count
         while pending:
             entries = pending.pop(0)
@@ -119,8 +152,8 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
                         f"{size}-byte file (truncated or damaged directory)", path)
                 sub_end = max(sub_end, base + offset + bsize)
                 if btype == BLOCK_IMAGE:
-                    yield {"frame_index": frame_index, "offset": base + offset, "size": bsize,
-                           "file_type": ftype, "subfile": subfile}
+                    images.append({"frame_index": frame_index, "offset": base + offset, "size": bsize,
+                                   "file_type": ftype, "subfile": subfile})
                 elif btype == BLOCK_HEADER:
                     # a header entry points to the next two directory entries of a sequence
                     where = base + offset
@@ -129,6 +162,8 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
                     seen_headers.add(where)
                     more = _read_at(fh, where, 2 * ENTRY_SIZE, path, "IRB sequence directory")
                     pending.append(np.frombuffer(more, "<i4").reshape(2, 8))
+        _check_disjoint(images, path)
+        yield from images
         # VarioCAM HD: the next complete IRB file follows after a [Merge] text block
         fh.seek(sub_end)
         window = fh.read(4096)  # the [Merge] block is about 2 kB
@@ -297,6 +332,39 @@ def _check_codes(good: np.ndarray, pal: np.ndarray, codes: np.ndarray, where: st
             "(damaged file or an encoding irdic does not know)", path)
 
 
+def iter_irb_headers(path: str | os.PathLike) -> Iterator[dict]:
+    """Stream the image headers of an ``.irb`` file without decoding pixels.
+
+    Reads 1728 bytes per frame, so that a series can be counted, timed and
+    checked (duplicate time stamps, frame sizes) before any frame is decoded
+    or written.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.irb`` image or sequence.
+
+    Yields
+    ------
+    dict
+        The ``meta`` of :func:`iter_irb_frames`, one per frame, in the same
+        order.
+
+    Raises
+    ------
+    FormatError
+        As :func:`iter_irb_frames`, except for problems in the pixel codes.
+    """
+    p = check_file(path)
+    size = p.stat().st_size
+    with open(p, "rb") as fh:
+        for block in _walk(fh, p, size):
+            pos = fh.tell()
+            head = _read_at(fh, block["offset"], PIXEL_OFFSET, p, f"image block at byte {block['offset']}")
+            fh.seek(pos)
+            yield _parse_image_header(head, block, p)
+
+
 def iter_irb_frames(path: str | os.PathLike) -> Iterator[tuple[dict, np.ndarray]]:
     """Stream the frames of an ``.irb`` file one at a time.
 
@@ -376,13 +444,16 @@ def iter_irb_dataarrays(path: str | os.PathLike) -> Iterator[xr.DataArray]:
         ``frame_index``.
     """
     p = check_file(path)
-    unix = (_dt.datetime(1970, 1, 1) - OLE_EPOCH).total_seconds()
     for info, frame in iter_irb_frames(p):
         check_temperatures(frame, p)
         attrs = _attrs(info, p)
         attrs["frame_index"] = int(info["frame_index"])
-        time = None if info["seconds"] is None else info["seconds"] - unix
-        yield temperature_dataarray(frame, time=time, attrs=attrs)
+        yield temperature_dataarray(frame, time=unix_time(info), attrs=attrs)
+
+
+def unix_time(info: dict) -> float | None:
+    """Recording time of a frame (``meta`` of :func:`iter_irb_headers`) in s since 1970-01-01, or None."""
+    return None if info["seconds"] is None else info["seconds"] - _UNIX_EPOCH_OLE
 
 
 def read_irb(path: str | os.PathLike) -> xr.DataArray:
@@ -414,36 +485,43 @@ def read_irb(path: str | os.PathLike) -> xr.DataArray:
         Frames of different sizes in one sequence.
     """
     p = check_file(path)
-    n = count_irb_frames(p)
+    # sizes and times from the headers first: nothing is decoded or allocated
+    # for a sequence that cannot be read
+    heads = list(iter_irb_headers(p))
+    n = len(heads)
     if n == 0:
         raise FormatError("holds no image block (only previews or text?)", p)
-    stack = None
-    first: dict = {}
-    seconds, indices = [], []
+    first = heads[0]
+    shape = (first["height"], first["width"])
+    for k, info in enumerate(heads):
+        if (info["height"], info["width"]) != shape:
+            raise DataError(f"{p}: frame {k} is {info['width']} x {info['height']} px, frame 0 is "
+                            f"{shape[1]} x {shape[0]} px; a sequence needs one frame size")
+    seconds = [info["seconds"] for info in heads]
+    indices = [info["frame_index"] for info in heads]
+    time = None
+    if n > 1:
+        if any(s is None for s in seconds):
+            warnings.warn(f"{p}: some frames have no valid recording time; the time coordinate is the "
+                          "frame number", IrdicWarning, stacklevel=2)
+            time = np.arange(n, dtype=np.float64)
+        else:
+            t = np.asarray(seconds, dtype=np.float64)
+            time = t - t[0]
+            if (np.diff(time) <= 0).any():
+                k = int(np.flatnonzero(np.diff(time) <= 0)[0]) + 1
+                warnings.warn(f"{p}: frame times do not increase (frame {k} at {time[k]:.3f} s after frame "
+                              f"{k - 1} at {time[k - 1]:.3f} s)", IrdicWarning, stacklevel=2)
+    stack = np.empty((n,) + shape, np.float32)
     for k, (info, frame) in enumerate(iter_irb_frames(p)):
-        if stack is None:
-            first = info
-            stack = np.empty((n,) + frame.shape, np.float32)
-        elif frame.shape != stack.shape[1:]:
-            raise DataError(f"{p}: frame {k} is {frame.shape[1]} x {frame.shape[0]} px, frame 0 is "
-                            f"{stack.shape[2]} x {stack.shape[1]} px; a sequence needs one frame size")
+        if k >= n or info["offset"] != heads[k]["offset"]:
+            raise DataError(f"{p}: the file changed while it was read")
         stack[k] = frame
-        seconds.append(info["seconds"])
-        indices.append(info["frame_index"])
     check_temperatures(stack, p)
     attrs = _attrs(first, p)
     if n == 1:
         attrs["frame_index"] = int(indices[0])
         return temperature_dataarray(stack[0], attrs=attrs)
-    if any(s is None for s in seconds):
-        warnings.warn(f"{p}: some frames have no valid recording time; the time coordinate is the "
-                      "frame number", IrdicWarning, stacklevel=2)
-        time = np.arange(n, dtype=np.float64)
-    else:
-        t = np.asarray(seconds, dtype=np.float64)
-        time = t - t[0]
-        if (np.diff(time) <= 0).any():
-            warnings.warn(f"{p}: frame times do not increase", IrdicWarning, stacklevel=2)
     attrs["n_frames"] = n
     return temperature_dataarray(stack, time=time, extra_coords={"frame_index": np.asarray(indices)},
                                  attrs=attrs)

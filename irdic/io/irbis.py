@@ -68,25 +68,40 @@ _POW10 = 10.0 ** np.arange(0, 23)
 _NON_BLANK = re.compile(rb"[^ \t\r\n]")
 _LINE_END = re.compile(rb"[\r\n]")
 _MAX_PIXELS = 100_000  # bound on image sizes and sensor positions (px)
+# a real header is about 2 kB; read_irbis_header gives up after this many bytes without [Data]
+_MAX_HEADER = 1 << 20
 
 
 # ----------------------------------------------------------------------------
 # header
 # ----------------------------------------------------------------------------
-def _find_data_marker(raw: bytes) -> int:
-    """Byte offset of the ``[Data]`` line (at a line start), or -1."""
-    pos = 0
+def _find_data_marker(raw: bytes, start: int = 0) -> int:
+    """Byte offset of the ``[Data]`` line (at a line start), or -1.
+
+    Only markers beginning at or after ``start`` are looked for (the caller
+    has searched the bytes before); the time taken is linear in the bytes
+    searched.
+    """
+    pos = start
     while True:
         i = raw.find(b"[Data]", pos)
         if i < 0:
-            low = raw.lower()
-            i = low.find(b"[data]")
-            while i > 0 and raw[i - 1:i] not in (b"\n", b"\r"):
-                i = low.find(b"[data]", i + 1)
-            return i
-        if i == 0 or raw[i - 1:i] in (b"\n", b"\r") or raw[:i].strip(b"\xef\xbb\xbf \t") == b"":
+            break
+        if _at_line_start(raw, i):
             return i
         pos = i + 1
+    # other capitalisations ([DATA], [data]): rare, so the lower-case copy is
+    # made only when the exact spelling is absent
+    low = raw[start:].lower()
+    i = low.find(b"[data]")
+    while i >= 0 and not _at_line_start(raw, start + i):
+        i = low.find(b"[data]", i + 1)
+    return -1 if i < 0 else start + i
+
+
+def _at_line_start(raw: bytes, i: int) -> bool:
+    return i == 0 or raw[i - 1:i] in (b"\n", b"\r") or (
+        i <= 64 and bytes(raw[:i]).strip(b"\xef\xbb\xbf \t") == b"")
 
 
 def _parse_header_text(text: str) -> dict:
@@ -262,17 +277,28 @@ def read_irbis_header(path: str | os.PathLike) -> dict:
         No ``[Data]`` section, or a malformed header value (line named).
     """
     p = check_file(path)
-    head = b""
+    head = bytearray()
+    i = -1
     with open(p, "rb") as fh:
-        while True:
+        while len(head) < _MAX_HEADER:
             chunk = fh.read(65536)
+            if not chunk:
+                break
+            # search only the new piece (plus a marker's length before it, for a
+            # marker cut in two): the whole text again would be quadratic in the
+            # length of a file without [Data]
+            start = max(0, len(head) - len(b"[Data]"))
             head += chunk
-            i = _find_data_marker(head)
-            if i >= 0 or not chunk:
+            i = _find_data_marker(head, start)
+            if i >= 0:
                 break
     if i < 0:
+        if len(head) >= _MAX_HEADER:
+            raise FormatError(
+                f"no [Data] line in the first {_MAX_HEADER // 1024} KiB; an IRBIS 3 text export has a "
+                "header of a few kB before its [Data] section (not an IRBIS export, or a damaged one)", p)
         raise FormatError("no [Data] section found; expected an IRBIS 3 text export", p)
-    return _interpret_header(_parse_header_text(decode_text(head[:i])), p)
+    return _interpret_header(_parse_header_text(decode_text(bytes(head[:i]))), p)
 
 
 # ----------------------------------------------------------------------------

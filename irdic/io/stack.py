@@ -25,7 +25,7 @@ from typing import Mapping
 import numpy as np
 import xarray as xr
 
-from ..errors import ConfigError, FormatError, IrdicWarning
+from ..errors import ConfigError, FormatError, IrdicError, IrdicWarning
 from ._common import check_file
 
 __all__ = ["read_tiff", "read_npy", "temperature_dataarray", "to_celsius", "normalise_unit"]
@@ -253,6 +253,35 @@ def _stack_from_array(
     return temperature_dataarray(temps, time=time, attrs=attrs)
 
 
+#: A TIFF may decode to at most this many times its file size (compressed
+#: temperatures shrink by a factor of 2 to 4; a crafted file by a thousand) ...
+MAX_DECODE_RATIO = 32
+#: ... or to this many bytes, whichever is larger (small files of smooth test data)
+MAX_DECODE_FLOOR = 256 * 2**20
+
+
+def _check_decoded_size(shape, dtype, file_size: int, path: Path) -> None:
+    """Refuse a TIFF whose pixels would decode to far more memory than its size suggests.
+
+    Notes
+    -----
+    The decoded stack is counted at ``max(itemsize, 4)`` bytes per value (it
+    is converted to float32) and allowed up to
+    ``max(MAX_DECODE_RATIO * file_size, MAX_DECODE_FLOOR)`` bytes.
+    """
+    values = int(np.prod(shape, dtype=object))
+    need = values * max(np.dtype(dtype).itemsize, 4)
+    limit = max(MAX_DECODE_RATIO * file_size, MAX_DECODE_FLOOR)
+    if need > limit:
+        raise FormatError(
+            f"its pages (shape {tuple(int(n) for n in shape)}, {np.dtype(dtype)}) would decode to "
+            f"{need / 2**20:.0f} MiB from a {file_size / 1024:.0f} kB file; irdic reads TIFFs that decode to at "
+            f"most {MAX_DECODE_RATIO} times their size or {MAX_DECODE_FLOOR // 2**20} MiB (damaged or crafted "
+            "compression?). Save large stacks uncompressed or as .npy",
+            path,
+        )
+
+
 def read_tiff(
     path: str | os.PathLike,
     *,
@@ -290,16 +319,31 @@ def read_tiff(
     FormatError
         Not a readable TIFF, colour (RGB) pages, more than three dimensions,
         integer or non-float samples, infinite values or values below
-        absolute zero.
+        absolute zero; pages that would decode to more than
+        :data:`MAX_DECODE_RATIO` times the file size (and more than
+        :data:`MAX_DECODE_FLOOR` bytes).
+
+    Notes
+    -----
+    Only the pages stored in ``path`` are read: references to other files in
+    OME-XML (or Micro-Manager/NDTiff metadata) are ignored, so a TIFF cannot
+    make irdic read another file.
     """
     import tifffile
 
     p = check_file(path)
+    file_size = p.stat().st_size
     try:
-        with tifffile.TiffFile(p) as tif:
+        # OME, Micro-Manager and NDTiff metadata can name other files (any
+        # path) whose pages tifffile would splice into the series: only the
+        # pages of this file are read
+        with tifffile.TiffFile(p, _multifile=False, is_ome=False, is_mmstack=False, is_ndtiff=False) as tif:
             series = tif.series[0]
             axes = series.axes
+            _check_decoded_size(series.shape, series.dtype, file_size, p)
             arr = series.asarray()
+    except IrdicError:
+        raise
     except Exception as exc:  # tifffile raises many types for damaged files
         raise FormatError(f"cannot read as TIFF ({type(exc).__name__}: {exc})", p) from exc
     if "S" in axes:

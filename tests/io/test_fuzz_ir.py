@@ -37,11 +37,22 @@ def _irb_bytes() -> bytes:
     return write_irb(_DIR / "base.irb", x, [0.0, 0.5]).read_bytes()
 
 
+def _tiff_bytes(compression=None) -> bytes:
+    import tifffile
+
+    x = (20.0 + np.arange(60.0).reshape(2, 5, 6) * 0.25).astype(np.float32)
+    path = _DIR / f"base_{compression}.tif"
+    tifffile.imwrite(path, x, photometric="minisblack", compression=compression)
+    return path.read_bytes()
+
+
 IRBIS = _irbis_bytes()
 IRB = _irb_bytes()
+TIFF = _tiff_bytes()
+TIFF_ZLIB = _tiff_bytes("zlib")
 
 
-def _check(reader, raw: bytes, name: str) -> None:
+def _check(reader, raw: bytes, name: str, allow_nan: bool = False) -> None:
     path = _DIR / name
     path.write_bytes(raw)
     try:
@@ -51,8 +62,9 @@ def _check(reader, raw: bytes, name: str) -> None:
     assert isinstance(da, xr.DataArray)
     assert da.dims in (("v", "u"), ("time", "v", "u"))
     assert da.dtype == np.float32
-    assert np.isfinite(da.values).all()
-    assert (da.values > -273.2).all()
+    values = da.values[~np.isnan(da.values)] if allow_nan else da.values  # TIFF stacks keep NaN (masked pixels)
+    assert np.isfinite(values).all()
+    assert (values > -273.2).all()
 
 
 def _mutations(base: bytes):
@@ -72,6 +84,8 @@ def _apply(base: bytes, flips):
 
 _T_IRBIS, _F_IRBIS = _mutations(IRBIS)
 _T_IRB, _F_IRB = _mutations(IRB)
+_T_TIFF, _F_TIFF = _mutations(TIFF)
+_T_TIFF_Z, _F_TIFF_Z = _mutations(TIFF_ZLIB)
 
 
 @FUZZ
@@ -131,9 +145,23 @@ def test_irb_damaged_directory_fields(changes):
     _check(_read_irb_all, bytes(raw), "h.irb")
 
 
+def _read_tiff(path):
+    from irdic.io.stack import read_tiff
+
+    return read_tiff(path, frame_rate=2.0)
+
+
+@FUZZ
+@given(st.one_of(_T_TIFF, _F_TIFF, _T_TIFF_Z, _F_TIFF_Z))
+def test_tiff_truncated_or_flipped(raw):
+    _check(_read_tiff, raw, "f.tif", allow_nan=True)
+
+
 def test_fuzz_bases_are_valid():
     _check(read_irbis, IRBIS, "ok.txt")
     da = read_irb(_DIR / "base.irb")
     assert da.shape == (2, 5, 6)
+    for name in ("base_None.tif", "base_zlib.tif"):
+        assert _read_tiff(_DIR / name).shape == (2, 5, 6)
     with pytest.raises(IrdicError):
         read_irbis(_DIR / "base.irb")

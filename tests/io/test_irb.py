@@ -10,7 +10,8 @@ import pytest
 
 from irdic.errors import ConfigError, FormatError
 from irdic.io import read_ir
-from irdic.io.irb import count_irb_frames, iter_irb_dataarrays, iter_irb_frames, read_irb, write_irb
+from irdic.io.irb import (count_irb_frames, iter_irb_dataarrays, iter_irb_frames, iter_irb_headers, read_irb,
+                          write_irb)
 
 BLOCK = 5216  # offset of the image block in both sample files (from their directories)
 
@@ -266,3 +267,64 @@ def test_writer_argument_errors(tmp_path, kwargs, match):
     args.update(kwargs)
     with pytest.raises(ConfigError, match=match):
         write_irb(tmp_path / "w.irb", **args)
+
+
+def _forged_directory(tmp_path, offsets, name="forged.irb"):
+    """An IRB file listing image blocks at ``offsets`` (from the first of two copies of one block)."""
+    one = _small(tmp_path, 1)
+    block_off, block_size = struct.unpack_from("<ii", one, 64 + 12)
+    block = one[block_off:block_off + block_size]
+    n = len(offsets)
+    head = bytearray(one[:64])
+    struct.pack_into("<iii", head, 21, 100, 64, n)
+    first = 64 + 32 * n
+    directory = b"".join(struct.pack("<8i", 1, 101, k + 1, first + off, block_size, 0, 1, 0)
+                         for k, off in enumerate(offsets))
+    return _put(tmp_path, bytes(head) + directory + block + block, name)
+
+
+def test_directory_listing_one_block_many_times_is_refused(tmp_path):
+    # 2,000 entries for one 1.8 kB block: read as 2,000 frames before (a 1.8 MB
+    # file listing its block 40,000 times asked for 45.8 GiB)
+    p = _forged_directory(tmp_path, [0] * 2000)
+    assert p.stat().st_size < 70_000
+    msg = r"forged\.irb: the IRB block directory lists image blocks 0 and 1 at the same byte 64064; every image"
+    for call in (read_irb, count_irb_frames, read_ir, lambda q: next(iter_irb_frames(q)),
+                 lambda q: next(iter_irb_dataarrays(q))):
+        with pytest.raises(FormatError, match=msg):
+            call(p)
+
+
+def test_overlapping_image_blocks_are_refused(tmp_path):
+    p = _forged_directory(tmp_path, [0, 100])
+    with pytest.raises(FormatError, match=r"image blocks 0 and 1 at bytes 128 \(\+1752 bytes\) and 228, which overlap"):
+        read_irb(p)
+    # disjoint blocks (the second copy of the block) stay readable
+    ok = _forged_directory(tmp_path, [0, 1752], "ok.irb")
+    with pytest.warns(Warning):
+        assert read_irb(ok).shape[0] == 2
+
+
+def test_decoded_size_is_bounded_by_the_file_size(tmp_path):
+    # whatever the directory says, frames come from disjoint blocks of the file
+    p = _forged_directory(tmp_path, [0, 1752])
+    heads = list(iter_irb_headers(p))
+    assert len(heads) == 2
+    assert sum(4 * h["width"] * h["height"] for h in heads) <= 2 * p.stat().st_size
+
+
+def test_non_increasing_times_are_found_before_decoding(tmp_path, monkeypatch):
+    import irdic.io.irb as irb
+
+    p = write_irb(tmp_path / "d.irb", 20 + np.zeros((3, 3, 4)), [0.0, 0.5, 0.5])
+    heads = list(irb.iter_irb_headers(p))
+    assert [h["frame_index"] for h in heads] == [1, 2, 3]
+    assert [irb.unix_time(h) - irb.unix_time(heads[0]) for h in heads] == [0.0, 0.5, 0.5]
+
+    def no_decoding(path):
+        raise AssertionError("frames decoded before the time stamps were checked")
+
+    monkeypatch.setattr(irb, "iter_irb_frames", no_decoding)
+    with pytest.warns(Warning, match=r"d\.irb: frame times do not increase \(frame 2 at 0\.500 s after frame 1"):
+        with pytest.raises(AssertionError, match="frames decoded"):
+            read_irb(p)

@@ -363,3 +363,72 @@ def test_empty_cell_plus_extra_value_is_not_shifted_silently(tmp_path):
     lines[k] = b"\t".join(cells[:1] + [b""] + cells[1:])  # 5 cells, 4 of them numbers
     with pytest.raises(FormatError, match=r"data row 1 has 5 values"):
         read_irbis(_write(tmp_path, b"\r\n".join(lines), "b.txt"))
+
+
+def test_header_without_data_is_refused_after_a_bounded_read(tmp_path):
+    # a 4 MB file that starts like an export but never reaches [Data]: the old
+    # header reader searched the whole growing text again for every 64 KiB read
+    # (quadratic); now it stops after 1 MiB with a message saying why
+    p = _write(tmp_path, b"[Settings]\r\nImageWidth=2\r\n" + b"Comment=xxxxxxxxxxxxxxxxxxxxxxxx\r\n" * 120_000)
+    with pytest.raises(FormatError, match=r"no \[Data\] line in the first 1024 KiB") as e:
+        read_irbis_header(p)
+    assert e.value.path == str(p)
+
+
+@pytest.mark.parametrize("pad", [65536 - 12, 65536 - 9, 65536 - 3, 65536, 2 * 65536 - 5])
+def test_header_marker_cut_by_a_read_boundary_is_found(tmp_path, pad):
+    head = b"[Settings]\nImageWidth=2\nImageHeight=1\n[Parameter]\nComment="
+    raw = head + b"y" * (pad - len(head) - 1) + b"\n[Data]\n1.5\t2.5\n"
+    p = _write(tmp_path, raw)
+    assert read_irbis_header(p)["width"] == 2
+    assert read_irbis(p).values.tolist() == [[1.5, 2.5]]
+    lower = _write(tmp_path, raw.replace(b"[Data]", b"[DATA]"), "l.txt")
+    assert read_irbis_header(lower)["height"] == 1
+
+
+def _fifo(tmp_path):
+    """A named pipe, and a writer thread that unblocks a reader that opens it (old code)."""
+    import os
+    import threading
+
+    fifo = tmp_path / "pipe.txt"
+    os.mkfifo(fifo)
+
+    def writer():  # only returns once a reader opened the pipe
+        with open(fifo, "wb") as fh:
+            fh.write(b"[Settings]\nImageWidth=1\nImageHeight=1\n[Data]\n1.0\n")
+
+    t = threading.Thread(target=writer, daemon=True)
+    t.start()
+    return fifo, t
+
+
+def _release(fifo, t):
+    import os
+
+    fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # lets the writer thread finish
+    t.join(5)
+    os.close(fd)
+
+
+@pytest.mark.parametrize("reader", ["read_ir", "read_irbis", "read_irbis_header", "read_dic"])
+def test_named_pipes_are_refused_before_opening(tmp_path, reader):
+    import irdic.io as io_
+
+    fn = {"read_ir": io_.read_ir, "read_irbis": read_irbis, "read_irbis_header": read_irbis_header,
+          "read_dic": io_.read_dic}[reader]
+    fifo, t = _fifo(tmp_path)
+    try:
+        with pytest.raises(FormatError, match=r"pipe\.txt: is a named pipe \(FIFO\), not a regular file"):
+            fn(fifo)
+    finally:
+        _release(fifo, t)
+
+
+def test_devices_are_refused(tmp_path):
+    import os
+
+    if not os.path.exists("/dev/zero"):
+        pytest.skip("no /dev/zero")
+    with pytest.raises(FormatError, match=r"/dev/zero: is a device, not a regular file"):
+        read_ir("/dev/zero")

@@ -139,3 +139,66 @@ def test_units_and_layout_helpers():
     assert normalise_unit("K") == "K" and normalise_unit("°F") == "degF" and normalise_unit("lux") is None
     da = temperature_dataarray(np.zeros((2, 3)), u0=10, v0=5, time=1.5)
     assert da.u.values.tolist() == [10, 11, 12] and da.v.values.tolist() == [5, 6] and float(da.time) == 1.5
+
+
+def _ome_referencing(tmp_path, target):
+    """A one-page OME-TIFF whose OME-XML puts the page of ``target`` (any path) in its series as frame 1."""
+    uuid_main, uuid_other = "urn:uuid:00000000-0000-0000-0000-000000000001", \
+        "urn:uuid:00000000-0000-0000-0000-000000000002"
+    xml = (
+        '<?xml version="1.0" encoding="UTF-8"?>'
+        '<OME xmlns="http://www.openmicroscopy.org/Schemas/OME/2016-06" '
+        f'UUID="{uuid_main}">'
+        '<Image ID="Image:0"><Pixels ID="Pixels:0" DimensionOrder="XYCZT" Type="float" '
+        'SizeX="5" SizeY="4" SizeC="1" SizeZ="1" SizeT="2" BigEndian="false">'
+        '<Channel ID="Channel:0:0" SamplesPerPixel="1"/>'
+        f'<TiffData FirstT="0" IFD="0" PlaneCount="1"><UUID FileName="main.ome.tif">{uuid_main}</UUID></TiffData>'
+        f'<TiffData FirstT="1" IFD="0" PlaneCount="1"><UUID FileName="{target}">{uuid_other}</UUID></TiffData>'
+        '</Pixels></Image></OME>'
+    )
+    p = tmp_path / "main.ome.tif"
+    tifffile.imwrite(p, np.full((4, 5), 20.0, np.float32), description=xml, metadata=None)
+    return p
+
+
+def test_ome_references_to_other_files_are_not_followed(tmp_path):
+    secret = tmp_path / "elsewhere" / "secret.tif"
+    secret.parent.mkdir()
+    tifffile.imwrite(secret, np.full((4, 5), 99.0, np.float32))
+    for target in (str(secret), "elsewhere/secret.tif"):
+        p = _ome_referencing(tmp_path, target)
+        da = read_tiff(p)
+        assert da.dims == ("v", "u") and da.shape == (4, 5)
+        assert (da.values == 20.0).all()  # nothing of the other file
+    # the file really is a multi-file OME-TIFF: tifffile alone follows the reference
+    with tifffile.TiffFile(p) as tif:
+        assert tif.series[0].shape == (2, 4, 5) and tif.series[0].asarray().max() == 99.0
+
+
+def test_tiff_that_decodes_to_far_more_than_its_size_is_refused(tmp_path, monkeypatch):
+    import irdic.io.stack as stack_mod
+
+    p = tmp_path / "bomb.tif"
+    tifffile.imwrite(p, np.zeros((8, 512, 512), np.float32), compression="zlib", photometric="minisblack")
+    size = p.stat().st_size
+    assert 8 * 512 * 512 * 4 > 32 * size  # a zlib ratio no temperature field reaches
+    monkeypatch.setattr(stack_mod, "MAX_DECODE_FLOOR", 2**20)  # the 256 MiB floor scaled down for the test
+    with pytest.raises(FormatError, match=r"bomb\.tif: its pages \(shape \(8, 512, 512\), float32\) would decode to "
+                                          r"8 MiB from a \d+ kB file; irdic reads TIFFs that decode to at most 32 "
+                                          r"times their size or 1 MiB"):
+        read_tiff(p)
+    # an uncompressed stack of the same size is read
+    q = tmp_path / "plain.tif"
+    tifffile.imwrite(q, np.full((8, 512, 512), 20.0, np.float32), photometric="minisblack")
+    assert read_tiff(q, frame_rate=1.0).shape == (8, 512, 512)
+
+
+def test_npy_header_larger_than_the_file_is_refused(tmp_path):
+    import io
+
+    buf = io.BytesIO()
+    np.save(buf, np.zeros((2, 3, 4), np.float32))
+    p = tmp_path / "lie.npy"
+    p.write_bytes(buf.getvalue().replace(b"(2, 3, 4)", b"(2000, 3000, 4)"))  # 96 bytes of data for 96 MB
+    with pytest.raises(FormatError, match=r"lie\.npy: cannot read as a \.npy array \(mmap length is greater"):
+        read_npy(p)
