@@ -22,8 +22,8 @@ def test_write_dataset_roundtrip_with_provenance(tmp_path):
     assert ds.attrs["irdic_stage"] == "test"
     assert ds.attrs["irdic_parameters"] == '{"c": 2.0}'
     assert ds.attrs[COMPLETE_ATTR] is True
-    # no temporary sibling left behind
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.zarr"]
+    # no temporary sibling left behind (the writers' lock file stays, empty)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".s.zarr.lock", "s.zarr"]
 
 
 def test_write_dataset_replaces_existing(tmp_path):
@@ -66,7 +66,7 @@ def test_framestore_interrupted_leaves_nothing(tmp_path):
         with FrameStore(tmp_path / "ir.zarr", "temperature", 3, ("v", "u"), {"v": np.arange(2), "u": np.arange(2)}) as fs:
             fs.write(0, 0.0, np.zeros((2, 2)))
             raise RuntimeError("killed")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["ir.zarr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".ir.zarr.lock", "ir.zarr"]
     assert open_store(tmp_path / "ir.zarr").attrs["irdic_stage"] == "old"
 
 
@@ -78,7 +78,7 @@ def test_framestore_checks(tmp_path):
     with pytest.raises(DataError, match="never written"):
         fs.close()
     fs.abort()
-    assert not list(tmp_path.iterdir())
+    assert [p.name for p in tmp_path.iterdir()] == [".ir.zarr.lock"]
 
 
 def test_killed_stage_leaves_no_store_and_the_next_run_cleans_up(tmp_path):
@@ -112,4 +112,4 @@ def test_killed_stage_leaves_no_store_and_the_next_run_cleans_up(tmp_path):
     with pytest.raises(DataError, match="not found"):
         open_store(tmp_path / "ir.zarr")
     write_dataset(_ds(), tmp_path / "ir.zarr", stage="rerun")
-    assert [p.name for p in tmp_path.iterdir()] == ["ir.zarr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".ir.zarr.lock", "ir.zarr"]
