@@ -28,7 +28,14 @@ log = logging.getLogger(__name__)
 
 
 def stage_paths(config: Mapping) -> dict:
-    """Output paths of every stage (the contract of the results folder)."""
+    """Output paths of every stage (the contract of the results folder).
+
+    Raises
+    ------
+    ConfigError
+        A setup or experiment name would put an output outside the results
+        folder (``../x``, an absolute path, a link leading elsewhere).
+    """
     r = Path(config.get("results", "results"))
     out = {"setups": {}, "experiments": {}}
     for s in config["setups"]:
@@ -36,6 +43,17 @@ def stage_paths(config: Mapping) -> dict:
                             "figure": r / "setups" / s / "calibration.png"}
     for e in config["experiments"]:
         out["experiments"][e] = {k: r / e / f"{k}.zarr" for k in ("dic", "ir", "points", "fields")}
+    root = r.resolve()
+    for section, entries in out.items():
+        for name, paths in entries.items():
+            for p in paths.values():
+                resolved = p.resolve()
+                # the experiment's own folder must lie strictly below results, not be results itself
+                if root not in resolved.parents or resolved.parent == root:
+                    raise ConfigError(
+                        f"{section}.{name}: output {p} would lie outside the results folder {r} (resolves to "
+                        f"{resolved}); use a plain name of letters, digits, '_', '-' and '.'"
+                    )
     return out
 
 
