@@ -1,11 +1,20 @@
 """Writing and opening irdic zarr stores: atomically, with units and provenance.
 
 Every stage writes one zarr store. A store is first written to a hidden
-sibling directory and renamed into place only when it is complete, and it
-carries the attribute ``irdic_complete = True`` written last. A job that dies
+sibling directory and moved into place only when it is complete; it carries
+the attribute ``irdic_complete = True``, written last together with
+``irdic_chunks``, the number of chunk files of every array. A job that dies
 half-way therefore leaves either nothing or a temporary directory that no
 later stage will take for a result, and :func:`open_store` refuses a store
-without the completion mark.
+without the completion mark or with fewer chunks than the mark promises.
+
+Replacing a store never exposes a mix: the old store is exchanged with the
+new one in one step (two renames where the system cannot) and deleted only
+afterwards, and a dataset still reading the old store lazily gets a
+:class:`~irdic.errors.DataError`, never fill values. Jobs writing the same
+store take turns through a lock file ``.<name>.lock`` next to it. Only
+irdic's own outputs are ever replaced: an existing file or folder that irdic
+did not write is refused.
 
 Provenance attributes (all stores):
 
@@ -14,6 +23,7 @@ Provenance attributes (all stores):
 ``irdic_created``      UTC time stamp, ISO 8601
 ``irdic_parameters``   JSON text of the parameters of the stage
 ``irdic_inputs``       JSON list of the input files or stores
+``irdic_chunks``       JSON: chunk files per array when the store was finished
 """
 
 from __future__ import annotations
@@ -589,6 +599,15 @@ class FrameStore:
         self._ctx = atomic_directory(self.path)
         self._tmp = self._ctx.__enter__()
         self._closed = False
+        try:
+            self._create(name, n_frames, frame_dims, frame_coords, dtype, var_attrs, time_attrs, attrs,
+                         extra_time_vars)
+        except BaseException:
+            self.abort()  # releases the lock and removes the temporary
+            raise
+
+    def _create(self, name, n_frames, frame_dims, frame_coords, dtype, var_attrs, time_attrs, attrs,
+                extra_time_vars) -> None:
         self.n_frames = n_frames
         self.frame_shape = tuple(len(frame_coords[d]) for d in frame_dims)
         root = zarr.open_group(str(self._tmp), mode="w", zarr_format=3)
