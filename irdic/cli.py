@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import traceback
 from typing import Sequence
 
 from .errors import IrdicError
@@ -56,12 +57,19 @@ def describe_store(path) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="irdic", description="Couple stereo DIC and infrared thermography.")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    # --debug is also accepted after the command; SUPPRESS keeps a top-level --debug from being reset
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("info", help="summarise an irdic zarr store")
+    def add_parser(name, **kw):
+        return sub.add_parser(name, parents=[common], **kw)
+
+    s = add_parser("info", help="summarise an irdic zarr store")
     s.add_argument("store")
 
-    s = sub.add_parser("demo", help="write the synthetic demo experiment")
+    s = add_parser("demo", help="write the synthetic demo experiment")
     s.add_argument("outdir")
     s.add_argument("--scale", choices=["tiny", "demo", "paper"], default="demo")
     s.add_argument("--ir-noise", type=float, default=0.05, help="K")
@@ -69,7 +77,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0)
 
     for kind in ("ir", "dic"):
-        s = sub.add_parser(f"ingest-{kind}", help=f"{kind.upper()} exports -> {kind}.zarr")
+        s = add_parser(f"ingest-{kind}", help=f"{kind.upper()} exports -> {kind}.zarr")
         s.add_argument("source", help="folder, glob or file")
         s.add_argument("out", help="store to write")
         s.add_argument("--format", default="auto")
@@ -78,7 +86,7 @@ def _parser() -> argparse.ArgumentParser:
         s.add_argument("--time-origin", choices=["first", "file"], default="first")
         s.add_argument("--time-offset", type=float, default=0.0, help="s")
 
-    s = sub.add_parser("calibrate", help="calibrate the IR camera from one target image")
+    s = add_parser("calibrate", help="calibrate the IR camera from one target image")
     s.add_argument("--markers", required=True, help="marker centres export (ID, x, y, z in mm)")
     s.add_argument("--target", required=True, help="IR image of the reference object")
     s.add_argument("--out", required=True, help="calibration.zarr to write")
@@ -86,20 +94,20 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--distortion", choices=["none", "k1", "k1k2"], default="none")
     s.add_argument("--polarity", choices=["auto", "dark", "bright"], default="auto")
 
-    s = sub.add_parser("couple", help="temperatures at the DIC points -> points.zarr")
+    s = add_parser("couple", help="temperatures at the DIC points -> points.zarr")
     s.add_argument("--dic", required=True, help="dic.zarr")
     s.add_argument("--ir", required=True, help="ir.zarr")
     s.add_argument("--calibration", required=True, help="calibration.zarr")
     s.add_argument("--out", required=True, help="points.zarr to write")
     s.add_argument("--method", choices=["rbf", "bilinear", "cubic"], default="rbf")
 
-    s = sub.add_parser("fields", help="gradient, rate and strain fields -> fields.zarr")
+    s = add_parser("fields", help="gradient, rate and strain fields -> fields.zarr")
     s.add_argument("--points", required=True, help="points.zarr")
     s.add_argument("--calibration", required=True, help="calibration.zarr")
     s.add_argument("--out", required=True, help="fields.zarr to write")
     s.add_argument("--temperature-smoothing", default=None, help="none (default), gcv or a number >= 1")
 
-    s = sub.add_parser("run", help="run all stages of a configuration without Snakemake")
+    s = add_parser("run", help="run all stages of a configuration without Snakemake")
     s.add_argument("--config", default="config/config.yaml")
     return p
 
@@ -107,51 +115,79 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``irdic`` command."""
     args = _parser().parse_args(argv)
+    try:
+        _run(args)
+    except BaseException as exc:  # noqa: BLE001 - the command line answers everything in one line
+        if isinstance(exc, SystemExit):
+            raise
+        if args.debug:
+            traceback.print_exc()
+        code, line = _one_line(exc)
+        print(f"irdic: {line}", file=sys.stderr)
+        return code
+    return 0
+
+
+def _one_line(exc: BaseException) -> tuple[int, str]:
+    """Exit status and the one line the user sees for an exception."""
+    if isinstance(exc, IrdicError):
+        code, text = 2, f"error: {exc}"
+    elif isinstance(exc, KeyboardInterrupt):
+        code, text = 130, "interrupted; outputs being written were discarded, finished ones are kept"
+    elif isinstance(exc, MemoryError):
+        code, text = 1, ("error: out of memory; process fewer frames or points at a time "
+                         "(e.g. a coarser scale or a subset), or use a machine with more memory")
+    elif isinstance(exc, OSError):
+        what = exc.strerror or str(exc) or type(exc).__name__
+        where = exc.filename if exc.filename is not None else None
+        code, text = 1, f"error: {where}: {what}" if where is not None else f"error: {what}"
+    else:
+        code, text = 1, (f"internal error: {type(exc).__name__}: {exc} (a bug in irdic; run again with --debug "
+                         "for the traceback and report it)")
+    return code, " ".join(text.split())  # one line, whatever the message holds
+
+
+def _run(args: argparse.Namespace) -> None:
     from .logs import configure
 
     configure(None)
-    try:
-        if args.command == "info":
-            print(describe_store(args.store))
-        elif args.command == "demo":
-            from .pipeline import make_demo
+    if args.command == "info":
+        print(describe_store(args.store))
+    elif args.command == "demo":
+        from .pipeline import make_demo
 
-            make_demo(args.outdir, scale=args.scale, ir_noise=args.ir_noise, dic_noise=args.dic_noise, seed=args.seed)
-        elif args.command in ("ingest-ir", "ingest-dic"):
-            from .ingest import ingest_dic, ingest_ir
+        make_demo(args.outdir, scale=args.scale, ir_noise=args.ir_noise, dic_noise=args.dic_noise, seed=args.seed)
+    elif args.command in ("ingest-ir", "ingest-dic"):
+        from .ingest import ingest_dic, ingest_ir
 
-            fn = ingest_ir if args.command == "ingest-ir" else ingest_dic
-            fn(args.source, args.out, format=args.format, frame_rate=args.frame_rate, time_source=args.time_source,
-               time_origin=args.time_origin, time_offset=args.time_offset)
-            print(describe_store(args.out))
-        elif args.command == "calibrate":
-            from .pipeline import calibrate_setup
+        fn = ingest_ir if args.command == "ingest-ir" else ingest_dic
+        fn(args.source, args.out, format=args.format, frame_rate=args.frame_rate, time_source=args.time_source,
+           time_origin=args.time_origin, time_offset=args.time_offset)
+        print(describe_store(args.out))
+    elif args.command == "calibrate":
+        from .pipeline import calibrate_setup
 
-            calibrate_setup(args.markers, args.target, args.out, args.figure,
-                            distortion=args.distortion, polarity=args.polarity)
-            print(describe_store(args.out))
-        elif args.command == "couple":
-            from .couple import couple_stores
+        calibrate_setup(args.markers, args.target, args.out, args.figure,
+                        distortion=args.distortion, polarity=args.polarity)
+        print(describe_store(args.out))
+    elif args.command == "couple":
+        from .couple import couple_stores
 
-            couple_stores(args.dic, args.ir, args.calibration, args.out, method=args.method)
-            print(describe_store(args.out))
-        elif args.command == "fields":
-            from .fields import fields_stores
+        couple_stores(args.dic, args.ir, args.calibration, args.out, method=args.method)
+        print(describe_store(args.out))
+    elif args.command == "fields":
+        from .fields import fields_stores
 
-            sm = args.temperature_smoothing
-            sm = None if sm in (None, "none") else ("gcv" if sm == "gcv" else float(sm))
-            fields_stores(args.points, args.calibration, args.out, temperature_smoothing=sm)
-            print(describe_store(args.out))
-        elif args.command == "run":
-            from .config import load_config
-            from .pipeline import run
+        sm = args.temperature_smoothing
+        sm = None if sm in (None, "none") else ("gcv" if sm == "gcv" else float(sm))
+        fields_stores(args.points, args.calibration, args.out, temperature_smoothing=sm)
+        print(describe_store(args.out))
+    elif args.command == "run":
+        from .config import load_config
+        from .pipeline import run
 
-            paths = run(load_config(args.config))
-            print(json.dumps(paths, default=str, indent=2))
-    except IrdicError as exc:
-        print(f"irdic: error: {exc}", file=sys.stderr)
-        return 2
-    return 0
+        paths = run(load_config(args.config))
+        print(json.dumps(paths, default=str, indent=2))
 
 
 if __name__ == "__main__":  # pragma: no cover

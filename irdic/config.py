@@ -140,6 +140,11 @@ def _message(error: jsonschema.ValidationError) -> str:
             keys = _clip(", ".join(repr(e) for e in extra))
             prefix = f"{where}." if where != "(top level)" else ""
             return f"{prefix}{_clip(extra[0]) if len(extra) == 1 else '{' + keys + '}'}: unknown key; allowed here: {', '.join(allowed)}"
+    if "propertyNames" in error.relative_schema_path:
+        return (
+            f"{where}: name {_clip(repr(error.instance))} is not allowed; {where} names become folder names under the "
+            "results folder and may contain only letters, digits, '_', '-' and '.', not starting with '.'"
+        )
     if error.validator == "required":
         return f"{where}: {error.message}"
     if error.validator == "enum":

@@ -8,6 +8,7 @@ order, without Snakemake (no caching: use the workflow for that).
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import shutil
@@ -27,7 +28,14 @@ log = logging.getLogger(__name__)
 
 
 def stage_paths(config: Mapping) -> dict:
-    """Output paths of every stage (the contract of the results folder)."""
+    """Output paths of every stage (the contract of the results folder).
+
+    Raises
+    ------
+    ConfigError
+        A setup or experiment name would put an output outside the results
+        folder (``../x``, an absolute path, a link leading elsewhere).
+    """
     r = Path(config.get("results", "results"))
     out = {"setups": {}, "experiments": {}}
     for s in config["setups"]:
@@ -35,44 +43,135 @@ def stage_paths(config: Mapping) -> dict:
                             "figure": r / "setups" / s / "calibration.png"}
     for e in config["experiments"]:
         out["experiments"][e] = {k: r / e / f"{k}.zarr" for k in ("dic", "ir", "points", "fields")}
+    root = r.resolve()
+    for section, entries in out.items():
+        for name, paths in entries.items():
+            for p in paths.values():
+                resolved = p.resolve()
+                # the experiment's own folder must lie strictly below results, not be results itself
+                if root not in resolved.parents or resolved.parent == root:
+                    raise ConfigError(
+                        f"{section}.{name}: output {p} would lie outside the results folder {r} (resolves to "
+                        f"{resolved}); use a plain name of letters, digits, '_', '-' and '.'"
+                    )
     return out
 
 
-#: what :func:`make_demo` writes into its folder
-_DEMO_ENTRIES = {"setup", "halfshell", "tube", "manifest.yaml"}
+#: the demo's record of every path it wrote (relative to its folder): the next run removes these and nothing else
+_DEMO_RECORD = ".irdic-demo-files.json"
+
+
+def _demo_tree(out: Path) -> list[str]:
+    """Every file, link and folder under ``out`` (``.zarr`` stores as one entry), relative, deepest first."""
+    found = []
+    for dirpath, dirnames, filenames in os.walk(out):  # does not follow links
+        rel = Path(dirpath).relative_to(out)
+        for d in list(dirnames):
+            p = Path(dirpath) / d
+            if d.endswith(".zarr") or p.is_symlink():
+                dirnames.remove(d)
+                found.append((rel / d).as_posix())
+        found += [(rel / f).as_posix() for f in filenames]
+        if rel != Path("."):
+            found.append(rel.as_posix())
+    return sorted(found, key=lambda r: (-r.count("/"), r))
+
+
+def _demo_removals(out: Path) -> list[str]:
+    """What a new demo run may remove from ``out``: the paths the last run recorded.
+
+    Raises :class:`ConfigError` when ``out`` holds anything else (dot files
+    and folders included), before anything is touched.
+    """
+    if not out.exists():
+        return []
+    if not out.is_dir():
+        raise ConfigError(f"{out}: the demo folder exists and is a file; choose a new or empty folder for the demo")
+    record = out / _DEMO_RECORD
+    recorded: set[str] = set()
+    if record.is_file():
+        try:
+            recorded = set(json.loads(record.read_text(encoding="utf-8")))
+        except (OSError, ValueError, TypeError):
+            raise ConfigError(f"{record}: the demo's record of its files is unreadable; "
+                              "choose a new or empty folder for the demo") from None
+        recorded.add(_DEMO_RECORD)
+    tree = _demo_tree(out)
+    # a folder is the demo's when the demo wrote it (recorded) or all it holds is the demo's
+    foreign = [r for r in tree if r not in recorded]
+    if foreign:
+        tops = sorted({r.split("/", 1)[0] for r in foreign})
+        raise ConfigError(
+            f"{out}: folder exists and holds {', '.join(tops[:5])}{' ...' if len(tops) > 5 else ''}, "
+            "which the demo did not write; choose an empty or new folder for the demo"
+        )
+    return tree
 
 
 def make_demo(outdir: str | os.PathLike, *, scale: str = "demo", ir_noise: float = 0.05,
               dic_noise: float = 0.005, seed: int = 0, manifest: str | os.PathLike | None = None) -> Path:
     """Generate the synthetic demo (raw exports + truth) under ``outdir``.
 
-    The folder is emptied first; ``manifest`` (default ``outdir/manifest.yaml``)
-    lists what was written and is written last, so its presence means the
-    demo is complete.
+    What an earlier demo wrote into ``outdir`` is removed first, file by
+    file, from the record it kept (``.irdic-demo-files.json``); a folder
+    holding anything else (dot files included) is refused before anything
+    is touched, as is a symbolic link. ``manifest`` (default
+    ``outdir/manifest.yaml``) summarises what was written and is written
+    last, so its presence means the demo is complete.
+
+    Raises
+    ------
+    ConfigError
+        An invalid argument, or ``outdir`` holds files the demo did not
+        write, is a file or is a symbolic link.
     """
     from . import synthetic
+    from .synthetic._checks import as_int, choice, positive
+    from .synthetic.experiments import SCALES
 
+    # every argument is checked before the disk is touched
+    choice(scale, "scale", SCALES)
+    ir_noise = positive(ir_noise, "ir_noise", allow_zero=True)
+    dic_noise = positive(dic_noise, "dic_noise", allow_zero=True)
+    seed = as_int(seed, "seed", minimum=0)
     out = Path(outdir)
-    if out.exists():
-        # only ever delete what an earlier demo wrote, never a user's folder
-        foreign = [p.name for p in out.iterdir() if p.name not in _DEMO_ENTRIES and not p.name.startswith(".")]
-        if foreign:
-            raise ConfigError(
-                f"{out}: folder exists and holds {', '.join(sorted(foreign)[:5])}, which the demo did not write; "
-                "choose an empty or new folder for the demo"
-            )
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
-    written = synthetic.make_demo(out, scale=scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
+    if out.is_symlink():
+        raise ConfigError(f"{out}: the demo folder is a symbolic link (to {os.readlink(out)}); give the folder "
+                          "itself: the demo replaces what it wrote and does not write through links")
     man = Path(manifest) if manifest is not None else out / "manifest.yaml"
+    removals = _demo_removals(out)
+    for rel in removals:  # deepest first, so folders are empty when their turn comes
+        p = out / rel
+        if p.is_dir() and not p.is_symlink():
+            if p.name.endswith(".zarr"):
+                shutil.rmtree(p)
+            else:
+                p.rmdir()
+        elif os.path.lexists(p):
+            p.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+    written = synthetic.make_demo(out, scale=scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
+    tree = _demo_tree(out)
+    try:
+        in_out = man.resolve().relative_to(out.resolve()).as_posix()
+        tree.append(in_out)
+    except ValueError:
+        pass  # a manifest outside the folder is not the demo's to remove
+    _write_text_atomic(out / _DEMO_RECORD, json.dumps(sorted(set(tree)), indent=0))
     files = sorted(str(p.relative_to(out)) for p in out.rglob("*")
-                   if p.is_file() and not any(part.endswith(".zarr") for part in p.parts))
-    with open(man, "w", encoding="utf-8") as fh:
-        yaml.safe_dump({"scale": scale, "ir_noise": ir_noise, "dic_noise": dic_noise, "seed": seed,
-                        "n_files": len(files), "contents": _jsonable(written)},
-                       fh, sort_keys=False)
+                   if p.is_file() and not any(part.endswith(".zarr") for part in p.parts)
+                   and not p.name.startswith("."))
+    _write_text_atomic(man, yaml.safe_dump({"scale": scale, "ir_noise": ir_noise, "dic_noise": dic_noise,
+                                            "seed": seed, "n_files": len(files), "contents": _jsonable(written)},
+                                           sort_keys=False))
     log.info("demo written to %s (%d files)", out, len(files))
     return out
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
 
 
 def ingest_experiment(exp: Mapping, dic_out: str | os.PathLike, ir_out: str | os.PathLike) -> None:

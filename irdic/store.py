@@ -1,11 +1,20 @@
 """Writing and opening irdic zarr stores: atomically, with units and provenance.
 
 Every stage writes one zarr store. A store is first written to a hidden
-sibling directory and renamed into place only when it is complete, and it
-carries the attribute ``irdic_complete = True`` written last. A job that dies
+sibling directory and moved into place only when it is complete; it carries
+the attribute ``irdic_complete = True``, written last together with
+``irdic_chunks``, the number of chunk files of every array. A job that dies
 half-way therefore leaves either nothing or a temporary directory that no
 later stage will take for a result, and :func:`open_store` refuses a store
-without the completion mark.
+without the completion mark or with fewer chunks than the mark promises.
+
+Replacing a store never exposes a mix: the old store is exchanged with the
+new one in one step (two renames where the system cannot) and deleted only
+afterwards, and a dataset still reading the old store lazily gets a
+:class:`~irdic.errors.DataError`, never fill values. Jobs writing the same
+store take turns through a lock file ``.<name>.lock`` next to it. Only
+irdic's own outputs are ever replaced: an existing file or folder that irdic
+did not write is refused.
 
 Provenance attributes (all stores):
 
@@ -14,20 +23,30 @@ Provenance attributes (all stores):
 ``irdic_created``      UTC time stamp, ISO 8601
 ``irdic_parameters``   JSON text of the parameters of the stage
 ``irdic_inputs``       JSON list of the input files or stores
+``irdic_chunks``       JSON: chunk files per array when the store was finished
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import datetime as _dt
+import errno
+import glob
+import itertools
 import json
 import os
+import re
 import shutil
+import socket
+import sys
+import time
 import uuid
 import warnings
 from pathlib import Path
 from typing import Any, Iterator, Mapping, Sequence
 
+import filelock
 import numpy as np
 import xarray as xr
 import zarr
@@ -41,9 +60,12 @@ __all__ = [
     "atomic_directory",
     "FrameStore",
     "COMPLETE_ATTR",
+    "CHUNKS_ATTR",
 ]
 
 COMPLETE_ATTR = "irdic_complete"
+#: JSON text written with the completion mark: chunk files of every array (see :func:`open_store`)
+CHUNKS_ATTR = "irdic_chunks"
 
 
 def _version() -> str:
@@ -103,51 +125,265 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+#: a temporary or set-aside copy of another host's job is removed only when older than this (s):
+#: that job may still be running on a shared file system, and its process cannot be asked about
+STALE_AGE_S = 7 * 24 * 3600.0
+#: how long a writer waits for another job writing the same output before giving up (s)
+LOCK_TIMEOUT_S = 600.0
+#: file that marks a folder (not a zarr store) as written by irdic, so that it may be replaced
+OUTPUT_MARK = ".irdic-output"
+#: files other tools drop into output folders that do not make a folder the user's
+_HARMLESS = {".snakemake_timestamp"}
+
+
+def _host() -> str:
+    # the host is part of temporaries' names: '/' would make a path, and '.' keeps names readable
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", socket.gethostname() or "unknown")
+
+
+def _sibling(final: Path, kind: str) -> Path:
+    return final.with_name(f".{final.name}.{kind}-{os.getpid()}-{uuid.uuid4().hex[:8]}-{_host()}")
+
+
+def _owner(tmp: Path, final: Path, kind: str) -> tuple[int | None, str | None]:
+    """(pid, host) encoded in a temporary's name; host is None for names of older irdic versions."""
+    rest = tmp.name[len(f".{final.name}.{kind}-"):]
+    parts = rest.split("-", 2)
+    try:
+        pid = int(parts[0])
+    except ValueError:
+        return None, None
+    return pid, (parts[2] if len(parts) == 3 else None)
+
+
 def _remove_stale_siblings(final: Path) -> None:
-    """Remove temporaries of ``final`` left by killed jobs (their process is gone)."""
-    for tmp in final.parent.glob(f".{final.name}.tmp-*"):
-        try:
-            pid = int(tmp.name.rsplit(".tmp-", 1)[1].split("-")[0])
-        except (IndexError, ValueError):
-            continue
-        if not _pid_alive(pid):
-            shutil.rmtree(tmp, ignore_errors=True)
+    """Remove temporaries of ``final`` left by dead jobs.
+
+    A temporary of this host is removed when its process is gone; one of
+    another host (or of an older irdic, whose names carry no host) only when
+    it is older than :data:`STALE_AGE_S`, because ``os.kill`` cannot see
+    processes on other nodes of a cluster sharing the file system.
+    """
+    now = time.time()
+    for kind in ("tmp", "old"):
+        for tmp in final.parent.glob(f".{glob.escape(final.name)}.{kind}-*"):
+            pid, host = _owner(tmp, final, kind)
+            if pid is None:
+                continue
+            if host == _host():
+                stale = not _pid_alive(pid)
+            else:
+                try:
+                    stale = now - tmp.lstat().st_mtime > STALE_AGE_S
+                except OSError:
+                    continue
+            if stale:
+                _remove(tmp)
+
+
+def _remove(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            p.unlink()
+
+
+def _zarr_attrs(path: Path) -> dict | None:
+    """Attributes of the zarr v3 group at ``path``, or None when it is not one."""
+    try:
+        with open(path / "zarr.json", encoding="utf-8") as fh:
+            meta = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(meta, dict) or meta.get("node_type") != "group":
+        return None
+    attrs = meta.get("attributes")
+    return attrs if isinstance(attrs, dict) else {}
+
+
+def _replaceable(final: Path) -> bool:
+    """True when ``final`` may be replaced: absent, empty, an irdic store or an irdic-marked folder."""
+    if not os.path.lexists(final):
+        return True
+    if final.is_symlink() or not final.is_dir():
+        return False
+    attrs = _zarr_attrs(final)
+    if attrs is not None and ("irdic_stage" in attrs or COMPLETE_ATTR in attrs):
+        return True
+    if (final / OUTPUT_MARK).is_file():
+        return True
+    return all(p.name in _HARMLESS for p in final.iterdir())
+
+
+def _check_replaceable(final: Path) -> None:
+    if not _replaceable(final):
+        what = ("a symbolic link" if final.is_symlink() else "a folder" if final.is_dir() else "a file")
+        raise DataError(
+            f"{final}: output path exists and is {what} that irdic did not write; irdic replaces only "
+            "its own stores and output folders. Choose another output path, or move it away yourself"
+        )
+
+
+_RENAME_EXCHANGE = 2
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap ``a`` and ``b`` in one step (Linux ``renameat2``); False where unsupported."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd = -100
+    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.ENOTSUP):
+        return False  # file system without exchange (some network ones): fall back to two renames
+    raise OSError(err, os.strerror(err), os.fspath(b))
+
+
+def _swap_in(tmp: Path, final: Path) -> None:
+    """Put ``tmp`` at ``final`` so that a reader sees the old or the new directory, never a mix.
+
+    The old directory is moved aside (exchanged in one step where the
+    system can) and only then deleted; readers of the old one that are
+    still loading chunks then meet missing files, which :func:`open_store`
+    reports, instead of the new store's chunks.
+    """
+    if not os.path.lexists(final):
+        os.replace(tmp, final)
+        return
+    if _exchange(tmp, final):
+        _remove(tmp)  # now holds the old directory
+        return
+    aside = _sibling(final, "old")
+    os.replace(final, aside)
+    os.replace(tmp, final)
+    _remove(aside)
 
 
 @contextlib.contextmanager
-def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
+def _writer_lock(final: Path, timeout: float | None) -> Iterator[None]:
+    """Hold the lock of ``final`` so that two jobs writing it take turns."""
+    timeout = LOCK_TIMEOUT_S if timeout is None else timeout
+    lock = filelock.FileLock(os.fspath(final.with_name(f".{final.name}.lock")))
+    try:
+        lock.acquire(timeout=timeout)
+    except filelock.Timeout:
+        others = sorted(p.name for p in final.parent.glob(f".{glob.escape(final.name)}.tmp-*"))
+        who = f" (its temporary: {others[0]})" if others else ""
+        raise DataError(
+            f"{final}: another job has been writing this output for over {timeout:g} s{who}; "
+            "wait for it to finish, or stop it, then run again"
+        ) from None
+    try:
+        yield
+    finally:
+        lock.release()
+
+
+@contextlib.contextmanager
+def atomic_directory(path: str | os.PathLike, *, lock_timeout: float | None = None) -> Iterator[Path]:
     """Yield a temporary sibling of ``path``; move it to ``path`` on success.
 
     On any exception the temporary directory is removed and ``path`` is left
     as it was before (an older complete result stays; nothing half-written
-    appears).
+    appears). An existing ``path`` is replaced only when irdic wrote it (an
+    irdic zarr store, or a folder carrying :data:`OUTPUT_MARK`) or when it is
+    an empty folder; anything else is refused before any work is done.
+    Jobs writing the same ``path`` take turns (a lock file next to it).
 
     Parameters
     ----------
     path : path-like
         Final location of the directory (for example ``results/x/ir.zarr``).
+    lock_timeout : float, optional
+        Seconds to wait for another job writing ``path`` (default
+        :data:`LOCK_TIMEOUT_S`).
+
+    Raises
+    ------
+    DataError
+        ``path`` exists and was not written by irdic, or another job holds
+        it for longer than ``lock_timeout``.
     """
     final = Path(path)
+    _check_replaceable(final)
     final.parent.mkdir(parents=True, exist_ok=True)
-    _remove_stale_siblings(final)
-    tmp = final.with_name(f".{final.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if final.exists():
-        if final.is_dir() and not final.is_symlink():
-            shutil.rmtree(final)
-        else:
-            final.unlink()
-    os.replace(tmp, final)
+    with _writer_lock(final, lock_timeout):
+        _remove_stale_siblings(final)
+        tmp = _sibling(final, "tmp")
+        try:
+            yield tmp
+            if tmp.is_dir() and not (tmp / "zarr.json").exists():
+                # a plain output folder: mark it as irdic's so that a later run may replace it
+                (tmp / OUTPUT_MARK).write_text("written by irdic; the whole folder is replaced on the next run\n",
+                                              encoding="utf-8")
+            _check_replaceable(final)  # something may have appeared while we were computing
+            _swap_in(tmp, final)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+
+
+def _chunk_manifest(root: Path) -> dict:
+    """``{array path: [chunk files present, chunks in the grid, absent chunk keys]}`` of a store.
+
+    Chunks equal to the fill value are not written by zarr, so an absent
+    chunk is only an error when it was present when the store was finished;
+    the few absent ones are listed to tell them apart.
+    """
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        if "zarr.json" not in filenames:
+            continue
+        try:
+            with open(os.path.join(dirpath, "zarr.json"), encoding="utf-8") as fh:
+                meta = json.load(fh)
+        except (OSError, ValueError):
+            continue
+        if meta.get("node_type") != "array":
+            continue
+        dirnames[:] = []
+        rel = Path(dirpath).relative_to(root).as_posix()
+        enc = meta.get("chunk_key_encoding", {})
+        if enc.get("name") != "default" or enc.get("configuration", {}).get("separator", "/") != "/":
+            continue  # irdic writes the default encoding only; others are not checked
+        present = set(_chunk_keys(Path(dirpath)))
+        shape = meta["shape"]
+        chunks = meta["chunk_grid"]["configuration"]["chunk_shape"]
+        grid = [range(-(-s // c)) for s, c in zip(shape, chunks)]
+        n_grid = int(np.prod([len(g) for g in grid])) if grid else 1
+        absent = []
+        if len(present) < n_grid:
+            absent = sorted({"/".join(["c", *map(str, idx)]) for idx in itertools.product(*grid)} - present)
+        out[rel] = [len(present), n_grid, absent]
+    return out
+
+
+def _chunk_keys(array_dir: Path) -> Iterator[str]:
+    """Chunk keys (``c/0/1``) present under one array's folder."""
+    c = array_dir / "c"
+    if c.is_file():
+        yield "c"
+        return
+    for dirpath, _, filenames in os.walk(c):
+        rel = Path(dirpath).relative_to(array_dir).as_posix()
+        for f in filenames:
+            yield f"{rel}/{f}"
 
 
 def _mark_complete(path: Path) -> None:
+    """Write the completion mark, with the chunk manifest that proves the data is there."""
+    manifest = json.dumps(_chunk_manifest(path), separators=(",", ":"))
     group = zarr.open_group(str(path), mode="r+")
-    group.attrs[COMPLETE_ATTR] = True
-    pass  # zarr v3 has no consolidated metadata in the spec; the mark is enough
+    # one metadata write: a store never carries the mark without the manifest
+    group.attrs.update({CHUNKS_ATTR: manifest, COMPLETE_ATTR: True})
 
 
 def write_dataset(
@@ -166,7 +402,8 @@ def write_dataset(
     ds : xarray.Dataset
         The data; variables should carry ``units`` and ``long_name`` attributes.
     path : path-like
-        Destination store (a directory, replaced if it exists).
+        Destination store (a directory; replaced if it is an irdic store,
+        refused if it is anything else, see :func:`atomic_directory`).
     stage, params, inputs
         See :func:`provenance`.
     encoding : mapping, optional
@@ -184,14 +421,69 @@ def write_dataset(
             ds[name] = ds[name].astype(object)
     ds.attrs.update(provenance(stage, params, inputs))
     ds.attrs.pop(COMPLETE_ATTR, None)
+    ds.attrs.pop(CHUNKS_ATTR, None)
     with atomic_directory(path) as tmp:
         ds.to_zarr(str(tmp), mode="w", encoding=dict(encoding or {}), consolidated=False, zarr_format=3)
         _mark_complete(tmp)
     return Path(path)
 
 
+def _identity(path: Path) -> tuple | None:
+    """What tells one write of a store from the next: its metadata file's inode and change time."""
+    try:
+        st = os.stat(path / "zarr.json")
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_ctime_ns)
+
+
+class _CheckedStore(zarr.storage.LocalStore):
+    """A local store that raises :class:`DataError` instead of reading fill values.
+
+    zarr reads a missing chunk as the fill value (NaN): a store replaced or
+    deleted while a lazy dataset still reads it would yield silently wrong
+    numbers. Every read therefore checks that the store is still the one
+    opened, and that a missing chunk was absent when the store was finished.
+    """
+
+    def __init__(self, root, *, read_only: bool = True, identity=None, absent=None, arrays=None):
+        super().__init__(root, read_only=read_only)
+        self._identity = identity
+        self._absent = absent or {}
+        self._arrays = arrays or set()
+
+    def with_read_only(self, read_only: bool = False):
+        return type(self)(self.root, read_only=read_only, identity=self._identity, absent=self._absent,
+                          arrays=self._arrays)
+
+    def _array_of(self, key: str) -> str | None:
+        # chunk keys are "<array>/c/<i>/<j>..." (or "<array>/c" for a 0-d array); indices are numbers
+        head = key[:-2] if key.endswith("/c") else key.rpartition("/c/")[0]
+        return head if head in self._arrays else None
+
+    async def get(self, key, prototype=None, byte_range=None):
+        value = await super().get(key, prototype, byte_range)
+        if self._identity is not None and _identity(self.root) != self._identity:
+            raise DataError(
+                f"{self.root}: store was replaced or removed while it was being read "
+                "(another job rewrote it); open it again"
+            )
+        if value is None:
+            arr = self._array_of(key)
+            if arr is not None and key[len(arr) + 1:] not in self._absent.get(arr, ()):
+                raise DataError(f"{self.root}: variable {arr!r}: chunk {key} is missing; the store is damaged, "
+                                "run the stage that writes it again")
+        return value
+
+
 def open_store(path: str | os.PathLike) -> xr.Dataset:
-    """Open a store written by irdic, refusing incomplete or foreign ones.
+    """Open a store written by irdic, refusing incomplete, damaged or foreign ones.
+
+    A store that opens is complete: the completion mark lists how many chunk
+    files each array had when the store was finished, and they are counted
+    here; a chunk that disappears later (the store is rewritten by another
+    job while this dataset is read lazily) raises :class:`DataError` when it
+    is read, instead of reading as NaN.
 
     Parameters
     ----------
@@ -206,16 +498,43 @@ def open_store(path: str | os.PathLike) -> xr.Dataset:
     Raises
     ------
     DataError
-        The store does not exist, is not a zarr store or is incomplete.
+        The store does not exist, is not a zarr store, is incomplete, misses
+        chunks, or is replaced while it is read.
     """
     p = Path(path)
     if not p.exists():
         raise DataError(f"{p}: store not found (run the stage that produces it first)")
+    identity = _identity(p)
+    attrs = _zarr_attrs(p)
+    if identity is None or attrs is None:
+        raise DataError(f"{p}: not a readable zarr store (no group metadata zarr.json)")
+    if not attrs.get(COMPLETE_ATTR, False):
+        raise DataError(
+            f"{p}: store is incomplete (written by an interrupted job?); delete it and run the stage again"
+        )
+    absent, arrays = {}, set()
+    if CHUNKS_ATTR in attrs:  # stores of irdic versions before the manifest are trusted as they are
+        try:
+            manifest = json.loads(attrs[CHUNKS_ATTR])
+        except (TypeError, ValueError):
+            raise DataError(f"{p}: chunk manifest {CHUNKS_ATTR} is unreadable; run the stage again") from None
+        for arr, (n_present, _, missing) in manifest.items():
+            found = sum(1 for _ in _chunk_keys(p / arr))
+            if found < n_present:
+                raise DataError(
+                    f"{p}: variable {arr!r} has {found} of its {n_present} chunks (the store is damaged, or being "
+                    "replaced by another job); run the stage that writes it again"
+                )
+            absent[arr] = set(missing)
+            arrays.add(arr)
+    store = _CheckedStore(p, identity=identity, absent=absent, arrays=arrays)
     try:
         with warnings.catch_warnings():
             # Snakemake drops a .snakemake_timestamp file into directory outputs
             warnings.filterwarnings("ignore", message=r".*\.snakemake_timestamp.*")
-            ds = xr.open_zarr(str(p), consolidated=False)
+            ds = xr.open_zarr(store, consolidated=False)
+    except IrdicError:
+        raise
     except Exception as exc:  # zarr raises several unrelated types here
         raise DataError(f"{p}: not a readable zarr store ({type(exc).__name__}: {exc})") from exc
     if not ds.attrs.get(COMPLETE_ATTR, False):
@@ -280,6 +599,15 @@ class FrameStore:
         self._ctx = atomic_directory(self.path)
         self._tmp = self._ctx.__enter__()
         self._closed = False
+        try:
+            self._create(name, n_frames, frame_dims, frame_coords, dtype, var_attrs, time_attrs, attrs,
+                         extra_time_vars)
+        except BaseException:
+            self.abort()  # releases the lock and removes the temporary
+            raise
+
+    def _create(self, name, n_frames, frame_dims, frame_coords, dtype, var_attrs, time_attrs, attrs,
+                extra_time_vars) -> None:
         self.n_frames = n_frames
         self.frame_shape = tuple(len(frame_coords[d]) for d in frame_dims)
         root = zarr.open_group(str(self._tmp), mode="w", zarr_format=3)
@@ -314,7 +642,7 @@ class FrameStore:
             arr = root.create_array(d, shape=c.shape, chunks=c.shape, dtype=c.dtype, dimension_names=(d,))
             arr[:] = c
             arr.attrs.update({"units": "px", "long_name": f"pixel {d} (full-sensor, 0-based)"})
-        self._attrs = dict(attrs or {})
+        self._attrs = {k: v for k, v in dict(attrs or {}).items() if k not in (COMPLETE_ATTR, CHUNKS_ATTR)}
         self._written = np.zeros(n_frames, dtype=bool)
 
     def write(self, index: int, time: float, frame: np.ndarray, **extra) -> None:

@@ -60,3 +60,54 @@ def test_pipeline_runs_without_snakemake(demo, monkeypatch):
         assert (demo / "results/tube/figures" / f"{name}.png").exists()
     assert (demo / "results/tube/paraview/points.pvd").exists()
     assert (demo / "results/tube/points.csv").exists()
+
+
+def test_ingest_refuses_to_overwrite_a_users_folder_or_file(demo, tmp_path, capsys):
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "results.xlsx").write_text("precious")
+    assert main(["ingest-ir", str(demo / "demo/tube/ir"), str(victim)]) == 2
+    err = capsys.readouterr().err
+    assert f"irdic: error: {victim}: output path exists and is a folder that irdic did not write" in err
+    assert "Traceback" not in err and [ln for ln in err.splitlines() if not ln[:2].isdigit()] == [err.splitlines()[-1]]
+    assert (victim / "results.xlsx").read_text() == "precious"
+    afile = tmp_path / "notes.txt"
+    afile.write_text("precious")
+    assert main(["ingest-ir", str(demo / "demo/tube/ir"), str(afile)]) == 2
+    assert "is a file that irdic did not write" in capsys.readouterr().err
+    assert afile.read_text() == "precious"
+    # its own store is replaced, as before
+    assert main(["ingest-ir", str(demo / "demo/tube/ir"), str(tmp_path / "ir.zarr")]) == 0
+    assert main(["ingest-ir", str(demo / "demo/tube/ir"), str(tmp_path / "ir.zarr")]) == 0
+
+
+def _raiser(exc):
+    def describe_store(path):
+        raise exc
+
+    return describe_store
+
+
+@pytest.mark.parametrize(
+    "exc, code, line",
+    [
+        (OSError(28, "No space left on device", "results/tube/ir.zarr"), 1,
+         "irdic: error: results/tube/ir.zarr: No space left on device"),
+        (PermissionError(13, "Permission denied"), 1, "irdic: error: Permission denied"),
+        (MemoryError(), 1, "irdic: error: out of memory; process fewer frames or points at a time"),
+        (KeyboardInterrupt(), 130, "irdic: interrupted; outputs being written were discarded"),
+        (ValueError("boom\nsecond line"), 1, "irdic: internal error: ValueError: boom second line (a bug in irdic; "
+                                              "run again with --debug"),
+    ],
+)
+def test_every_error_is_one_line_without_traceback(monkeypatch, capsys, exc, code, line):
+    import irdic.cli
+
+    monkeypatch.setattr(irdic.cli, "describe_store", _raiser(exc))
+    assert main(["info", "x.zarr"]) == code
+    err = capsys.readouterr().err
+    assert err.startswith(line) and err.count("\n") == 1 and "Traceback" not in err
+    for argv in (["--debug", "info", "x.zarr"], ["info", "x.zarr", "--debug"]):
+        assert main(argv) == code
+        err = capsys.readouterr().err
+        assert "Traceback" in err and err.rstrip().splitlines()[-1].startswith(line)

@@ -1,4 +1,5 @@
 import copy
+import re
 from pathlib import Path
 
 import pytest
@@ -149,3 +150,41 @@ def test_fuzzed_config_is_valid_or_config_error(tmp_path, data):
         assert len(str(exc)) < 3000
     else:
         assert isinstance(cfg, dict)
+
+@pytest.mark.parametrize("section", ["setups", "experiments"])
+@pytest.mark.parametrize("name", ["../../x", "/tmp/x", "a/b", ".hidden", "..", "", "tab\\there", "x y"])
+def test_names_that_would_escape_results_are_refused(cfg, section, name):
+    if section == "setups":
+        cfg["setups"][name] = cfg["setups"].pop("lab")
+        for e in cfg["experiments"].values():
+            e["setup"] = name
+    else:
+        cfg["experiments"][name] = cfg["experiments"].pop("tube")
+    with pytest.raises(ConfigError, match=rf"{section}: name {re.escape(repr(name))} is not allowed; {section} names "
+                                          r"become folder names under the results folder"):
+        validate_config(cfg)
+
+
+@pytest.mark.parametrize("name", ["tube", "Tube_2-b", "run.3", "-x", "42"])
+def test_plain_names_are_accepted(cfg, name):
+    cfg["experiments"][name] = cfg["experiments"].pop("tube")
+    assert name in validate_config(cfg)["experiments"]
+
+
+def test_stage_paths_stay_inside_results(cfg, tmp_path):
+    from irdic.pipeline import stage_paths
+
+    c = validate_config(cfg)
+    c["results"] = str(tmp_path / "results")
+    paths = stage_paths(c)
+    assert paths["experiments"]["tube"]["ir"] == tmp_path / "results" / "tube" / "ir.zarr"
+    # a configuration that skipped validation (Python API) is still caught where paths are made
+    c["experiments"]["../../x"] = c["experiments"].pop("tube")
+    with pytest.raises(ConfigError, match=r"experiments\.\.\./\.\./x: output .* would lie outside the results folder"):
+        stage_paths(c)
+    c["experiments"] = {"tube": c["experiments"].pop("../../x")}
+    (tmp_path / "results").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "results" / "tube").symlink_to(tmp_path / "elsewhere")
+    with pytest.raises(ConfigError, match=r"experiments\.tube: output .* would lie outside the results folder"):
+        stage_paths(c)

@@ -207,7 +207,7 @@ def test_paraview_float32_and_selected_times(stores, tmp_path):
     pvd = write_paraview(points, tmp_path / "pv", fields=fields, times=[0.4, 2.0], name="fab")
     entries = _pvd(pvd)
     assert entries == [(0.5, "fab_0001.vtu"), (2.0, "fab_0004.vtu")]
-    assert sorted(p.name for p in pvd.parent.iterdir()) == ["fab.pvd", "fab_0001.vtu", "fab_0004.vtu"]
+    assert sorted(p.name for p in pvd.parent.iterdir()) == [".irdic-output", "fab.pvd", "fab_0001.vtu", "fab_0004.vtu"]
     m = meshio.read(pvd.parent / "fab_0004.vtu")
     assert m.point_data["temperature_rate"].dtype == np.float32
     np.testing.assert_array_equal(m.point_data["temperature_rate"],
@@ -215,18 +215,26 @@ def test_paraview_float32_and_selected_times(stores, tmp_path):
     assert m.points.dtype == np.float64
 
 
-def test_paraview_replaces_the_folder_and_works_without_fields(stores, tmp_path):
+def test_paraview_replaces_its_own_folder_and_works_without_fields(stores, tmp_path):
     points, _ = stores
     out = tmp_path / "pv"
-    out.mkdir()
-    (out / "stale.vtu").write_text("old")
     pvd = write_paraview(points, out)
-    assert not (out / "stale.vtu").exists()
     assert [e[1] for e in _pvd(pvd)] == [f"points_{i:04d}.vtu" for i in range(5)]
     pvd = write_paraview(points, out, every=2)
     assert _pvd(pvd) == [(0.0, "points_0000.vtu"), (1.0, "points_0002.vtu"), (2.0, "points_0004.vtu")]
+    assert not (out / "points_0001.vtu").exists()  # the older export was replaced as a whole
     m = meshio.read(pvd.parent / "points_0000.vtu")
     assert "temperature_local_rate" in m.point_data and "strain" not in m.point_data
+
+
+def test_paraview_never_replaces_a_folder_irdic_did_not_write(stores, tmp_path):
+    points, _ = stores
+    out = tmp_path / "pv"
+    out.mkdir()
+    (out / "my_model.vtu").write_text("precious")
+    with pytest.raises(DataError, match=r"pv: output path exists and is a folder that irdic did not write"):
+        write_paraview(points, out)
+    assert sorted(p.name for p in out.iterdir()) == ["my_model.vtu"]
 
 
 def test_paraview_bad_arguments(stores, tmp_path):

@@ -4,7 +4,7 @@ import xarray as xr
 import zarr
 
 from irdic.errors import DataError
-from irdic.store import COMPLETE_ATTR, FrameStore, open_store, write_dataset
+from irdic.store import COMPLETE_ATTR, OUTPUT_MARK, FrameStore, atomic_directory, open_store, write_dataset
 
 
 def _ds():
@@ -22,8 +22,8 @@ def test_write_dataset_roundtrip_with_provenance(tmp_path):
     assert ds.attrs["irdic_stage"] == "test"
     assert ds.attrs["irdic_parameters"] == '{"c": 2.0}'
     assert ds.attrs[COMPLETE_ATTR] is True
-    # no temporary sibling left behind
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.zarr"]
+    # no temporary sibling left behind (the writers' lock file stays, empty)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".s.zarr.lock", "s.zarr"]
 
 
 def test_write_dataset_replaces_existing(tmp_path):
@@ -66,7 +66,7 @@ def test_framestore_interrupted_leaves_nothing(tmp_path):
         with FrameStore(tmp_path / "ir.zarr", "temperature", 3, ("v", "u"), {"v": np.arange(2), "u": np.arange(2)}) as fs:
             fs.write(0, 0.0, np.zeros((2, 2)))
             raise RuntimeError("killed")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["ir.zarr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".ir.zarr.lock", "ir.zarr"]
     assert open_store(tmp_path / "ir.zarr").attrs["irdic_stage"] == "old"
 
 
@@ -78,7 +78,7 @@ def test_framestore_checks(tmp_path):
     with pytest.raises(DataError, match="never written"):
         fs.close()
     fs.abort()
-    assert not list(tmp_path.iterdir())
+    assert [p.name for p in tmp_path.iterdir()] == [".ir.zarr.lock"]
 
 
 def test_killed_stage_leaves_no_store_and_the_next_run_cleans_up(tmp_path):
@@ -112,4 +112,171 @@ def test_killed_stage_leaves_no_store_and_the_next_run_cleans_up(tmp_path):
     with pytest.raises(DataError, match="not found"):
         open_store(tmp_path / "ir.zarr")
     write_dataset(_ds(), tmp_path / "ir.zarr", stage="rerun")
-    assert [p.name for p in tmp_path.iterdir()] == ["ir.zarr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".ir.zarr.lock", "ir.zarr"]
+
+
+# --------------------------------------------------------------------------- data safety (issue 9)
+
+_BY_TIME = {"a": {"chunks": (1, 3)}}
+
+
+def test_refuses_to_replace_what_irdic_did_not_write(tmp_path):
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "thesis.tex").write_text("precious")
+    with pytest.raises(DataError, match=r"victim: output path exists and is a folder that irdic did not write"):
+        write_dataset(_ds(), victim, stage="x")
+    assert (victim / "thesis.tex").read_text() == "precious"
+    afile = tmp_path / "notes.txt"
+    afile.write_text("precious")
+    with pytest.raises(DataError, match="is a file that irdic did not write"):
+        write_dataset(_ds(), afile, stage="x")
+    assert afile.read_text() == "precious"
+    # a foreign zarr store (no irdic provenance) is a user's data too
+    _ds().to_zarr(tmp_path / "theirs.zarr", zarr_format=3, consolidated=False)
+    with pytest.raises(DataError, match="irdic did not write"):
+        write_dataset(_ds(), tmp_path / "theirs.zarr", stage="x")
+    link = tmp_path / "link.zarr"
+    link.symlink_to(victim)
+    with pytest.raises(DataError, match="is a symbolic link"):
+        write_dataset(_ds(), link, stage="x")
+    assert (victim / "thesis.tex").read_text() == "precious"
+    # nothing was written next to them either
+    assert not [p for p in tmp_path.iterdir() if ".tmp-" in p.name]
+
+
+def test_empty_folder_and_irdic_output_folders_are_replaced(tmp_path):
+    (tmp_path / "s.zarr").mkdir()
+    write_dataset(_ds(), tmp_path / "s.zarr", stage="one")
+    assert open_store(tmp_path / "s.zarr").attrs["irdic_stage"] == "one"
+    with atomic_directory(tmp_path / "out") as tmp:
+        tmp.mkdir()
+        (tmp / "a.vtu").write_text("1")
+    assert (tmp_path / "out" / OUTPUT_MARK).is_file()
+    with atomic_directory(tmp_path / "out") as tmp:
+        tmp.mkdir()
+        (tmp / "b.vtu").write_text("2")
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [OUTPUT_MARK, "b.vtu"]
+
+
+def test_open_store_refuses_a_store_with_missing_chunks(tmp_path):
+    write_dataset(_ds(), tmp_path / "s.zarr", stage="x", encoding=_BY_TIME)
+    chunk = tmp_path / "s.zarr" / "a" / "c" / "1" / "0"
+    assert chunk.is_file()
+    chunk.unlink()
+    with pytest.raises(DataError, match=r"s.zarr: variable 'a' has 1 of its 2 chunks"):
+        open_store(tmp_path / "s.zarr")
+
+
+def test_chunk_lost_after_open_raises_instead_of_nan(tmp_path):
+    write_dataset(_ds(), tmp_path / "s.zarr", stage="x", encoding=_BY_TIME)
+    ds = open_store(tmp_path / "s.zarr")
+    (tmp_path / "s.zarr" / "a" / "c" / "1" / "0").unlink()
+    with pytest.raises(DataError, match=r"variable 'a': chunk a/c/1/0 is missing"):
+        ds["a"].values
+
+
+def test_all_fill_value_chunks_are_not_missing(tmp_path):
+    # zarr does not write chunks equal to the fill value: they must not read as damage
+    ds = _ds()
+    ds["a"][:] = np.nan
+    write_dataset(ds, tmp_path / "s.zarr", stage="x", encoding=_BY_TIME)
+    assert np.isnan(open_store(tmp_path / "s.zarr")["a"].values).all()
+
+
+def test_store_replaced_while_read_lazily_raises(tmp_path):
+    write_dataset(_ds(), tmp_path / "s.zarr", stage="one")
+    ds = open_store(tmp_path / "s.zarr")
+    write_dataset(_ds() * 2, tmp_path / "s.zarr", stage="two")
+    with pytest.raises(DataError, match="replaced or removed while it was being read"):
+        ds["a"].values  # the old metadata with the new chunks would be a silent mix
+
+
+_RACE_WRITER = """
+import sys, numpy as np, xarray as xr
+from irdic.store import write_dataset
+path, n = sys.argv[1], int(sys.argv[2])
+for k in range(1, n + 1):
+    ds = xr.Dataset({"a": (("time", "point"), np.full((20, 50), float(k)))},
+                    coords={"time": np.arange(20.0), "point": np.arange(50)})
+    write_dataset(ds, path, stage="race", params={"k": k}, encoding={"a": {"chunks": (1, 50)}})
+"""
+
+
+def test_reader_never_sees_a_half_replaced_store(tmp_path):
+    """A reader looping over open_store while another process rewrites the
+    store gets complete data with the values of one write, or a DataError;
+    never NaN (missing chunks), never a raw KeyError, never a mix."""
+    import json
+    import subprocess
+    import sys
+
+    path = tmp_path / "s.zarr"
+    subprocess.run([sys.executable, "-c", _RACE_WRITER, str(path), "1"], check=True)
+    writer = subprocess.Popen([sys.executable, "-c", _RACE_WRITER, str(path), "25"])
+    good = errors = 0
+    try:
+        while writer.poll() is None:
+            try:
+                ds = open_store(path)
+                k = json.loads(ds.attrs["irdic_parameters"])["k"]
+                a = ds["a"].values
+            except DataError:
+                errors += 1
+                continue
+            assert a.shape == (20, 50)
+            assert np.all(a == float(k)), f"write {k} read back as {np.unique(a)}"
+            good += 1
+    finally:
+        writer.wait(timeout=120)
+    assert writer.returncode == 0
+    assert good > 0
+    ds = open_store(path)
+    assert np.all(ds["a"].values == 25.0)
+    assert not [p for p in tmp_path.iterdir() if ".tmp-" in p.name or ".old-" in p.name]
+
+
+def test_two_writers_take_turns(tmp_path):
+    import subprocess
+    import sys
+
+    path = tmp_path / "s.zarr"
+    procs = [subprocess.Popen([sys.executable, "-c", _RACE_WRITER, str(path), "8"], stderr=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    for p in procs:
+        _, err = p.communicate(timeout=180)
+        assert p.returncode == 0, err
+    assert np.all(open_store(path)["a"].values == 8.0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".s.zarr.lock", "s.zarr"]
+
+
+def test_second_writer_times_out_clearly(tmp_path):
+    path = tmp_path / "s.zarr"
+    with atomic_directory(path) as tmp:
+        tmp.mkdir()
+        with pytest.raises(DataError, match=r"s.zarr: another job has been writing this output for over 0.2 s "
+                                            r"\(its temporary: \.s\.zarr\.tmp-"):
+            with atomic_directory(path, lock_timeout=0.2):
+                pass
+    assert (path / OUTPUT_MARK).is_file()
+
+
+def test_stale_temporaries_of_other_hosts_are_kept(tmp_path, monkeypatch):
+    import os
+    import time
+
+    from irdic import store
+
+    path = tmp_path / "s.zarr"
+    other = tmp_path / ".s.zarr.tmp-999999-abcdef12-othernode-7"
+    mine_dead = tmp_path / f".s.zarr.tmp-999999-abcdef12-{store._host()}"
+    old_other = tmp_path / ".s.zarr.tmp-999999-abcdef13-othernode-8"
+    for d in (other, mine_dead, old_other):
+        d.mkdir()
+    old = time.time() - store.STALE_AGE_S - 10
+    os.utime(old_other, (old, old))
+    monkeypatch.setattr(store, "_pid_alive", lambda pid: False)
+    write_dataset(_ds(), path, stage="x")
+    names = {p.name for p in tmp_path.iterdir()}
+    assert other.name in names  # a live job on another node may own it: os.kill cannot tell
+    assert mine_dead.name not in names and old_other.name not in names

@@ -3,10 +3,13 @@
 import re
 
 import irdic.config
+import irdic.pipeline
 from irdic.codehash import code_hash
 from irdic.ingest import list_inputs
 
 irdic.config.validate_config(config)
+# outputs must stay inside the results folder whatever the names (links included)
+irdic.pipeline.stage_paths(config)
 
 RESULTS = config["results"]
 DEMO = config["demo"]
