@@ -151,6 +151,7 @@ def test_fuzzed_config_is_valid_or_config_error(tmp_path, data):
     else:
         assert isinstance(cfg, dict)
 
+
 @pytest.mark.parametrize("section", ["setups", "experiments"])
 @pytest.mark.parametrize("name", ["../../x", "/tmp/x", "a/b", ".hidden", "..", "", "tab\\there", "x y"])
 def test_names_that_would_escape_results_are_refused(cfg, section, name):
