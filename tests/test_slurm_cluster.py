@@ -69,15 +69,23 @@ def _config():
     return cfg
 
 
-def _snakemake(workdir: Path, args, env, timeout):
+def _start_snakemake(workdir: Path, args, env):
     workdir.mkdir(parents=True, exist_ok=True)
     with open(workdir / "config.yaml", "w") as fh:
         yaml.safe_dump(_config(), fh)
     cmd = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"),
            "--directory", str(workdir), "--configfile", str(workdir / "config.yaml"), *args]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
-    assert res.returncode == 0, f"{' '.join(cmd)} failed:\n{res.stderr[-4000:]}"
-    return res
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+
+def _finish(proc, timeout):
+    try:
+        _, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()  # Snakemake's slurm executor cancels its jobs on the way out
+        _, err = proc.communicate()
+        pytest.fail(f"{' '.join(proc.args)} ran longer than {timeout} s:\n{err[-4000:]}")
+    assert proc.returncode == 0, f"{' '.join(proc.args)} failed:\n{err[-4000:]}"
 
 
 def _stores(work: Path) -> dict[str, Path]:
@@ -107,10 +115,12 @@ def test_demo_on_slurm_matches_the_local_run(slurm_env, tmp_path):
     on_slurm, local = tmp_path / "slurm", tmp_path / "local"
     logs = tmp_path / "slurm-logs"
     prefix = f"irdic-test-{os.getpid()}"
-    _snakemake(on_slurm, ["--profile", str(PROFILE), "--slurm-logdir", str(logs),
-                          "--slurm-jobname-prefix", prefix],
-               slurm_env, timeout=1200)
-    _snakemake(local, ["--cores", "2"], slurm_env, timeout=900)
+    # side by side: the SLURM run mostly waits for its status queries
+    slurm_run = _start_snakemake(on_slurm, ["--profile", str(PROFILE), "--slurm-logdir", str(logs),
+                                            "--slurm-jobname-prefix", prefix], slurm_env)
+    local_run = _start_snakemake(local, ["--cores", "2"], slurm_env)
+    _finish(local_run, timeout=1200)
+    _finish(slurm_run, timeout=1200)
 
     # every job but the aggregating target rule ran as a SLURM job and left its log
     job_logs = sorted(logs.rglob("*.log"))
@@ -120,10 +130,11 @@ def test_demo_on_slurm_matches_the_local_run(slurm_env, tmp_path):
     job_ids = [p.stem for p in job_logs]
     assert all(j.isdigit() for j in job_ids), job_ids
     # slurmctld keeps finished jobs for MinJobAge (600 s on the local cluster)
-    res = subprocess.run(["squeue", "-h", "--states=all", "-o", "%i %T", "-j", ",".join(job_ids)],
+    res = subprocess.run(["squeue", "-h", "--states=all", "-o", "%i %T %j", "-j", ",".join(job_ids)],
                          env=slurm_env, capture_output=True, text=True, timeout=30)
-    states = dict(line.split() for line in res.stdout.splitlines())
-    assert states == {j: "COMPLETED" for j in job_ids}, res.stdout + res.stderr
+    jobs = {i: (state, name) for i, state, name in (line.split() for line in res.stdout.splitlines())}
+    assert jobs.keys() == set(job_ids), res.stdout + res.stderr
+    assert all(state == "COMPLETED" and name.startswith(prefix) for state, name in jobs.values()), jobs
 
     stores = _stores(on_slurm)
     assert stores.keys() == _stores(local).keys()
