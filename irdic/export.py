@@ -242,6 +242,27 @@ def point_variables(points: xr.Dataset, fields: xr.Dataset | None = None) -> dic
     return out
 
 
+def signal_columns(fields: xr.Dataset | None, taken=()) -> dict[str, np.ndarray]:
+    """The testing machine signals of ``fields.zarr`` as ``{"name [unit]": values (time,)}``.
+
+    Names as in the ``signal`` coordinate (machine signals already carry
+    ``machine_``); a name that clashes with one of ``taken`` (other columns,
+    ``time``) gets the prefix ``signal_``. Empty without signals.
+    """
+    if fields is None or "signal_value" not in fields:
+        return {}
+    v = np.asarray(fields["signal_value"].transpose("time", "signal").values, dtype=float)
+    units = ([str(u) for u in fields["signal_unit"].values] if "signal_unit" in fields.coords
+             else [""] * v.shape[1])
+    taken = {str(t).lower() for t in taken} | {"time", "point", "point_id", "x", "y", "z"}
+    out = {}
+    for j, name in enumerate(str(n) for n in fields["signal"].values):
+        if name.lower() in taken:
+            name = f"signal_{name}"
+        out[f"{name} [{units[j]}]" if units[j] else name] = v[:, j]
+    return out
+
+
 def _vtk_arrays(name: str, a: np.ndarray, dims: tuple, labels: dict, dtype) -> dict[str, np.ndarray]:
     """VTK point-data arrays ((N,) or (N, k)) of one time slice ``a`` with dimensions ``("point", ...)``."""
     if a.dtype == bool:
@@ -301,6 +322,10 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
                    every: int = 1, name: str = "points", compression: str | None = "zlib", dtype: str = "float32") -> Path:
     """One ``.vtu`` per time with every point variable, and a ``.pvd`` collection.
 
+    The testing machine signals of ``fields.zarr`` (if any) are written as
+    field data of each time step (one value each, named as the CSV columns,
+    see :func:`signal_columns`).
+
     Points whose coordinates are missing at a time (DIC correlation failed
     there) are left out of that time's file; the ``point_id`` array keeps the
     DIC point IDs, so ParaView selections by ID work across times.
@@ -351,6 +376,7 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
     idx = np.arange(t_all.size) if times is None else select_times(t_all, times, name="times")
     idx = idx[::every]
     variables = point_variables(points, fields)
+    signals = signal_columns(_aligned_fields(points, fields), taken=variables)
     ids = points["point"].values.astype(np.int64)
     width = max(4, len(str(t_all.size - 1)))
     labels = {d: [str(v) for v in ds[d].values] for ds in (points, fields) if ds is not None
@@ -377,8 +403,10 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
                         data.update(_vtk_arrays(vname, loaded[vname][j][keep], da.dims[1:], labels, dtype))
                 for vname, (a, dims) in static.items():
                     data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
+                # one value per time step: VTK field data, shown by ParaView's spreadsheet and plot-over-time
                 mesh = meshio.Mesh(points=x[keep], cells=[("vertex", np.arange(int(keep.sum()))[:, None])],
-                                   point_data=data)
+                                   point_data=data,
+                                   field_data={k: np.array([v[i]], dtype=np.float64) for k, v in signals.items()})
                 fname = f"{name}_{int(i):0{width}d}.vtu"
                 meshio.vtu.write(os.fspath(tmp / fname), mesh, binary=True, compression=compression)
                 files.append(fname)
@@ -400,7 +428,8 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
 
     Columns: ``time [s]``, ``point``, ``x [mm]``, ``y [mm]``, ``z [mm]``,
     then every per-point variable (or ``variables``) with its unit in
-    brackets; vector and tensor components get the component label
+    brackets, then the testing machine signals of ``fields.zarr`` at each
+    time (:func:`signal_columns`: ``force [N]``, ``machine_force [kN]``); vector and tensor components get the component label
     (``temperature_gradient_x [K/mm]``, ``strain_12 [1]``,
     ``principal_direction_max_x [1]``). Decimal point, comma separator, UTF-8,
     missing values empty.
@@ -478,6 +507,8 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
         for j, combo in enumerate(combos):
             lab = joiner.join(labels[d][c] for d, c in enumerate(combo))
             cols[f"{v}_{lab}{suffix}"] = flat[:, j]
+    for name, v in signal_columns(_aligned_fields(points, fields), taken=[c.split(" [")[0] for c in cols]).items():
+        cols[name] = np.repeat(v[idx], n_p)
     frame = pd.DataFrame(cols)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
