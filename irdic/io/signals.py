@@ -48,6 +48,7 @@ STANDARD_NAMES = {
     "time": "time", "zeit": "time",
 }
 
+_VALUE_UNIT = re.compile(r"^([+-]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][+-]?\d+)?)\s*([^\d\s].*)$")
 _TITLE = re.compile(r"^signals?\s*:?$", re.IGNORECASE)
 _RULE = set("#-=*_ ")
 
@@ -117,7 +118,9 @@ def parse_signals(lines: Sequence[str], path: str | Path) -> list[Signal]:
     -----
     IrdicWarning
         A signal value is not a number (the signal is left out of this stage,
-        so it is NaN there after ingest).
+        so it is NaN there after ingest). A value followed by a unit
+        (``23,5 °C``) is read with that unit; a unit alone (``N``: the signal
+        is listed without a value) gives NaN with that unit, without warning.
 
     Raises
     ------
@@ -151,6 +154,13 @@ def parse_signals(lines: Sequence[str], path: str | Path) -> list[Signal]:
             written, kind, value = ":".join(parts[:-2]), parts[-2], parts[-1]
         name, unit = split_unit(written)
         v = _number(value)
+        if v is None:
+            # "23,5 °C": a value with its unit; "N" alone: the exporter lists the signal with its unit only
+            m = _VALUE_UNIT.match(value)
+            if m and _number(m.group(1)) is not None:
+                v, unit = _number(m.group(1)), unit or m.group(2).strip()
+            elif not any(ch.isdigit() for ch in value):
+                v, unit = float("nan"), unit or value
         if v is None:
             warnings.warn(f"{p}, line {k + 1}: signal {written!r} has the value {value!r}, expected a number; "
                           "it is left out of this stage (NaN)", IrdicWarning, stacklevel=3)
