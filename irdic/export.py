@@ -289,6 +289,34 @@ _BLOCK_BYTES = 256 * 2**20
 # --------------------------------------------------------------------------- ParaView
 
 
+def _add_field_data(path: Path, values: dict[str, float], compression: str | None) -> None:
+    """Insert one-value VTK field data arrays (the signals of the time step) into a .vtu meshio wrote.
+
+    meshio's .vtu writer leaves field data out. The arrays are encoded as
+    meshio encodes its own (binary, the file's compressor, UInt32 block
+    header), since ParaView's ASCII parser does not read ``nan``.
+    """
+    import base64
+    import lzma
+    import zlib
+    from xml.sax.saxutils import quoteattr
+
+    def encode(a: np.ndarray) -> str:
+        raw = a.astype("<f8").tobytes()
+        if compression is None:
+            return base64.b64encode(np.array([len(raw)], "<u4").tobytes() + raw).decode()
+        packed = (zlib.compress(raw) if compression == "zlib" else lzma.compress(raw))
+        head = np.array([1, max(len(raw), 1), len(raw), len(packed)], "<u4").tobytes()
+        return base64.b64encode(head).decode() + base64.b64encode(packed).decode()
+
+    block = "<FieldData>\n" + "".join(
+        f'<DataArray type="Float64" Name={quoteattr(k)} NumberOfTuples="1" format="binary">\n'
+        f"{encode(np.array([v]))}\n</DataArray>\n" for k, v in values.items()) + "</FieldData>\n"
+    text = path.read_text(encoding="utf-8")
+    at = text.index("<UnstructuredGrid>") + len("<UnstructuredGrid>\n")
+    path.write_text(text[:at] + block + text[at:], encoding="utf-8")
+
+
 def write_pvd(path, files: Sequence[str], times: Sequence[float]) -> Path:
     """A ParaView data collection listing ``files`` (relative to ``path``) at ``times`` (s).
 
@@ -405,10 +433,11 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
                     data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
                 # one value per time step: VTK field data, shown by ParaView's spreadsheet and plot-over-time
                 mesh = meshio.Mesh(points=x[keep], cells=[("vertex", np.arange(int(keep.sum()))[:, None])],
-                                   point_data=data,
-                                   field_data={k: np.array([v[i]], dtype=np.float64) for k, v in signals.items()})
+                                   point_data=data)
                 fname = f"{name}_{int(i):0{width}d}.vtu"
                 meshio.vtu.write(os.fspath(tmp / fname), mesh, binary=True, compression=compression)
+                if signals:
+                    _add_field_data(tmp / fname, {k: float(v[i]) for k, v in signals.items()}, compression)
                 files.append(fname)
         write_pvd(tmp / f"{name}.pvd", files, t_all[idx])
     log.info("paraview: %d times x %d point variables -> %s", len(files), len(variables), directory / f"{name}.pvd")
