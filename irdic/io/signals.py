@@ -48,7 +48,7 @@ STANDARD_NAMES = {
     "time": "time", "zeit": "time",
 }
 
-_VALUE_UNIT = re.compile(r"^([+-]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][+-]?\d+)?)\s*([^\d\s].*)$")
+_VALUE_UNIT = re.compile(r"^([+-]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-zµμ°%].*)$")
 _TITLE = re.compile(r"^signals?\s*:?$", re.IGNORECASE)
 _RULE = set("#-=*_ ")
 
