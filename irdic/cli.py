@@ -106,6 +106,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--calibration", required=True, help="calibration.zarr")
     s.add_argument("--out", required=True, help="fields.zarr to write")
     s.add_argument("--temperature-smoothing", default=None, help="none (default), gcv or a number >= 1")
+    s.add_argument("--dic", default=None, help="dic.zarr: its testing machine signals at the DIC times")
+    s.add_argument("--machine", default=None, help="machine.zarr: the machine record at the DIC times")
 
     s = add_parser("run", help="run all stages of a configuration without Snakemake")
     s.add_argument("--config", default="config/config.yaml")
@@ -180,7 +182,8 @@ def _run(args: argparse.Namespace) -> None:
 
         sm = args.temperature_smoothing
         sm = None if sm in (None, "none") else ("gcv" if sm == "gcv" else float(sm))
-        fields_stores(args.points, args.calibration, args.out, temperature_smoothing=sm)
+        fields_stores(args.points, args.calibration, args.out, dic=args.dic, machine=args.machine,
+                      temperature_smoothing=sm)
         print(describe_store(args.out))
     elif args.command == "run":
         from .config import load_config

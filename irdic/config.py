@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import os
+import re
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -201,6 +202,18 @@ def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) 
                 raise ConfigError(
                     f"experiments.{name}.dic.columns: format table needs the column names of {', '.join(missing)}"
                 )
+        machine = exp.get("machine")
+        if machine is not None:
+            bad = [k for k in machine["columns"] if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k)]
+            if bad:
+                raise ConfigError(f"experiments.{name}.machine.columns: signal name {bad[0]!r} must be an "
+                                  "identifier such as force or angle (it names the signal machine_<name>)")
+            sep = machine["sep"]
+            if sep is not None and (len(sep) != 1 or sep in "\r\n\"'#"):
+                raise ConfigError(f"experiments.{name}.machine.sep: expected one character such as ',', ';' "
+                                  f"or '\\t', got {sep!r}")
+            if sep == "," and machine["decimal"] == ",":
+                raise ConfigError(f"experiments.{name}.machine.decimal: ',' is impossible with sep ','")
     for name, setup in setups.items():
         seeds = setup.get("seeds", {})
         if seeds and len(seeds) < 6:

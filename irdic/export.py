@@ -242,6 +242,27 @@ def point_variables(points: xr.Dataset, fields: xr.Dataset | None = None) -> dic
     return out
 
 
+def signal_columns(fields: xr.Dataset | None, taken=()) -> dict[str, np.ndarray]:
+    """The testing machine signals of ``fields.zarr`` as ``{"name [unit]": values (time,)}``.
+
+    Names as in the ``signal`` coordinate (machine signals already carry
+    ``machine_``); a name that clashes with one of ``taken`` (other columns,
+    ``time``) gets the prefix ``signal_``. Empty without signals.
+    """
+    if fields is None or "signal_value" not in fields:
+        return {}
+    v = np.asarray(fields["signal_value"].transpose("time", "signal").values, dtype=float)
+    units = ([str(u) for u in fields["signal_unit"].values] if "signal_unit" in fields.coords
+             else [""] * v.shape[1])
+    taken = {str(t).lower() for t in taken} | {"time", "point", "point_id", "x", "y", "z"}
+    out = {}
+    for j, name in enumerate(str(n) for n in fields["signal"].values):
+        if name.lower() in taken:
+            name = f"signal_{name}"
+        out[f"{name} [{units[j]}]" if units[j] else name] = v[:, j]
+    return out
+
+
 def _vtk_arrays(name: str, a: np.ndarray, dims: tuple, labels: dict, dtype) -> dict[str, np.ndarray]:
     """VTK point-data arrays ((N,) or (N, k)) of one time slice ``a`` with dimensions ``("point", ...)``."""
     if a.dtype == bool:
@@ -266,6 +287,34 @@ _BLOCK_BYTES = 256 * 2**20
 
 
 # --------------------------------------------------------------------------- ParaView
+
+
+def _add_field_data(path: Path, values: dict[str, float], compression: str | None) -> None:
+    """Insert one-value VTK field data arrays (the signals of the time step) into a .vtu meshio wrote.
+
+    meshio's .vtu writer leaves field data out. The arrays are encoded as
+    meshio encodes its own (binary, the file's compressor, UInt32 block
+    header), since ParaView's ASCII parser does not read ``nan``.
+    """
+    import base64
+    import lzma
+    import zlib
+    from xml.sax.saxutils import quoteattr
+
+    def encode(a: np.ndarray) -> str:
+        raw = a.astype("<f8").tobytes()
+        if compression is None:
+            return base64.b64encode(np.array([len(raw)], "<u4").tobytes() + raw).decode()
+        packed = (zlib.compress(raw) if compression == "zlib" else lzma.compress(raw))
+        head = np.array([1, max(len(raw), 1), len(raw), len(packed)], "<u4").tobytes()
+        return base64.b64encode(head).decode() + base64.b64encode(packed).decode()
+
+    block = "<FieldData>\n" + "".join(
+        f'<DataArray type="Float64" Name={quoteattr(k)} NumberOfTuples="1" format="binary">\n'
+        f"{encode(np.array([v]))}\n</DataArray>\n" for k, v in values.items()) + "</FieldData>\n"
+    text = path.read_text(encoding="utf-8")
+    at = text.index("<UnstructuredGrid>") + len("<UnstructuredGrid>\n")
+    path.write_text(text[:at] + block + text[at:], encoding="utf-8")
 
 
 def write_pvd(path, files: Sequence[str], times: Sequence[float]) -> Path:
@@ -300,6 +349,10 @@ def write_pvd(path, files: Sequence[str], times: Sequence[float]) -> Path:
 def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None = None, times=None,
                    every: int = 1, name: str = "points", compression: str | None = "zlib", dtype: str = "float32") -> Path:
     """One ``.vtu`` per time with every point variable, and a ``.pvd`` collection.
+
+    The testing machine signals of ``fields.zarr`` (if any) are written as
+    field data of each time step (one value each, named as the CSV columns,
+    see :func:`signal_columns`).
 
     Points whose coordinates are missing at a time (DIC correlation failed
     there) are left out of that time's file; the ``point_id`` array keeps the
@@ -351,6 +404,7 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
     idx = np.arange(t_all.size) if times is None else select_times(t_all, times, name="times")
     idx = idx[::every]
     variables = point_variables(points, fields)
+    signals = signal_columns(_aligned_fields(points, fields), taken=variables)
     ids = points["point"].values.astype(np.int64)
     width = max(4, len(str(t_all.size - 1)))
     labels = {d: [str(v) for v in ds[d].values] for ds in (points, fields) if ds is not None
@@ -377,10 +431,13 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
                         data.update(_vtk_arrays(vname, loaded[vname][j][keep], da.dims[1:], labels, dtype))
                 for vname, (a, dims) in static.items():
                     data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
+                # one value per time step: VTK field data, shown by ParaView's spreadsheet and plot-over-time
                 mesh = meshio.Mesh(points=x[keep], cells=[("vertex", np.arange(int(keep.sum()))[:, None])],
                                    point_data=data)
                 fname = f"{name}_{int(i):0{width}d}.vtu"
                 meshio.vtu.write(os.fspath(tmp / fname), mesh, binary=True, compression=compression)
+                if signals:
+                    _add_field_data(tmp / fname, {k: float(v[i]) for k, v in signals.items()}, compression)
                 files.append(fname)
         write_pvd(tmp / f"{name}.pvd", files, t_all[idx])
     log.info("paraview: %d times x %d point variables -> %s", len(files), len(variables), directory / f"{name}.pvd")
@@ -400,7 +457,8 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
 
     Columns: ``time [s]``, ``point``, ``x [mm]``, ``y [mm]``, ``z [mm]``,
     then every per-point variable (or ``variables``) with its unit in
-    brackets; vector and tensor components get the component label
+    brackets, then the testing machine signals of ``fields.zarr`` at each
+    time (:func:`signal_columns`: ``force [N]``, ``machine_force [kN]``); vector and tensor components get the component label
     (``temperature_gradient_x [K/mm]``, ``strain_12 [1]``,
     ``principal_direction_max_x [1]``). Decimal point, comma separator, UTF-8,
     missing values empty.
@@ -478,6 +536,8 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
         for j, combo in enumerate(combos):
             lab = joiner.join(labels[d][c] for d, c in enumerate(combo))
             cols[f"{v}_{lab}{suffix}"] = flat[:, j]
+    for name, v in signal_columns(_aligned_fields(points, fields), taken=[c.split(" [")[0] for c in cols]).items():
+        cols[name] = np.repeat(v[idx], n_p)
     frame = pd.DataFrame(cols)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)

@@ -218,9 +218,22 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
     return grad
 
 
-def fields_stores(points_path, calibration_path, out, **params) -> Path:
-    """Run :func:`fields` on stores and write ``fields.zarr`` atomically."""
+def fields_stores(points_path, calibration_path, out, *, dic=None, machine=None, **params) -> Path:
+    """Run :func:`fields` on stores and write ``fields.zarr`` atomically.
+
+    ``dic`` (``dic.zarr``) and ``machine`` (``machine.zarr``), when given,
+    add the testing machine signals at the DIC times:
+    ``signal_value(time, signal)`` with the signal coordinates (see
+    :func:`irdic.signals.signals_at`; machine signals prefixed ``machine_``).
+    """
+    from .signals import signals_at
+
     ds = fields(open_store(points_path), open_store(calibration_path), **params)
-    write_dataset(ds, out, stage="fields", params=params,
-                  inputs=[os.fspath(points_path), os.fspath(calibration_path)])
+    sig = signals_at(ds["time"].values, dic=open_store(dic) if dic is not None else None,
+                     machine=open_store(machine) if machine is not None else None)
+    if sig is not None:
+        ds = ds.merge(sig.drop_vars("time"))
+    inputs = [os.fspath(points_path), os.fspath(calibration_path)]
+    inputs += [os.fspath(q) for q in (dic, machine) if q is not None]
+    write_dataset(ds, out, stage="fields", params=params, inputs=inputs)
     return Path(out)

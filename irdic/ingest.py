@@ -502,7 +502,11 @@ def ingest_dic(
     pathlib.Path
         ``out``; the store holds ``x(time, point, component)`` (mm, NaN where a
         point is missing in a stage), ``x_ref(point, component)`` when the
-        exports carry reference coordinates, ``time`` (s), ``stage_file``.
+        exports carry reference coordinates, ``time`` (s), ``stage_file``;
+        when the exports carry testing machine signals (nodemap ``# SIGNALS:``)
+        also ``signal_value(time, signal)`` (float64, NaN in stages without that
+        signal) with coordinates ``signal`` (names as written),
+        ``signal_kind``, ``signal_unit``, ``signal_standard_name``.
     """
     files = _as_files(source, "DIC exports")
     log.info("ingest DIC: %d stages", len(files))
@@ -538,6 +542,7 @@ def ingest_dic(
     t = frame_times(file_times, stage_numbers, time_source=time_source, frame_rate=frame_rate,
                     time_origin=time_origin, time_offset=time_offset, labels=[f.name for f in files],
                     what="DIC stage")
+    signals = _gather_signals(stages, files)
     missing = np.isnan(x[..., 0])
     never = missing.all(axis=0)
     if never.all():
@@ -553,11 +558,16 @@ def ingest_dic(
         data_vars["x_ref"] = (("point", "component"), x_ref,
                               {"units": "mm", "long_name": "reference (undeformed) coordinates from the exports"})
     attrs = {k: v for k, v in stages[0].attrs.items() if isinstance(v, (str, int, float, bool)) and k != "source"}
+    coords_extra = {}
+    if signals is not None:
+        values, coords_extra = signals
+        data_vars["signal_value"] = (("time", "signal"), values,
+                               {"long_name": "testing machine signal recorded with the DIC stage"})
     ds = xr.Dataset(
         data_vars,
         coords={"time": ("time", t, {"units": "s", "long_name": "time"}),
                 "point": ("point", ids, {"long_name": "point ID of the DIC software"}),
-                "component": ("component", np.array(["x", "y", "z"]))},
+                "component": ("component", np.array(["x", "y", "z"])), **coords_extra},
         attrs=attrs,
     )
     params = dict(format=format, columns=columns or {}, time_source=time_source, frame_rate=frame_rate,
@@ -566,3 +576,45 @@ def ingest_dic(
                   encoding={"x": {"chunks": (1, n_p, 3)}})
     _log_gaps("DIC", t, stage_numbers)
     return Path(out)
+
+
+def _gather_signals(stages: Sequence[xr.Dataset], files: Sequence[Path]):
+    """Per-stage signals -> (values (n_t, n_s), coordinates), or None when no stage has any.
+
+    Signals are identified by name; a stage without a signal gets NaN there.
+    A name whose unit or kind differs between stages is a DataError (the
+    values would not be comparable).
+    """
+    from .io.signals import signal_coords
+
+    order: dict[str, tuple[str, str, str, str]] = {}  # name -> (kind, unit, standard name, first file)
+    for s, f in zip(stages, files):
+        if "signal" not in s.coords:
+            continue
+        for name, kind, unit, std in zip(*(s[c].values for c in ("signal", "signal_kind", "signal_unit",
+                                                                  "signal_standard_name"))):
+            name, kind, unit = str(name), str(kind), str(unit)
+            if name not in order:
+                order[name] = (kind, unit, str(std), f.name)
+                continue
+            k0, u0, _, f0 = order[name]
+            if (kind, unit) != (k0, u0):
+                raise DataError(
+                    f"{f}: signal {name!r} is a {kind or 'signal'} in {unit or 'no unit'}, but in {f0} a "
+                    f"{k0 or 'signal'} in {u0 or 'no unit'}; a signal must keep its kind and unit in every stage"
+                )
+    if not order:
+        return None
+    names = list(order)
+    col = {n: j for j, n in enumerate(names)}
+    values = np.full((len(stages), len(names)), np.nan)
+    for i, s in enumerate(stages):
+        if "signal" in s.coords:
+            values[i, [col[str(n)] for n in s["signal"].values]] = s["signal_value"].values
+    missing = np.isnan(values).sum(axis=0)
+    for n, m in zip(names, missing):
+        if m:
+            log.info("DIC signal %r: missing (NaN) in %d of %d stages", n, int(m), len(stages))
+    log.info("DIC: %d signals (%s)", len(names), ", ".join(names))
+    return values, signal_coords(names, [order[n][0] for n in names], [order[n][1] for n in names],
+                                 [order[n][2] for n in names])

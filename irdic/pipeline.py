@@ -43,6 +43,8 @@ def stage_paths(config: Mapping) -> dict:
                             "figure": r / "setups" / s / "calibration.png"}
     for e in config["experiments"]:
         out["experiments"][e] = {k: r / e / f"{k}.zarr" for k in ("dic", "ir", "points", "fields")}
+        if config["experiments"][e].get("machine"):
+            out["experiments"][e]["machine"] = r / e / "machine.zarr"
     root = r.resolve()
     for section, entries in out.items():
         for name, paths in entries.items():
@@ -174,12 +176,22 @@ def _write_text_atomic(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def ingest_experiment(exp: Mapping, dic_out: str | os.PathLike, ir_out: str | os.PathLike) -> None:
-    """Ingest one experiment's DIC and IR exports (``exp`` as in the configuration)."""
+def ingest_experiment(exp: Mapping, dic_out: str | os.PathLike, ir_out: str | os.PathLike,
+                      machine_out: str | os.PathLike | None = None) -> None:
+    """Ingest one experiment's DIC and IR exports (``exp`` as in the configuration).
+
+    The testing machine record (``exp["machine"]``) goes to ``machine_out``
+    when both are given.
+    """
     dic = dict(exp["dic"])
     ir = dict(exp["ir"])
     ingest_dic(dic.pop("path"), dic_out, **dic)
     ingest_ir(ir.pop("path"), ir_out, **ir)
+    if exp.get("machine") and machine_out is not None:
+        from .signals import ingest_machine
+
+        machine = dict(exp["machine"])
+        ingest_machine(machine.pop("path"), machine_out, **machine)
 
 
 def calibrate_setup(markers: str | os.PathLike, target: Mapping | str | os.PathLike,
@@ -247,7 +259,7 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
     if "ingest" in stages:
         for name, e in config["experiments"].items():
             p = paths["experiments"][name]
-            ingest_experiment(e, p["dic"], p["ir"])
+            ingest_experiment(e, p["dic"], p["ir"], p.get("machine"))
     if "couple" in stages:
         from .couple import couple_stores
 
@@ -261,7 +273,8 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
         for name, e in config["experiments"].items():
             p = paths["experiments"][name]
             cal = paths["setups"][e["setup"]]["calibration"]
-            fields_stores(p["points"], cal, p["fields"], **config.get("fields", {}))
+            fields_stores(p["points"], cal, p["fields"], dic=p["dic"], machine=p.get("machine"),
+                          **config.get("fields", {}))
     if "figures" in stages or "export" in stages:
         for name, e in config["experiments"].items():
             p = paths["experiments"][name]

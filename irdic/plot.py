@@ -7,7 +7,8 @@ Calibration: :func:`plot_calibration`, :func:`plot_detections`.
 
 Results of one experiment (``points.zarr``, optionally ``fields.zarr``):
 :func:`plot_temperature`, :func:`plot_gradient`, :func:`plot_rate`,
-:func:`plot_history`, :func:`plot_strain`, and :func:`plot_experiment` for
+:func:`plot_history`, :func:`plot_strain`, :func:`plot_load` (temperature
+against the testing machine's signals), and :func:`plot_experiment` for
 all of them. The surface is drawn as the IR camera sees it, orthographically
 and in mm: the view axes are the directions in which the image coordinates
 u (right) and -v (up) grow, fitted to the projected points
@@ -42,6 +43,7 @@ __all__ = [
     "plot_rate",
     "plot_history",
     "plot_strain",
+    "plot_load",
     "plot_experiment",
     "FIGURES",
 ]
@@ -209,7 +211,7 @@ def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25
 # =========================================================================== results of an experiment
 
 #: figures of :func:`plot_experiment`, by name (the strain figure needs fields.zarr)
-FIGURES = ("temperature", "gradient", "rate", "history", "strain")
+FIGURES = ("temperature", "gradient", "rate", "history", "strain", "load")
 
 _PANEL_IN = 4.2  # width of one map panel, inches
 _DPI = 120
@@ -814,6 +816,133 @@ def _history_summary(ax, points, ids, sel, theta, status, colors):
                 transform=ax.transAxes, family="monospace")
 
 
+#: quantities the load figure puts on its horizontal axes, in this order
+_LOAD_AXES = ("force", "displacement", "torque", "angle")
+
+
+def _load_signals(fields) -> list[tuple[int, str]]:
+    """(signal index, axis label) of the signals to plot against.
+
+    One signal per standard quantity (force, displacement, torque, angle), the
+    one with the most values where several sources have it (a machine record
+    has no gaps where a DIC stage lacks a signal); without any of those the
+    first two signals that are neither a time nor a cycle count.
+    """
+    if fields is None or "signal_value" not in fields:
+        return []
+    names = [str(n) for n in fields["signal"].values]
+    n = len(names)
+
+    def coord(c):
+        return [str(v) for v in fields[c].values] if c in fields.coords else [""] * n
+
+    std, unit = coord("signal_standard_name"), coord("signal_unit")
+    v = np.asarray(fields["signal_value"].transpose("time", "signal").values, dtype=float)
+    count = np.isfinite(v).sum(axis=0)
+    picks = []
+    for q in _LOAD_AXES:
+        cands = [j for j in range(n) if std[j] == q and count[j] > 0]
+        if cands:
+            picks.append(max(cands, key=lambda j: (count[j], -j)))
+    if not picks:
+        picks = [j for j in range(n) if std[j] not in ("time", "cycles") and count[j] > 0][:2]
+    return [(j, f"{names[j]} ({unit[j]})" if unit[j] else names[j]) for j in picks]
+
+
+def plot_load(points, path, *, fields=None, point_ids=None, experiment=None):
+    """Temperature of the specimen region against the testing machine's signals.
+
+    One column per load quantity found in ``fields.zarr``'s signals (force,
+    displacement, torque, angle; see :func:`_load_signals`). Top: mean
+    temperature of the points that have one (the specimen region seen by the
+    IR camera), its minimum and maximum, and the chosen point's temperature.
+    Bottom: mean material temperature rate and the chosen point's rate. Each
+    marker is one DIC time. Without signals the figure says so, so that the
+    workflow's set of outputs does not depend on the data.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        ``points.zarr``.
+    path : path-like
+        PNG to write.
+    fields : xarray.Dataset, optional
+        ``fields.zarr`` with ``signal_value(time, signal)``.
+    point_ids : sequence of int, optional
+        The first is the chosen point; default the visible point nearest the
+        centre of the cloud.
+    experiment : str, optional
+        Name shown in the title.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from .export import _aligned_fields
+
+    name = _experiment_name(points, experiment)
+    fields = _aligned_fields(points, fields)
+    axes = _load_signals(fields)
+    if not axes:
+        fig = Figure(figsize=(7.0, 3.0), dpi=_DPI, layout="constrained")
+        FigureCanvasAgg(fig)
+        ax = fig.add_subplot(1, 1, 1)
+        ax.axis("off")
+        why = ("no fields.zarr" if fields is None else
+               "the DIC exports carry no testing machine signals (nodemap SIGNALS) and no machine record "
+               "is configured (experiments.<name>.machine)")
+        ax.text(0.5, 0.5, f"{name}: no load figure\n{why}", ha="center", va="center", wrap=True, fontsize=10)
+        return _save(fig, path)
+    ids = select_points(points, list(point_ids)[:1] if point_ids is not None and len(point_ids) else None,
+                        name="point_ids")
+    pid = int(ids[0])
+    theta = np.asarray(points["temperature"].transpose("time", "point").values, dtype=float)
+    seen = np.isfinite(theta)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # times without any temperature stay NaN
+        t_mean, t_min, t_max = np.nanmean(theta, axis=1), np.nanmin(theta, axis=1), np.nanmax(theta, axis=1)
+        rate = (np.asarray(fields["temperature_rate"].transpose("time", "point").values, dtype=float)
+                if "temperature_rate" in fields else None)
+        r_mean = np.nanmean(np.where(seen, rate, np.nan), axis=1) if rate is not None else None
+    k = int(np.flatnonzero(points["point"].values == pid)[0])
+    sig = np.asarray(fields["signal_value"].transpose("time", "signal").values, dtype=float)
+    fig = Figure(figsize=(3.6 * len(axes) + 1.0, 6.4), dpi=_DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    gs = fig.add_gridspec(2, len(axes))
+    unit_t = _unit_label(points["temperature"], "degC")
+    for c, (j, label) in enumerate(axes):
+        x = sig[:, j]
+        ax_t = fig.add_subplot(gs[0, c])
+        ax_r = fig.add_subplot(gs[1, c], sharex=ax_t)
+        ax_t.plot(x, t_mean, "-o", color="C3", ms=3, lw=1.2, label="mean")
+        ax_t.plot(x, t_min, "--", color="C0", lw=0.9, label="min")
+        ax_t.plot(x, t_max, "--", color="C1", lw=0.9, label="max")
+        ax_t.plot(x, theta[:, k], ":s", color="k", ms=2.5, lw=0.9, label=f"point {pid}")
+        ax_t.grid(True, alpha=0.3)
+        ax_t.tick_params(labelbottom=False)
+        if r_mean is not None:
+            ax_r.plot(x, r_mean, "-o", color="C3", ms=3, lw=1.2, label="mean rate")
+            ax_r.plot(x, rate[:, k], ":s", color="k", ms=2.5, lw=0.9, label=f"point {pid}")
+        ax_r.axhline(0.0, color="0.5", lw=0.6)
+        ax_r.grid(True, alpha=0.3)
+        ax_r.set_xlabel(label)
+        if c == 0:
+            ax_t.set_ylabel(f"temperature ({unit_t})")
+            ax_r.set_ylabel("material temperature rate (K/s)")
+            ax_t.legend(fontsize=7, loc="best")
+            if r_mean is not None:
+                ax_r.legend(fontsize=7, loc="best")
+        if not np.isfinite(x).all():
+            ax_t.set_title(f"{int((~np.isfinite(x)).sum())} time(s) without {label}", fontsize=8, color="0.35")
+    _note(fig, "mean, min, max over the points with a temperature (the specimen region seen by the IR camera); "
+               "one marker per DIC time")
+    fig.suptitle(f"{name}: temperature against load", fontsize=11)
+    return _save(fig, path)
+
+
 def plot_experiment(points, outdir, *, fields=None, times=None, point_ids=None, experiment=None,
                     names=None) -> dict[str, Path]:
     """All figures of one experiment.
@@ -826,12 +955,12 @@ def plot_experiment(points, outdir, *, fields=None, times=None, point_ids=None, 
         Folder of the PNGs (``<outdir>/<name>.png``), or the path of each
         figure by name (keys of :data:`FIGURES`; then ``names`` are its keys).
     fields : xarray.Dataset, optional
-        ``fields.zarr``; the strain figure needs it.
+        ``fields.zarr``; the strain and load figures need it.
     times, point_ids, experiment
         See the single figure functions.
     names : sequence of str, optional
         Figures to draw (keys of :data:`FIGURES`); default all that the data
-        allow (no strain figure without ``fields``).
+        allow (no strain or load figure without ``fields``).
 
     Returns
     -------
@@ -842,7 +971,7 @@ def plot_experiment(points, outdir, *, fields=None, times=None, point_ids=None, 
         names = list(paths)
     else:
         if names is None:
-            names = [n for n in FIGURES if n != "strain" or fields is not None]
+            names = [n for n in FIGURES if n not in ("strain", "load") or fields is not None]
         paths = {n: Path(outdir) / f"{n}.png" for n in names}
     unknown = [n for n in names if n not in FIGURES]
     if unknown:
@@ -858,6 +987,8 @@ def plot_experiment(points, outdir, *, fields=None, times=None, point_ids=None, 
             done[n] = plot_rate(points, p, fields=fields, times=times, experiment=experiment)
         elif n == "history":
             done[n] = plot_history(points, p, fields=fields, point_ids=point_ids, experiment=experiment)
+        elif n == "load":
+            done[n] = plot_load(points, p, fields=fields, point_ids=point_ids, experiment=experiment)
         else:
             done[n] = plot_strain(fields, p, points=points, times=times, experiment=experiment)
         log.info("figure %s -> %s", n, p)

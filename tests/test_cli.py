@@ -8,6 +8,7 @@ from irdic.cli import main
 from irdic.config import validate_config
 from irdic.pipeline import run
 from irdic.store import open_store
+from irdic.synthetic.demo import MACHINE_CLOCK_OFFSET, MACHINE_COLUMNS
 
 pytestmark = pytest.mark.slow
 
@@ -51,15 +52,55 @@ def test_pipeline_runs_without_snakemake(demo, monkeypatch):
         "demo": {"enabled": False},
         "setups": {"lab": {"markers": {"path": "demo/setup/markers.txt"},
                            "target_image": {"path": "demo/setup/target.txt"}}},
-        "experiments": {"tube": {"setup": "lab", "dic": {"path": "demo/tube/dic"}, "ir": {"path": "demo/tube/ir"}}},
+        "experiments": {"tube": {"setup": "lab", "dic": {"path": "demo/tube/dic"}, "ir": {"path": "demo/tube/ir"},
+                                 "machine": {"path": "demo/tube/machine.csv", "columns": dict(MACHINE_COLUMNS),
+                                             "time_offset": -MACHINE_CLOCK_OFFSET}}},
     }
     paths = run(validate_config(cfg))
     f = open_store(paths["experiments"]["tube"]["fields"])
     assert np.isfinite(f.temperature_gradient.values).any()
-    for name in ("temperature", "gradient", "rate", "history", "strain"):
+    for name in ("temperature", "gradient", "rate", "history", "strain", "load"):
         assert (demo / "results/tube/figures" / f"{name}.png").exists()
     assert (demo / "results/tube/paraview/points.pvd").exists()
     assert (demo / "results/tube/points.csv").exists()
+    # the load: analytic force and torque of the tube (F = E A u / L, T = G J phi / L) at the DIC times
+    truth = open_store(demo / "demo/tube/truth.zarr")
+    np.testing.assert_allclose(f.time.values, truth.time.values)
+    sig = {str(n): f.signal_value.sel(signal=n).values for n in f.signal.values}
+    F, T = truth.force.values, truth.torque.values
+    assert F.max() > 1e6 and T.max() > 1e4  # N, N m: the tube is loaded
+    np.testing.assert_allclose(sig["force"], F, rtol=1e-12)
+    np.testing.assert_allclose(sig["Kraft"], F / 1000.0, rtol=1e-12)
+    np.testing.assert_allclose(sig["Drehmoment"], T, rtol=1e-12)
+    assert np.isnan(sig["torque"][2]) and np.isfinite(np.delete(sig["torque"], 2)).all()  # stage 2 lacks it
+    # the machine record (50 Hz, 9 decimals) on the DIC clock: the offset applied with the right sign
+    np.testing.assert_allclose(sig["machine_force"], F / 1000.0, rtol=0, atol=1e-6 * F.max() / 1000.0)
+    np.testing.assert_allclose(sig["machine_torque"], T, rtol=0, atol=1e-6 * T.max())
+    np.testing.assert_allclose(sig["machine_angle"], truth.angle.values, rtol=0, atol=1e-6)
+    assert dict(zip(f.signal.values, f.signal_unit.values))["machine_force"] == "kN"
+    import pandas as pd
+
+    table = pd.read_csv(demo / "results/tube/points.csv")
+    for col in ("force [N]", "Kraft [kN]", "machine_force [kN]", "machine_torque [N*m]"):
+        assert col in table.columns
+    np.testing.assert_allclose(table.groupby("time [s]")["force [N]"].first().to_numpy(), F, rtol=1e-12)
+
+
+def test_machine_clock_offset_sign(demo):
+    """time_offset is added to the machine times: the wrong sign puts every DIC time outside the record."""
+    from irdic.errors import IrdicWarning
+    from irdic.signals import read_machine, signals_at
+
+    truth = open_store(demo / "demo/tube/truth.zarr")
+    t = truth.time.values
+    right = read_machine(demo / "demo/tube/machine.csv", columns=MACHINE_COLUMNS, time_offset=-MACHINE_CLOCK_OFFSET)
+    s = signals_at(t, machine=right)
+    np.testing.assert_allclose(s.signal_value.sel(signal="machine_force").values, truth.force.values / 1000.0,
+                               atol=1e-6 * truth.force.values.max() / 1000.0)
+    wrong = read_machine(demo / "demo/tube/machine.csv", columns=MACHINE_COLUMNS, time_offset=MACHINE_CLOCK_OFFSET)
+    with pytest.warns(IrdicWarning, match="check machine.time_offset"):
+        s = signals_at(t, machine=wrong)
+    assert np.isnan(s.signal_value.values).all()
 
 
 def test_ingest_refuses_to_overwrite_a_users_folder_or_file(demo, tmp_path, capsys):

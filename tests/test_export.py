@@ -315,3 +315,45 @@ def test_csv_bad_arguments(stores, tmp_path):
     with pytest.raises(ConfigError, match="times: 9 s outside"):
         write_csv(points, tmp_path / "p.csv", times=[9.0])
     assert not (tmp_path / "p.csv").exists()
+
+
+def _fields_with_signals(fields):
+    from irdic.io.signals import signal_coords
+
+    t = fields["time"].values
+    v = np.column_stack([1000.0 * t, 2.0 * t, t + 100.0])
+    v[1, 0] = np.nan  # a DIC stage without the force
+    return fields.assign({"signal_value": (("time", "signal"), v)}).assign_coords(
+        signal_coords(["force", "machine_force", "time"], ["value_element", "machine", "value_element"],
+                      ["N", "kN", ""]))
+
+
+def test_csv_carries_the_signals_at_each_time(stores, tmp_path):
+    import pandas as pd
+
+    points, fields = stores
+    f = _fields_with_signals(fields)
+    p = write_csv(points, tmp_path / "s.csv", fields=f, point_ids=[1000, 1025])
+    df = pd.read_csv(p)
+    t = df["time [s]"].to_numpy()
+    # the DIC signal named "time" must not pass for the time column
+    assert list(df.columns[-3:]) == ["force [N]", "machine_force [kN]", "signal_time"]
+    np.testing.assert_allclose(df["machine_force [kN]"], 2.0 * t)
+    np.testing.assert_allclose(df["signal_time"], t + 100.0)
+    gap = t == fields["time"].values[1]
+    assert gap.sum() == 2 and df["force [N]"][gap].isna().all()
+    np.testing.assert_allclose(df["force [N]"][~gap], 1000.0 * t[~gap])
+
+
+def test_paraview_field_data_carries_the_signals(stores, tmp_path):
+    import meshio
+
+    points, fields = stores
+    pvd = write_paraview(points, tmp_path / "pv", fields=_fields_with_signals(fields), dtype="float64")
+    for k, t in enumerate(fields["time"].values):
+        m = meshio.read(pvd.parent / f"points_{k:04d}.vtu")
+        assert float(m.field_data["machine_force [kN]"][0]) == 2.0 * t
+        if k == 1:
+            assert np.isnan(m.field_data["force [N]"][0])
+        else:
+            assert float(m.field_data["force [N]"][0]) == 1000.0 * t

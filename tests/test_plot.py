@@ -7,7 +7,7 @@ import pytest
 from matplotlib.image import imread
 
 from irdic.errors import ConfigError, DataError, IrdicWarning
-from irdic.plot import (FIGURES, plot_experiment, plot_gradient, plot_history, plot_rate, plot_strain,
+from irdic.plot import (FIGURES, plot_experiment, plot_gradient, plot_history, plot_load, plot_rate, plot_strain,
                         plot_temperature, view_basis)
 
 from .test_export import contract_stores
@@ -93,6 +93,9 @@ def test_experiment_figures_with_and_without_fields(stores, tmp_path):
     done = plot_experiment(points, tmp_path / "a", fields=fields, experiment="fab")
     assert list(done) == list(FIGURES)
     for name, p in done.items():
+        if name == "load":  # these stores have no signals: a note instead of empty axes
+            _check_png(p, min_kb=3, min_ink=0.005)
+            continue
         _check_png(p, min_ink=0.08 if name == "history" else 0.15)
     done = plot_experiment(points, tmp_path / "b")
     assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["gradient.png", "history.png", "rate.png",
@@ -132,3 +135,38 @@ def test_no_matplotlib_layout_warnings(stores, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         plot_experiment(points, tmp_path, fields=fields, times=[0.0, 1.0, 2.0])
+
+
+def _with_signals(fields, names=("Kraft", "Weg", "machine_torque"), units=("kN", "mm", "N*m"),
+                  kinds=("analog_input", "value_element", "machine"), standard=("force", "displacement", "torque")):
+    from irdic.io.signals import signal_coords
+
+    t = fields["time"].values
+    v = np.column_stack([10.0 * t, 0.1 * t, 3.0 * t])
+    v[2, 0] = np.nan  # a stage without the force
+    return fields.assign({"signal_value": (("time", "signal"), v)}).assign_coords(
+        signal_coords(list(names), list(kinds), list(units), list(standard)))
+
+
+def test_load_figure_against_force_displacement_and_torque(stores, tmp_path):
+    from irdic.plot import _load_signals
+
+    points, fields = stores
+    f = _with_signals(fields)
+    assert [lab for _, lab in _load_signals(f)] == ["Kraft (kN)", "Weg (mm)", "machine_torque (N*m)"]
+    img = _check_png(plot_load(points, tmp_path / "load.png", fields=f, point_ids=[1000], experiment="fab"),
+                     min_ink=0.08)
+    assert img.shape[1] > 1000  # three columns of panels
+    # the placeholder when there is nothing to plot against is a small picture, not an error
+    small = _check_png(plot_load(points, tmp_path / "none.png", fields=fields), min_kb=3, min_ink=0.005)
+    assert small.shape[1] < img.shape[1]
+
+
+def test_load_figure_prefers_the_complete_signal(stores):
+    from irdic.plot import _load_signals
+
+    _, fields = stores
+    f = _with_signals(fields, names=("force", "machine_force", "cycles"), units=("N", "N", ""),
+                      kinds=("value_element", "machine", "value_element"), standard=("force", "force", "cycles"))
+    # the DIC force misses a stage, the machine's does not; cycles are no load axis
+    assert [lab for _, lab in _load_signals(f)] == ["machine_force (N)"]

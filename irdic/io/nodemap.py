@@ -39,6 +39,7 @@ import numpy as np
 import xarray as xr
 
 from ..errors import ConfigError, FormatError, IrdicWarning
+from .signals import format_signals, parse_signals, stage_signals
 from .table import (Header, check_unique, data_lines, detect_decimal, extra_columns, length_scale,
                     parse_date, parse_duration, read_lines, read_rows, split_fields, stage_dataset)
 
@@ -83,7 +84,9 @@ def _metadata(lines: list[str]) -> tuple[dict[str, tuple[str, int]], dict[str, d
             section = key.rstrip(":").strip()
             sections.setdefault(section, {})
             continue
-        flat.setdefault(key, (value, k + 1))
+        if section != "signals":
+            # signal names are free text (a signal called "time" is no stage time)
+            flat.setdefault(key, (value, k + 1))
         sections.setdefault(section, {}).setdefault(key, (value, k + 1))
     return flat, sections
 
@@ -176,7 +179,10 @@ def read_nodemap(path: str | os.PathLike) -> xr.Dataset:
         and other columns as ``(point)`` variables with their units. attrs:
         ``format="nodemap"``, ``source``, ``stage_index``,
         ``reference_stage_index``, ``stage_name``, ``stage_date`` (ISO) when
-        present, ``rbm_compensation``.
+        present, ``rbm_compensation``. When the header has a ``# SIGNALS:``
+        section: ``signal_value(signal)`` values with coordinates ``signal`` (names
+        as written), ``signal_kind``, ``signal_unit``,
+        ``signal_standard_name`` (see :mod:`irdic.io.signals`).
 
     Warns
     -----
@@ -247,7 +253,11 @@ def read_nodemap(path: str | os.PathLike) -> xr.Dataset:
     attrs["rbm_compensation"] = rbm
     if rbm:
         warnings.warn(f"{p}: {RBM_WARNING}", IrdicWarning, stacklevel=2)
-    return stage_dataset(ids, x, x_ref, path=p, fmt="nodemap", time=time, attrs=attrs, extras=extras)
+    ds = stage_dataset(ids, x, x_ref, path=p, fmt="nodemap", time=time, attrs=attrs, extras=extras)
+    signals = parse_signals(lines[:k], p)
+    if signals:
+        ds = ds.merge(stage_signals(signals))
+    return ds
 
 
 # --------------------------------------------------------------------------- writer
@@ -288,7 +298,8 @@ def _strain_table(strains: Any, n: int) -> list[tuple[str, str, np.ndarray]]:
 def write_nodemap(path: str | os.PathLike, ids: Any, x_undef: Any, displacement: Any, *, stage_index: int,
                   relative_time: float | None = None, reference_stage_index: int = 0,
                   stage_name: str | None = None, stage_date: datetime | str | None = None,
-                  rbm_compensation: bool = False, strains: Any = None, decimals: int = 4) -> Path:
+                  rbm_compensation: bool = False, strains: Any = None, decimals: int = 4,
+                  signals: Any = None) -> Path:
     """Write one stage in the ZEISS INSPECT / ARAMIS nodemap text layout.
 
     Parameters
@@ -316,6 +327,9 @@ def write_nodemap(path: str | os.PathLike, ids: Any, x_undef: Any, displacement:
     decimals : int
         Decimals of coordinates and displacements (mm); the round trip
         through :func:`read_nodemap` is exact to ``0.5 * 10**-decimals``.
+    signals : sequence of (name, kind, value), optional
+        The ``# SIGNALS:`` section, e.g. ``("force [N]", "value_element",
+        1500.0)``; values are written with ``repr`` (exact round trip).
 
     Returns
     -------
@@ -359,6 +373,16 @@ def write_nodemap(path: str | os.PathLike, ids: Any, x_undef: Any, displacement:
         if text is not None and ("\n" in str(text) or "\r" in str(text)):
             raise ConfigError(f"{name} must be one line of text")
     strain_cols = _strain_table(strains, n)
+    signal_items = []
+    for item in signals or ():
+        try:
+            name, kind, value = item
+            value = float(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"signals must be (name, kind, value) triples with a numeric value, got {item!r}") from None
+        if not str(name).strip() or any(c in f"{name}{kind}" for c in ":\n\r"):
+            raise ConfigError(f"signal name and kind must be one line of text without ':', got {name!r}, {kind!r}")
+        signal_items.append((str(name), str(kind), value))
 
     def block(title: str, items: list[tuple[str, Any]]) -> list[str]:
         return [f"# {title}:"] + [f"# {k.ljust(30)}: {v}" for k, v in items] + ["#" * 100]
@@ -375,6 +399,8 @@ def write_nodemap(path: str | os.PathLike, ids: Any, x_undef: Any, displacement:
     ])
     head += block("rigid body motion compensation", [("alignment_is_active", bool(rbm_compensation))]
                   + [(f"alignment_{kind}_{c}", 0.0) for kind in ("rotation", "translation") for c in "xyz"])
+    if signal_items:
+        head += format_signals(signal_items) + ["#" * 100]
     names = ["ID", "x_undef [mm]", "y_undef [mm]", "z_undef [mm]", "u [mm]", "v [mm]", "w [mm]"]
     names += [f"{key} [{unit}]" for key, unit, _ in strain_cols]
     head.append("#" + "; ".join([f"{names[0]:>10}"] + [f"{c:>20}" for c in names[1:]]))

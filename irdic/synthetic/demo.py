@@ -9,6 +9,19 @@
     outdir/<exp>/dic/<exp>_0_<k>.txt  ZEISS/ARAMIS nodemap of DIC stage k (relative time in s)
     outdir/<exp>/ir/<exp>_<n:05d>.txt IRBIS text crop export of IR frame n (n = position in the recording)
     outdir/<exp>/truth.zarr           every truth quantity on (time = DIC times, point)
+    outdir/tube/machine.csv           the testing machine's record at 50 Hz on its own clock
+
+Testing machine signals of the tube (linear elastic proxies of its
+tension-torsion loading, see :class:`~irdic.synthetic.specimens.Tube`:
+``F = E A u / L``, ``T = G J phi / L``): every nodemap has a ``SIGNALS``
+section with ``force [N]``, ``displacement [mm]``, ``torque [N*m]``,
+``angle [deg]`` (value elements) and ``Kraft [kN]``, ``Drehmoment [N*m]``
+(analog inputs); stage 2 lacks ``torque`` (a missing signal).
+``machine.csv`` is a German-locale export (``;``, decimal comma) with
+``Zeit [s];Kraft [kN];Weg [mm];Drehmoment [N*m];Winkel [deg]`` every
+0.02 s from machine time 0, which is ``MACHINE_CLOCK_OFFSET`` = 12.34 s
+before the DIC trigger, to 1 s after the last stage: the configuration needs
+``machine: {time_offset: -12.34}``.
 
 IR exports: 3 decimals, ``StartPos`` = the crop window, ``ms`` = 1000 t +
 1234.5 (ms since the recording started; t = 0 is the trigger shared with the
@@ -39,12 +52,20 @@ from .camera import lab_camera
 from .experiments import EXPERIMENTS, SCALES, Experiment, experiment
 from .target import OpenBook, open_book_target
 
-__all__ = ["make_demo", "write_setup", "write_experiment", "demo_book", "IR_MS_OFFSET"]
+__all__ = ["make_demo", "write_setup", "write_experiment", "demo_book", "IR_MS_OFFSET", "MACHINE_CLOCK_OFFSET",
+           "MACHINE_RATE", "MACHINE_COLUMNS"]
 
 log = logging.getLogger(__name__)
 
 #: ms of the trigger (t = 0) in the IR recording's clock
 IR_MS_OFFSET = 1234.5
+#: s of the trigger (t = 0) on the testing machine's clock (its record starts at machine time 0)
+MACHINE_CLOCK_OFFSET = 12.34
+#: samples per second of the machine record
+MACHINE_RATE = 50.0
+#: machine.columns of the configuration for the tube's machine.csv
+MACHINE_COLUMNS = {"time": "Zeit [s]", "force": "Kraft [kN]", "displacement": "Weg [mm]",
+                   "torque": "Drehmoment [N*m]", "angle": "Winkel [deg]"}
 _REC_START = {"halfshell": _dt.datetime(2024, 5, 13, 10, 15, 40), "tube": _dt.datetime(2024, 5, 14, 14, 2, 10)}
 _SETUP_TIME = _dt.datetime(2024, 5, 13, 9, 30, 5)
 _IR_STYLE = {"halfshell": {"sep": "\t", "decimal": ".", "trailing_sep": False},
@@ -128,7 +149,8 @@ def write_experiment(outdir, ex: Experiment, *, write_ir: bool = True) -> dict:
             p = tmp / "dic" / f"{name}_0_{k}.txt"
             write_nodemap(p, ex.ids[keep], x_undef[keep], ex.x_dic[k][keep] - x_undef[keep], stage_index=k,
                           relative_time=float(t), reference_stage_index=0, stage_name=f"Stage {k}",
-                          stage_date=start + _dt.timedelta(seconds=float(t)))
+                          stage_date=start + _dt.timedelta(seconds=float(t)),
+                          signals=_stage_signals(ex, k) if hasattr(ex.specimen, "axial_force") else None)
             dic_files.append(final / "dic" / p.name)
         if write_ir:
             u0, v0, _, _ = ex.window
@@ -143,11 +165,39 @@ def write_experiment(outdir, ex: Experiment, *, write_ir: bool = True) -> dict:
                                                                 "Emissivity": 0.96},
                             **_IR_STYLE[name])
                 ir_files.append(final / "ir" / p.name)
+        if hasattr(ex.specimen, "axial_force"):
+            _write_machine(tmp / "machine.csv", ex)
         write_dataset(ex.truth(), tmp / "truth.zarr", stage="synthetic-truth",
                       params={"experiment": name, "scale": ex.scale, "ir_noise_K": ex.ir_noise,
                               "dic_noise_mm": ex.dic_noise, "seed": ex.seed, "ir_ms_offset": IR_MS_OFFSET,
                               "specimen": ex.specimen.describe()})
     return {"dic": dic_files, "ir": ir_files, "truth": final / "truth.zarr"}
+
+
+def _stage_signals(ex: Experiment, k: int) -> list[tuple[str, str, float]]:
+    """SIGNALS of DIC stage ``k``: English value elements, German analog inputs; stage 2 lacks the torque."""
+    spec, t = ex.specimen, float(ex.dic_times[k])
+    F, T = float(spec.axial_force(t)), float(spec.torque(t))
+    u, phi = float(spec.axial_displacement(t)[0]), float(np.degrees(spec.twist(t)[0]))
+    sig = [("force [N]", "value_element", F), ("displacement [mm]", "value_element", u),
+           ("torque [N*m]", "value_element", T), ("angle [deg]", "value_element", phi),
+           ("Kraft [kN]", "analog_input", F / 1000.0), ("Drehmoment [N*m]", "analog_input", T)]
+    return [s for s in sig if not (k == 2 and s[0].startswith("torque"))]
+
+
+def _write_machine(path: Path, ex: Experiment) -> None:
+    """The machine record: German CSV, MACHINE_RATE Hz from machine time 0 to 1 s after the last stage."""
+    spec = ex.specimen
+    n = int(round((MACHINE_CLOCK_OFFSET + float(ex.dic_times[-1]) + 1.0) * MACHINE_RATE)) + 1
+    t_machine = np.arange(n) / MACHINE_RATE
+    t = t_machine - MACHINE_CLOCK_OFFSET  # the DIC clock
+    cols = [t_machine, np.asarray(spec.axial_force(t)) / 1000.0, spec.axial_displacement(t)[0],
+            np.asarray(spec.torque(t)), np.degrees(spec.twist(t)[0])]
+    lines = ["Prüfmaschine;Demo Zug-Torsion", "Messrate [Hz];" + f"{MACHINE_RATE:g}".replace(".", ","), "",
+             ";".join(MACHINE_COLUMNS.values())]
+    fmt = ";".join(["%.3f", "%.9f", "%.9f", "%.9f", "%.9f"])
+    lines += [(fmt % tuple(row)).replace(".", ",") for row in np.column_stack(cols).tolist()]
+    path.write_text("\r\n".join(lines) + "\r\n", encoding="cp1252")
 
 
 def make_demo(outdir, *, scale: str = "demo", ir_noise: float = 0.05, dic_noise: float = 0.005, seed: int = 0,

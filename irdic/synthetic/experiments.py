@@ -178,6 +178,16 @@ class Experiment:
             ds["present"] = (("time", "point"), self.present, {"long_name": "point present in the stage export"})
             ds = ds.assign_coords(ir_time=("ir_frame", self.ir_times, {"units": "s", "long_name": "IR frame time"}),
                                   ir_frame_number=("ir_frame", self.ir_frame_numbers))
+            if hasattr(self.specimen, "axial_force"):
+                t = self.dic_times
+                ds["force"] = ("time", np.asarray(self.specimen.axial_force(t), float),
+                               {"units": "N", "long_name": "axial force of the testing machine (E A u / L)"})
+                ds["torque"] = ("time", np.asarray(self.specimen.torque(t), float),
+                                {"units": "N m", "long_name": "torque of the testing machine (G J phi / L)"})
+                ds["displacement"] = ("time", np.asarray(self.specimen.axial_displacement(t)[0], float),
+                                      {"units": "mm", "long_name": "grip displacement"})
+                ds["angle"] = ("time", np.degrees(np.asarray(self.specimen.twist(t)[0], float)),
+                               {"units": "deg", "long_name": "grip twist angle"})
             ds.attrs.update({"experiment": self.name, "scale": self.scale, "ir_window": list(self.window),
                              "ir_noise_K": self.ir_noise, "dic_noise_mm": self.dic_noise, "seed": self.seed})
             self._truth = ds

@@ -52,6 +52,9 @@ Thin-walled tube under proportional tension-torsion (:class:`Tube`)
     at the end of loading and relaxes afterwards. ``dT`` is evaluated by
     20-point Gauss-Legendre quadrature of the convolution (exact to rounding).
     Clamps: radius 24 mm, 40 mm long, apparent 24.5 degC; room 20 degC.
+    Testing machine signals (linear elastic proxies, steel-like E = 210 GPa,
+    G = 81 GPa): ``F = E pi (R^2 - R_inner^2) u / L`` (N) and
+    ``T = G pi / 2 (R^4 - R_inner^4) phi / L`` (N mm; written in N m).
 """
 
 from __future__ import annotations
@@ -385,7 +388,7 @@ class Tube(Specimen):
                  phi_max_deg=25.0, load=(0.5, 5.5), unload_torque=(6.5, 7.5), phi_recovery_deg=2.0,
                  unload_force=(7.5, 8.5), u_recovery=0.2, T0=22.5, Q=4.0, tau_c=6.0, beta=0.5,
                  gamma=0.04, Z_c=30.0, clamp_radius=24.0, clamp_length=40.0, T_clamp=24.5,
-                 T_background=20.0):
+                 T_background=20.0, E=210000.0, G=81000.0):
         self.R, self.R_inner, self.axis_z = float(R), float(R_inner), float(axis_z)
         self.L, self.Z_b = float(L), float(Z_b)
         self.u_max, self.phi_max = float(u_max), math.radians(phi_max_deg)
@@ -395,6 +398,7 @@ class Tube(Specimen):
         self.beta, self.gamma, self.Z_c = float(beta), float(gamma), float(Z_c)
         self.clamp_radius, self.clamp_length = float(clamp_radius), float(clamp_length)
         self.T_clamp, self.T_background = float(T_clamp), float(T_background)
+        self.E, self.G = float(E), float(G)
         self._xg, self._wg = np.polynomial.legendre.leggauss(20)
 
     def describe(self) -> dict:
@@ -417,6 +421,31 @@ class Tube(Specimen):
         """Axial stretch ``lam_z`` and its rate (1/s)."""
         u, du = self.axial_displacement(t)
         return 1.0 + u / self.L, du / self.L
+
+    def axial_force(self, t):
+        """Axial force of the testing machine, N (linear elastic proxy).
+
+        Notes
+        -----
+        ``F = E A eps``, ``A = pi (R^2 - R_inner^2)`` (reference section, mm^2),
+        ``eps = u / L`` (grip displacement over the free length), ``E`` in
+        N/mm^2 (steel-like 210 GPa). Only the demo's signals use it; the
+        kinematics do not depend on it.
+        """
+        u, _ = self.axial_displacement(t)
+        return self.E * math.pi * (self.R**2 - self.R_inner**2) * u / self.L
+
+    def torque(self, t):
+        """Torque of the testing machine, N m (linear elastic proxy).
+
+        Notes
+        -----
+        ``T = G J gamma / R`` with the surface shear strain ``gamma = R phi / L``
+        and ``J = pi / 2 (R^4 - R_inner^4)`` (mm^4), i.e. ``T = G J phi / L``
+        in N mm, divided by 1000 for N m; ``G`` in N/mm^2 (81 GPa).
+        """
+        phi, _ = self.twist(t)
+        return self.G * 0.5 * math.pi * (self.R**4 - self.R_inner**4) * phi / self.L / 1000.0
 
     def radius(self, t):
         """Current outer radius ``R / sqrt(lam_z)`` (mm)."""

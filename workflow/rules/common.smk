@@ -61,10 +61,25 @@ def experiment_results(wildcards):
     return out
 
 
+def fields_inputs(wildcards):
+    """points.zarr, calibration, dic.zarr (its signals) and machine.zarr when the experiment has a machine record."""
+    e = config["experiments"][wildcards.experiment]
+    out = {
+        "points": f"{RESULTS}/{wildcards.experiment}/points.zarr",
+        "calibration": f"{RESULTS}/setups/{e['setup']}/calibration.zarr",
+        "dic": f"{RESULTS}/{wildcards.experiment}/dic.zarr",
+    }
+    if e.get("machine"):
+        out["machine"] = f"{RESULTS}/{wildcards.experiment}/machine.zarr"
+    return out
+
+
 def all_outputs():
     out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
     for e in EXPERIMENTS:
         out += [f"{RESULTS}/{e}/dic.zarr", f"{RESULTS}/{e}/ir.zarr", f"{RESULTS}/{e}/points.zarr", f"{RESULTS}/{e}/fields.zarr"]
+        if config["experiments"][e].get("machine"):
+            out.append(f"{RESULTS}/{e}/machine.zarr")
         out += [f"{RESULTS}/{e}/figures/{name}.png" for name in FIGURES]
         out += [f"{RESULTS}/{e}/paraview", f"{RESULTS}/{e}/points.csv"]
     return out

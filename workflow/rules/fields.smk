@@ -1,10 +1,10 @@
-# points.zarr + calibration -> in-plane temperature gradient, temperature rate and strain.
+# points.zarr + calibration -> in-plane temperature gradient, temperature rate and strain,
+# with the testing machine signals of dic.zarr (and machine.zarr when configured) at the DIC times.
 
 
 rule fields:
     input:
-        points=f"{RESULTS}/{{experiment}}/points.zarr",
-        calibration=lambda wc: f"{RESULTS}/setups/{config['experiments'][wc.experiment]['setup']}/calibration.zarr",
+        unpack(fields_inputs),
     output:
         directory(f"{RESULTS}/{{experiment}}/fields.zarr"),
     params:

@@ -41,3 +41,25 @@ rule ingest_dic:
         "../envs/irdic.yaml"
     script:
         "../../scripts/ingest_dic.py"
+
+
+# Only requested for experiments with a `machine:` record (all_outputs, fields_inputs in common.smk).
+rule ingest_machine:
+    input:
+        lambda wc: raw_files(config["experiments"][wc.experiment]["machine"]["path"]),
+    output:
+        directory(f"{RESULTS}/{{experiment}}/machine.zarr"),
+    params:
+        source=lambda wc: config["experiments"][wc.experiment]["machine"],
+        code=code_hash("ingest"),
+    log:
+        f"{RESULTS}/logs/{{experiment}}/ingest_machine.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/{{experiment}}/ingest_machine.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        "../envs/irdic.yaml"
+    script:
+        "../../scripts/ingest_machine.py"

@@ -1,8 +1,8 @@
 # points.zarr (+ fields.zarr) -> figures for `snakemake --report`, a ParaView time series and a CSV table.
 # Include after fields.smk: without a fields rule the figures and the export use points.zarr alone
-# (experiment_results() in common.smk) and there is no strain figure.
+# (experiment_results() in common.smk) and there is no strain figure and no load figure (the signals are in fields.zarr).
 
-FIGURES = ["temperature", "gradient", "rate", "history"] + (["strain"] if workflow.is_rule("fields") else [])
+FIGURES = ["temperature", "gradient", "rate", "history"] + (["strain", "load"] if workflow.is_rule("fields") else [])
 
 
 rule figures:
