@@ -56,6 +56,8 @@ def describe_store(path) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="irdic", description="Couple stereo DIC and infrared thermography.")
+    p.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="CPU threads for BLAS/OpenMP (default: all cores this process may use)")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("info", help="summarise an irdic zarr store")
@@ -108,50 +110,57 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``irdic`` command."""
     args = _parser().parse_args(argv)
     from .logs import configure
+    from .threads import stage_threads
 
     configure(None)
     try:
-        if args.command == "info":
-            print(describe_store(args.store))
-        elif args.command == "demo":
-            from .pipeline import make_demo
-
-            make_demo(args.outdir, scale=args.scale, ir_noise=args.ir_noise, dic_noise=args.dic_noise, seed=args.seed)
-        elif args.command in ("ingest-ir", "ingest-dic"):
-            from .ingest import ingest_dic, ingest_ir
-
-            fn = ingest_ir if args.command == "ingest-ir" else ingest_dic
-            fn(args.source, args.out, format=args.format, frame_rate=args.frame_rate, time_source=args.time_source,
-               time_origin=args.time_origin, time_offset=args.time_offset)
-            print(describe_store(args.out))
-        elif args.command == "calibrate":
-            from .pipeline import calibrate_setup
-
-            calibrate_setup(args.markers, args.target, args.out, args.figure,
-                            distortion=args.distortion, polarity=args.polarity)
-            print(describe_store(args.out))
-        elif args.command == "couple":
-            from .couple import couple_stores
-
-            couple_stores(args.dic, args.ir, args.calibration, args.out, method=args.method)
-            print(describe_store(args.out))
-        elif args.command == "fields":
-            from .fields import fields_stores
-
-            sm = args.temperature_smoothing
-            sm = None if sm in (None, "none") else ("gcv" if sm == "gcv" else float(sm))
-            fields_stores(args.points, args.calibration, args.out, temperature_smoothing=sm)
-            print(describe_store(args.out))
-        elif args.command == "run":
-            from .config import load_config
-            from .pipeline import run
-
-            paths = run(load_config(args.config))
-            print(json.dumps(paths, default=str, indent=2))
+        with stage_threads(args.threads):
+            _dispatch(args)
     except IrdicError as exc:
         print(f"irdic: error: {exc}", file=sys.stderr)
         return 2
     return 0
+
+
+def _dispatch(args) -> None:
+    """Run the sub-command of the parsed ``args``."""
+    if args.command == "info":
+        print(describe_store(args.store))
+    elif args.command == "demo":
+        from .pipeline import make_demo
+
+        make_demo(args.outdir, scale=args.scale, ir_noise=args.ir_noise, dic_noise=args.dic_noise, seed=args.seed)
+    elif args.command in ("ingest-ir", "ingest-dic"):
+        from .ingest import ingest_dic, ingest_ir
+
+        fn = ingest_ir if args.command == "ingest-ir" else ingest_dic
+        fn(args.source, args.out, format=args.format, frame_rate=args.frame_rate, time_source=args.time_source,
+           time_origin=args.time_origin, time_offset=args.time_offset)
+        print(describe_store(args.out))
+    elif args.command == "calibrate":
+        from .pipeline import calibrate_setup
+
+        calibrate_setup(args.markers, args.target, args.out, args.figure,
+                        distortion=args.distortion, polarity=args.polarity)
+        print(describe_store(args.out))
+    elif args.command == "couple":
+        from .couple import couple_stores
+
+        couple_stores(args.dic, args.ir, args.calibration, args.out, method=args.method)
+        print(describe_store(args.out))
+    elif args.command == "fields":
+        from .fields import fields_stores
+
+        sm = args.temperature_smoothing
+        sm = None if sm in (None, "none") else ("gcv" if sm == "gcv" else float(sm))
+        fields_stores(args.points, args.calibration, args.out, temperature_smoothing=sm)
+        print(describe_store(args.out))
+    elif args.command == "run":
+        from .config import load_config
+        from .pipeline import run
+
+        paths = run(load_config(args.config), threads=args.threads)
+        print(json.dumps(paths, default=str, indent=2))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -2,7 +2,9 @@
 
 :func:`stage_logging` sends irdic's log records to a file (the Snakemake
 ``log:`` of the rule) and to stderr, and turns an :class:`~irdic.errors.IrdicError`
-into one readable line in the log and a non-zero exit instead of a traceback.
+into one readable line in the log and a non-zero exit instead of a traceback;
+it also limits BLAS and OpenMP to the threads the stage was given
+(:func:`irdic.threads.stage_threads`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import warnings
 from typing import Iterator
 
 from .errors import IrdicError
+from .threads import stage_threads
 
 __all__ = ["stage_logging", "configure"]
 
@@ -45,12 +48,17 @@ def configure(log_path: str | os.PathLike | None = None, level: int = logging.IN
 
 
 @contextlib.contextmanager
-def stage_logging(log_path: str | os.PathLike | None, stage: str) -> Iterator[logging.Logger]:
-    """Run a stage with logging to ``log_path``; exit(1) with a clear line on an irdic error."""
+def stage_logging(log_path: str | os.PathLike | None, stage: str, *,
+                  threads: int | None = None) -> Iterator[logging.Logger]:
+    """Run a stage with logging to ``log_path``; exit(1) with a clear line on an irdic error.
+
+    ``threads``: CPU threads the stage was given (Snakemake's ``threads``);
+    None: all cores.
+    """
     logger = configure(log_path)
-    logger.info("irdic %s: start", stage)
     try:
-        with warnings.catch_warnings():
+        with stage_threads(threads) as n, warnings.catch_warnings():
+            logger.info("irdic %s: start (%d thread%s)", stage, n, "" if n == 1 else "s")
             warnings.simplefilter("default")
             yield logger
     except IrdicError as exc:

@@ -88,9 +88,9 @@ per-mask setup (~250 edge tiles), the rest ~60 ms per time, linear in frames
 and about linear in points. scipy's ``RBFInterpolator(neighbors=50)`` per
 frame with difference-quotient derivatives: ~1900 s, 50 x slower, and 200 x
 farther (7e-3 K) from the global interpolant in the interior.
-BLAS threads: on a machine shared by several processes, OpenBLAS threading
-makes the ~600 x 600 Cholesky factorisations up to 30 x slower; run with
-``OPENBLAS_NUM_THREADS=1`` there.
+BLAS threads: every stage limits BLAS to the threads it was given
+(:mod:`irdic.threads`); the ~600 x 600 Cholesky factorisations gain nothing
+from more than one.
 """
 
 from __future__ import annotations
