@@ -18,7 +18,6 @@ import glob
 import logging
 import os
 import re
-import time as _time
 from pathlib import Path
 from typing import Iterable, Iterator, Sequence
 
@@ -27,6 +26,7 @@ import xarray as xr
 
 from . import io as _io
 from .errors import DataError, FormatError, IrdicError
+from .logs import Progress
 from .store import FrameStore, provenance, write_dataset
 
 __all__ = ["list_inputs", "ingest_ir", "ingest_dic", "frame_times"]
@@ -204,7 +204,7 @@ def ingest_ir(
     files = _as_files(source, "IR exports")
     n = _count_ir_frames(files, format)
     log.info("ingest IR: %d frames from %d files", n, len(files))
-    started = _time.perf_counter()
+    progress = Progress(n, "ingest IR", unit="frames", logger=log)
     it = _iter_ir_frames(files, format)
     label0, first = next(it)
     frame_coords = {"v": first["v"].values, "u": first["u"].values}
@@ -240,9 +240,7 @@ def ingest_ir(
             numbers.append(int(fi) if fi is not None else None)
             labels.append(label)
             fs.write(i, 0.0, frame.values.astype(np.float32, copy=False), frame_index=-1 if fi is None else int(fi))
-            if (i + 1) % 100 == 0 or i + 1 == n:
-                el = _time.perf_counter() - started
-                log.info("  %d/%d frames, %.1f frames/s, ETA %.0f s", i + 1, n, (i + 1) / el, (n - i - 1) * el / (i + 1))
+            progress.update(i + 1)
         if len(labels) != n:
             raise DataError(f"{files[0].parent}: counted {n} frames but read {len(labels)}")
         t = frame_times(file_times, numbers, time_source=time_source, frame_rate=frame_rate,
@@ -322,13 +320,11 @@ def ingest_dic(
     log.info("ingest DIC: %d stages", len(files))
     kwargs = {"columns": columns} if (format == "table" and columns) else {}
     stages: list[xr.Dataset] = []
-    started = _time.perf_counter()
+    progress = Progress(len(files), "ingest DIC", unit="stages", logger=log)
     for i, f in enumerate(files):
         ds = _io.read_dic(f, format=format, **kwargs)
         stages.append(ds)
-        if (i + 1) % 100 == 0 or i + 1 == len(files):
-            el = _time.perf_counter() - started
-            log.info("  %d/%d stages, %.1f stages/s", i + 1, len(files), (i + 1) / el)
+        progress.update(i + 1)
     ids = np.unique(np.concatenate([s["point"].values for s in stages]))
     n_t, n_p = len(stages), ids.size
     x = np.full((n_t, n_p, 3), np.nan)

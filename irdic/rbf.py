@@ -114,6 +114,7 @@ from ._checks import float_array as _float_array
 from ._checks import increasing_times as _increasing_times
 from ._checks import positive as _positive
 from .errors import ConfigError, DataError, IrdicWarning
+from .logs import Progress
 
 __all__ = [
     "METHODS",
@@ -1338,16 +1339,9 @@ def evaluate_series(
     Wd = temporal.weights(te[ks], 1) if ks.size else None
     row_of = np.full(n_times, -1, np.int64)
     row_of[ks] = np.arange(ks.size)
-    started = time.perf_counter()
+    progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
     done = 0
-    next_report = max(1, ks.size // 10)
     for ch in pieces:
-        done += ch.size
-        if done >= next_report or done == ks.size:
-            el = time.perf_counter() - started
-            log.info("evaluate_series: %d/%d times, %.1f times/s, ETA %.0f s", done, ks.size, done / max(el, 1e-9),
-                     (ks.size - done) * el / max(done, 1))
-            next_report = done + max(1, ks.size // 10)
         mi = int(mask_of[ch[0]])
         interp = interps.get(mi)
         if interp is None:
@@ -1374,6 +1368,8 @@ def evaluate_series(
         gv[ch] = dv[:, 0]
         rate[ch] = val[:, 1]
         edge[ch] = ed
+        done += ch.size
+        progress.update(done)
     log.info(
         "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised",
         n_times, M, n_u, len(masks), cache.built,

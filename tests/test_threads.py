@@ -73,3 +73,46 @@ def test_bad_thread_counts(bad):
     with pytest.raises(ConfigError, match="threads must be a whole number"):
         with stage_threads(bad):
             pass
+
+
+class _FakeClock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_progress_rate_and_eta_exclude_the_setup():
+    import logging
+
+    from irdic.logs import Progress
+
+    clock = _FakeClock()
+    p = Progress(100, "evaluate_series", unit="times", logger=logging.getLogger("test"), clock=clock)
+    # first chunk: 10 times after 20 s of one-off setup; no rate claimed yet
+    clock.t = 20.0
+    assert p.update(10) == "evaluate_series: 10/100 times, 20.0 s elapsed"
+    # then a steady 2 times/s: rate and ETA are right and do not jump
+    lines = []
+    for done in range(20, 101, 10):
+        clock.t += 5.0
+        lines.append(p.update(done))
+    assert lines[0] == "evaluate_series: 20/100 times, 2 times/s, ETA 40 s"
+    assert lines[3] == "evaluate_series: 50/100 times, 2 times/s, ETA 25 s"
+    assert lines[-1] == "evaluate_series: 100/100 times, 2 times/s, ETA 0 s"
+
+
+def test_progress_reports_about_every_tenth():
+    import logging
+
+    from irdic.logs import Progress
+
+    clock = _FakeClock()
+    p = Progress(1000, "ingest IR", unit="frames", logger=logging.getLogger("test"), clock=clock)
+    said = []
+    for i in range(1, 1001):
+        clock.t += 0.01
+        if p.update(i):
+            said.append(i)
+    assert said == list(range(100, 1001, 100))
