@@ -938,18 +938,20 @@ class MaskedGridInterpolant:
         v1, u1 = v0 + C - 1, u0 + C - 1
         a, b = max(v0 - R, 0), min(v1 + R, H - 1)
         l, r = max(u0 - R, 0), min(u1 + R, W - 1)
-        crop = self.mask[a:b + 1, l:r + 1]
-        key = (ty, tx, C, R, self._ce, (a, b, l, r), crop.tobytes())
+        # only the masked pixels within R of the core enter: the key is their
+        # pattern, so a change in the corners of the crop does not refactorise
+        gv = np.arange(a, b + 1)[:, None]
+        gu = np.arange(l, r + 1)[None, :]
+        dx = np.maximum(np.maximum(u0 - gu, gu - u1), 0)
+        dy = np.maximum(np.maximum(v0 - gv, gv - v1), 0)
+        crop = self.mask[a:b + 1, l:r + 1] & (dx * dx + dy * dy <= R * R)
+        key = (ty, tx, C, R, self._ce, (a, b, l, r), np.packbits(crop).tobytes())
         tile = self._tiles.get(key)
         if tile is not None:
             return tile
         cv, cu = np.nonzero(crop)
         cv = cv + a
         cu = cu + l
-        dx = np.maximum(np.maximum(u0 - cu, cu - u1), 0)
-        dy = np.maximum(np.maximum(v0 - cv, cv - v1), 0)
-        keep = dx * dx + dy * dy <= R * R
-        cv, cu = cv[keep], cu[keep]
         ou, ov = u0 + 0.5 * (C - 1), v0 + 0.5 * (C - 1)
         lu, lv = cu - ou, cv - ov
         _check_unisolvent(
