@@ -61,6 +61,10 @@ def _parser() -> argparse.ArgumentParser:
     # --debug is also accepted after the command; SUPPRESS keeps a top-level --debug from being reset
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show the traceback of an error")
+    p.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="CPU threads for BLAS/OpenMP (default: all cores this process may use)")
+    common.add_argument("--threads", type=int, default=argparse.SUPPRESS, metavar="N",
+                        help="CPU threads for BLAS/OpenMP (default: all cores this process may use)")
     sub = p.add_subparsers(dest="command", required=True)
 
     def add_parser(name, **kw):
@@ -151,8 +155,15 @@ def _one_line(exc: BaseException) -> tuple[int, str]:
 
 def _run(args: argparse.Namespace) -> None:
     from .logs import configure
+    from .threads import stage_threads
 
     configure(None)
+    with stage_threads(args.threads):
+        _dispatch(args)
+
+
+def _dispatch(args) -> None:
+    """Run the sub-command of the parsed ``args``."""
     if args.command == "info":
         print(describe_store(args.store))
     elif args.command == "demo":
@@ -189,7 +200,7 @@ def _run(args: argparse.Namespace) -> None:
         from .config import load_config
         from .pipeline import run
 
-        paths = run(load_config(args.config))
+        paths = run(load_config(args.config), threads=args.threads)
         print(json.dumps(paths, default=str, indent=2))
 
 

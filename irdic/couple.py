@@ -36,7 +36,6 @@ import logging
 import os
 import re
 import time as _time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +43,7 @@ import xarray as xr
 from scipy import ndimage
 
 from .calibrate import load_camera
-from .errors import CalibrationError, ConfigError, DataError, IrdicWarning
+from .errors import CalibrationError, ConfigError, DataError
 from .footprint import facing_camera, point_normals, specimen_mask
 from .rbf import evaluate_series
 from .store import open_store, write_dataset
@@ -251,13 +250,20 @@ def couple(
     seen = in_frame & facing
     query = np.where(seen[..., None], local, np.nan)
 
+    # Points that project just outside the mask are extrapolated from samples
+    # of the interpolant inside it. The samples are evaluated in the same pass
+    # as the points: a second pass would factorise every edge tile of every
+    # mask again.
+    inmask = _in_mask(masks, local)
+    outside = seen & ~inmask
+    samples, cols = _extrapolation_samples(local, masks, outside, max_extrapolation_px)
     try:
-        res = evaluate_series(ir["temperature"], t_ir, t_dic, query, masks, method=method, c=c_space, R0=R0_space,
-                              c_time=c_time, R0_time=R0_time, halo=halo)
+        res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
+                              method=method, c=c_space, R0=R0_space, c_time=c_time, R0_time=R0_time, halo=halo)
     except DataError as exc:
         _raise_in_sensor_pixels(exc, u, v, t_ir)
         raise
-    theta, gu, gv, rate, edge = (np.array(a, dtype=float) for a in
+    theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)
     if not in_span.any():
@@ -265,14 +271,7 @@ def couple(
             f"no DIC time ({t_dic[0]:g}..{t_dic[-1]:g} s) lies inside the IR time span "
             f"({t_ir[0]:g}..{t_ir[-1]:g} s): check time_offset/time_origin of the experiment"
         )
-
-    # extrapolate points just outside the mask from the nearest masked pixel
-    outside = seen & in_span[:, None] & ~np.isfinite(theta)
-    extrap = np.zeros_like(outside)
-    if max_extrapolation_px > 0 and outside.any():
-        extrap = _extrapolate(ir, t_ir, t_dic, local, masks, outside, theta, gu, gv, rate, edge,
-                              method=method, c=c_space, R0=R0_space, c_time=c_time, R0_time=R0_time,
-                              halo=halo, limit=max_extrapolation_px)
+    extrap = _extrapolate(res, M, cols, samples, local, theta, gu, gv, rate, edge)
 
     status = np.full((n_t, M), 0, dtype=np.int8)
     status[extrap] = 1
@@ -333,25 +332,25 @@ def couple(
 _EXTRAP_SAMPLES = 9
 
 
-def _extrapolate(ir, t_ir, t_dic, local, masks, outside, theta, gu, gv, rate, edge, *, limit, **kw):
-    """Extrapolation from the mask edge for points just outside it (in place).
+def _in_mask(masks, local):
+    """(n_t, M) True where a point's nearest pixel (``rint``) is on that time's mask."""
+    n_t, H, W = masks.shape
+    c = np.rint(local[..., 0])
+    r = np.rint(local[..., 1])
+    with np.errstate(invalid="ignore"):
+        ok = (c >= 0) & (c < W) & (r >= 0) & (r < H)
+    tt, pp = np.nonzero(ok)
+    out = np.zeros(ok.shape, dtype=bool)
+    out[tt, pp] = masks[tt, r[tt, pp].astype(np.int64), c[tt, pp].astype(np.int64)]
+    return out
 
-    For a point ``p`` outside the mask, ``q`` is the nearest masked pixel and
-    ``e = (p - q)/|p - q|``. The interpolated values at ``q - j e``,
-    j = 0 .. 8 (as long as they lie on the mask, at least 3) are fitted by a
-    parabola in the distance along ``e`` (least squares), which is evaluated at
-    ``L = |p - q|``. Values, unlike derivatives, stay accurate at the edge of
-    the data; the curvature matters (linear extrapolation from ``q`` left
-    0.04 K at the heated edge of the demo half-shell), and fitting nine samples
-    instead of passing through three keeps the amplification of pixel noise
-    at 1.3 (L = 1 px) to 2.6 (L = 3 px) instead of 4 to 19. With fewer than 3
-    samples on the mask the extrapolation is linear from the gradient at ``q``.
-    The local rate is the one at ``q``.
-    """
-    n_t, M = outside.shape
+
+def _extrapolation_samples(local, masks, outside, limit):
+    """Sample points for :func:`_extrapolate`: (S, n_t, Mc, 2) px and the point columns (Mc,)."""
+    n_t = outside.shape[0]
     S = _EXTRAP_SAMPLES
     # only the few points near the edge (at any time) take part: work on their columns
-    cols = np.flatnonzero(outside.any(axis=0))
+    cols = np.flatnonzero(outside.any(axis=0)) if limit > 0 else np.zeros(0, np.int64)
     Mc = cols.size
     out_c = outside[:, cols]
     local_c = local[:, cols]
@@ -377,19 +376,37 @@ def _extrapolate(ir, t_ir, t_dic, local, masks, outside, theta, gu, gv, rate, ed
             on &= inside
             on[inside] &= masks[k][rj[inside], cj[inside]]
             pts[j, k, idx[on]] = qj[on]
-    todo = np.isfinite(pts[0]).all(axis=2)
+    return pts, cols
+
+
+def _extrapolate(res, M, cols, pts, local, theta, gu, gv, rate, edge):
+    """Extrapolation from the mask edge for points just outside it (in place).
+
+    For a point ``p`` outside the mask, ``q`` is the nearest masked pixel and
+    ``e = (p - q)/|p - q|``. The interpolated values at ``q - j e``,
+    j = 0 .. 8 (as long as they lie on the mask, at least 3) are fitted by a
+    parabola in the distance along ``e`` (least squares), which is evaluated at
+    ``L = |p - q|``. Values, unlike derivatives, stay accurate at the edge of
+    the data; the curvature matters (linear extrapolation from ``q`` left
+    0.04 K at the heated edge of the demo half-shell), and fitting nine samples
+    instead of passing through three keeps the amplification of pixel noise
+    at 1.3 (L = 1 px) to 2.6 (L = 3 px) instead of 4 to 19. With fewer than 3
+    samples on the mask the extrapolation is linear from the gradient at ``q``.
+    The local rate is the one at ``q``. ``res`` holds the interpolant at the
+    ``M`` points followed by the samples ``pts`` of :func:`_extrapolation_samples`.
+    """
+    n_t = theta.shape[0]
+    S = _EXTRAP_SAMPLES
+    Mc = cols.size
     done_full = np.zeros((n_t, M), dtype=bool)
+    if Mc == 0:
+        return done_full
+    local_c = local[:, cols]
+    todo = np.isfinite(pts[0]).all(axis=2)
     if not todo.any():
         return done_full
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", IrdicWarning)  # the first pass already said which times are out of span
-        try:
-            res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate(list(pts), axis=1), masks, **kw)
-        except DataError as exc:
-            _raise_in_sensor_pixels(exc, ir["u"].values, ir["v"].values, t_ir)
-            raise
-    f = np.stack([res.theta[:, j * Mc:(j + 1) * Mc] for j in range(S)])  # (S, n_t, Mc)
-    gq_u, gq_v, rq = res.dtheta_du[:, :Mc], res.dtheta_dv[:, :Mc], res.dtheta_dt[:, :Mc]
+    f = np.stack([res.theta[:, M + j * Mc:M + (j + 1) * Mc] for j in range(S)])  # (S, n_t, Mc)
+    gq_u, gq_v, rq = (a[:, M:M + Mc] for a in (res.dtheta_du, res.dtheta_dv, res.dtheta_dt))
     d = local_c - pts[0]
     L = np.linalg.norm(d, axis=2)
     e = d / np.maximum(L, 1e-12)[..., None]

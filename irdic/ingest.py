@@ -18,7 +18,6 @@ import glob
 import logging
 import os
 import re
-import time as _time
 from pathlib import Path
 from typing import Iterable, Iterator, Sequence
 
@@ -28,6 +27,7 @@ import xarray as xr
 from . import io as _io
 from .errors import DataError, FormatError, IrdicError
 from .io._common import non_regular_kind as _non_regular_kind
+from .logs import Progress
 from .store import FrameStore, provenance, write_dataset
 
 __all__ = ["list_inputs", "ingest_ir", "ingest_dic", "frame_times"]
@@ -275,7 +275,7 @@ def ingest_ir(
         labels0, times0, numbers0 = zip(*stamps)
         frame_times(times0, numbers0, time_source=time_source, frame_rate=frame_rate,
                     time_origin=time_origin, time_offset=time_offset, labels=labels0, what="IR frame")
-    started = _time.perf_counter()
+    progress = Progress(n, "ingest IR", unit="frames", logger=log)
     it = _iter_ir_frames(files, format)
     label0, first = next(it)
     frame_coords = {"v": first["v"].values, "u": first["u"].values}
@@ -317,9 +317,7 @@ def ingest_ir(
             numbers.append(int(fi) if fi is not None else None)
             labels.append(label)
             fs.write(i, 0.0, values, frame_index=-1 if fi is None else int(fi))
-            if (i + 1) % 100 == 0 or i + 1 == n:
-                el = _time.perf_counter() - started
-                log.info("  %d/%d frames, %.1f frames/s, ETA %.0f s", i + 1, n, (i + 1) / el, (n - i - 1) * el / (i + 1))
+            progress.update(i + 1)
         if len(labels) != n:
             raise DataError(f"{files[0].parent}: counted {n} frames but read {len(labels)}")
         t = frame_times(file_times, numbers, time_source=time_source, frame_rate=frame_rate,
@@ -513,13 +511,11 @@ def ingest_dic(
     kwargs = {"columns": columns} if (format == "table" and columns) else {}
     formats = _dic_formats(files) if format == "auto" else [format] * len(files)
     stages: list[xr.Dataset] = []
-    started = _time.perf_counter()
+    progress = Progress(len(files), "ingest DIC", unit="stages", logger=log)
     for i, (f, fmt) in enumerate(zip(files, formats)):
         ds = _io.read_dic(f, format=fmt, **kwargs)
         stages.append(ds)
-        if (i + 1) % 100 == 0 or i + 1 == len(files):
-            el = _time.perf_counter() - started
-            log.info("  %d/%d stages, %.1f stages/s", i + 1, len(files), (i + 1) / el)
+        progress.update(i + 1)
     stages = _match_row_points(stages, files)
     ids = np.unique(np.concatenate([s["point"].values for s in stages]))
     n_t, n_p = len(stages), ids.size

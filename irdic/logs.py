@@ -2,7 +2,9 @@
 
 :func:`stage_logging` sends irdic's log records to a file (the Snakemake
 ``log:`` of the rule) and to stderr, and turns an :class:`~irdic.errors.IrdicError`
-into one readable line in the log and a non-zero exit instead of a traceback.
+into one readable line in the log and a non-zero exit instead of a traceback;
+it also limits BLAS and OpenMP to the threads the stage was given
+(:func:`irdic.threads.stage_threads`).
 """
 
 from __future__ import annotations
@@ -11,12 +13,14 @@ import contextlib
 import logging
 import os
 import sys
+import time
 import warnings
-from typing import Iterator
+from typing import Callable, Iterator
 
 from .errors import IrdicError
+from .threads import stage_threads
 
-__all__ = ["stage_logging", "configure"]
+__all__ = ["stage_logging", "configure", "Progress"]
 
 _FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
 
@@ -45,15 +49,76 @@ def configure(log_path: str | os.PathLike | None = None, level: int = logging.IN
 
 
 @contextlib.contextmanager
-def stage_logging(log_path: str | os.PathLike | None, stage: str) -> Iterator[logging.Logger]:
-    """Run a stage with logging to ``log_path``; exit(1) with a clear line on an irdic error."""
+def stage_logging(log_path: str | os.PathLike | None, stage: str, *,
+                  threads: int | None = None) -> Iterator[logging.Logger]:
+    """Run a stage with logging to ``log_path``; exit(1) with a clear line on an irdic error.
+
+    ``threads``: CPU threads the stage was given (Snakemake's ``threads``);
+    None: all cores.
+    """
     logger = configure(log_path)
-    logger.info("irdic %s: start", stage)
     try:
-        with warnings.catch_warnings():
+        with stage_threads(threads) as n, warnings.catch_warnings():
+            logger.info("irdic %s: start (%d thread%s)", stage, n, "" if n == 1 else "s")
             warnings.simplefilter("default")
             yield logger
     except IrdicError as exc:
         logger.error("%s failed: %s", stage, exc)
         raise SystemExit(f"irdic {stage} failed: {exc}") from None
     logger.info("irdic %s: done", stage)
+
+
+class Progress:
+    """Progress lines ``what: done/total unit, rate unit/s, ETA s`` at about every tenth.
+
+    Parameters
+    ----------
+    total : int
+        Work units (frames, times) to do.
+    what : str
+        Prefix of the lines (e.g. the function name).
+    unit : str
+        Name of a work unit.
+    logger : logging.Logger
+    clock : callable
+        Seconds (monotonic); a test may pass a fake one.
+
+    Notes
+    -----
+    The first reported chunk carries the one-off setup (the first mask,
+    stencils, factorisations), so the rate is measured from the end of the
+    first update on: ``r = (n - n_1) / (t - t_1)``, the mean over all later
+    work (no jumps from a single slow or fast chunk), and the ETA is
+    ``(total - n) / r``. Before a second update only the elapsed time is
+    known and no rate is claimed.
+    """
+
+    def __init__(self, total: int, what: str, *, unit: str = "items", logger: logging.Logger | None = None,
+                 clock: Callable[[], float] = time.perf_counter):
+        self.total = int(total)
+        self.what = what
+        self.unit = unit
+        self.log = logger if logger is not None else logging.getLogger("irdic")
+        self.clock = clock
+        self.started = clock()
+        self._first = None  # (done, time) after the first update
+        self._next = max(1, self.total // 10)
+
+    def update(self, done: int) -> str | None:
+        """Report that ``done`` units are finished; returns the line logged, if any."""
+        now = self.clock()
+        if self._first is None:
+            self._first = (done, now)
+        if done < self._next and done < self.total:
+            return None
+        self._next = done + max(1, self.total // 10)
+        n1, t1 = self._first
+        el = now - self.started
+        if done > n1 and now > t1:
+            rate = (done - n1) / (now - t1)
+            line = (f"{self.what}: {done}/{self.total} {self.unit}, {rate:.3g} {self.unit}/s, "
+                    f"ETA {(self.total - done) / rate:.0f} s")
+        else:
+            line = f"{self.what}: {done}/{self.total} {self.unit}, {el:.1f} s elapsed"
+        self.log.info("%s", line)
+        return line

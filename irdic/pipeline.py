@@ -20,6 +20,7 @@ import yaml
 from .errors import ConfigError
 from .store import _jsonable
 from .ingest import ingest_dic, ingest_ir
+from .threads import stage_threads
 
 __all__ = ["make_demo", "ingest_experiment", "calibrate_setup", "make_figures", "export_experiment", "run",
            "stage_paths", "STAGES"]
@@ -226,7 +227,7 @@ def calibrate_setup(markers: str | os.PathLike, target: Mapping | str | os.PathL
 STAGES = ("demo", "ingest", "calibrate", "couple", "fields", "figures", "export")
 
 
-def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
+def run(config: Mapping, *, stages: tuple[str, ...] = STAGES, threads: int | None = None) -> dict:
     """Run the configured stages for every setup and experiment, in order.
 
     Parameters
@@ -235,6 +236,9 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
         A validated configuration (see :func:`irdic.config.load_config`).
     stages : tuple of str
         Which stages to run.
+    threads : int, optional
+        CPU threads for BLAS/OpenMP in every stage; default all cores this
+        process may use.
 
     Returns
     -------
@@ -244,6 +248,11 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES) -> dict:
     unknown = set(stages) - set(STAGES)
     if unknown:
         raise ConfigError(f"unknown stage(s) {sorted(unknown)}; expected {', '.join(STAGES)}")
+    with stage_threads(threads):
+        return _run(config, stages)
+
+
+def _run(config: Mapping, stages: tuple[str, ...]) -> dict:
     paths = stage_paths(config)
     demo = config.get("demo", {})
     if "demo" in stages and demo.get("enabled", False):

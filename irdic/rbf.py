@@ -88,9 +88,9 @@ per-mask setup (~250 edge tiles), the rest ~60 ms per time, linear in frames
 and about linear in points. scipy's ``RBFInterpolator(neighbors=50)`` per
 frame with difference-quotient derivatives: ~1900 s, 50 x slower, and 200 x
 farther (7e-3 K) from the global interpolant in the interior.
-BLAS threads: on a machine shared by several processes, OpenBLAS threading
-makes the ~600 x 600 Cholesky factorisations up to 30 x slower; run with
-``OPENBLAS_NUM_THREADS=1`` there.
+BLAS threads: every stage limits BLAS to the threads it was given
+(:mod:`irdic.threads`); the ~600 x 600 Cholesky factorisations gain nothing
+from more than one.
 """
 
 from __future__ import annotations
@@ -114,6 +114,7 @@ from ._checks import float_array as _float_array
 from ._checks import increasing_times as _increasing_times
 from ._checks import positive as _positive
 from .errors import ConfigError, DataError, IrdicWarning
+from .logs import Progress
 
 __all__ = [
     "METHODS",
@@ -937,18 +938,20 @@ class MaskedGridInterpolant:
         v1, u1 = v0 + C - 1, u0 + C - 1
         a, b = max(v0 - R, 0), min(v1 + R, H - 1)
         l, r = max(u0 - R, 0), min(u1 + R, W - 1)
-        crop = self.mask[a:b + 1, l:r + 1]
-        key = (ty, tx, C, R, self._ce, (a, b, l, r), crop.tobytes())
+        # only the masked pixels within R of the core enter: the key is their
+        # pattern, so a change in the corners of the crop does not refactorise
+        gv = np.arange(a, b + 1)[:, None]
+        gu = np.arange(l, r + 1)[None, :]
+        dx = np.maximum(np.maximum(u0 - gu, gu - u1), 0)
+        dy = np.maximum(np.maximum(v0 - gv, gv - v1), 0)
+        crop = self.mask[a:b + 1, l:r + 1] & (dx * dx + dy * dy <= R * R)
+        key = (ty, tx, C, R, self._ce, (a, b, l, r), np.packbits(crop).tobytes())
         tile = self._tiles.get(key)
         if tile is not None:
             return tile
         cv, cu = np.nonzero(crop)
         cv = cv + a
         cu = cu + l
-        dx = np.maximum(np.maximum(u0 - cu, cu - u1), 0)
-        dy = np.maximum(np.maximum(v0 - cv, cv - v1), 0)
-        keep = dx * dx + dy * dy <= R * R
-        cv, cu = cv[keep], cu[keep]
         ou, ov = u0 + 0.5 * (C - 1), v0 + 0.5 * (C - 1)
         lu, lv = cu - ou, cv - ov
         _check_unisolvent(
@@ -1338,16 +1341,9 @@ def evaluate_series(
     Wd = temporal.weights(te[ks], 1) if ks.size else None
     row_of = np.full(n_times, -1, np.int64)
     row_of[ks] = np.arange(ks.size)
-    started = time.perf_counter()
+    progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
     done = 0
-    next_report = max(1, ks.size // 10)
     for ch in pieces:
-        done += ch.size
-        if done >= next_report or done == ks.size:
-            el = time.perf_counter() - started
-            log.info("evaluate_series: %d/%d times, %.1f times/s, ETA %.0f s", done, ks.size, done / max(el, 1e-9),
-                     (ks.size - done) * el / max(done, 1))
-            next_report = done + max(1, ks.size // 10)
         mi = int(mask_of[ch[0]])
         interp = interps.get(mi)
         if interp is None:
@@ -1374,6 +1370,8 @@ def evaluate_series(
         gv[ch] = dv[:, 0]
         rate[ch] = val[:, 1]
         edge[ch] = ed
+        done += ch.size
+        progress.update(done)
     log.info(
         "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised",
         n_times, M, n_u, len(masks), cache.built,

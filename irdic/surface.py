@@ -99,7 +99,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import os
 import time as _time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
@@ -114,6 +113,7 @@ from ._checks import float_array as _float_array
 from ._checks import increasing_times as _increasing_times
 from ._checks import positive as _positive
 from .errors import ConfigError, DataError, GeometryError, IrdicWarning
+from .threads import blas_threads, thread_budget
 
 __all__ = [
     "surface_parameters",
@@ -725,16 +725,14 @@ class _LocalOperator:
             for o, j in zip(out, pos):
                 o[idx] = Wk[j] @ Fl
 
-        with _blas_threads(1):
+        with blas_threads(1):
             _parallel_map(work, self.tiles)
         return out
 
 
 def _workers():
-    try:
-        return max(1, min(len(os.sched_getaffinity(0)), 8))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, min(os.cpu_count() or 1, 8))
+    # the stage's thread budget, capped: beyond 8 the tiles are too few to share
+    return max(1, min(thread_budget(), 8))
 
 
 def _parallel_map(fn, items):
@@ -745,71 +743,6 @@ def _parallel_map(fn, items):
         return [fn(i) for i in items]
     with ThreadPoolExecutor(max_workers=n) as ex:
         return list(ex.map(fn, items))
-
-
-_BLAS_LIBS = None
-
-
-def _openblas_controls():
-    """(set, get) thread-count functions of the OpenBLAS copies loaded by numpy and scipy."""
-    global _BLAS_LIBS
-    if _BLAS_LIBS is not None:
-        return _BLAS_LIBS
-    found = []
-    try:
-        import ctypes
-        import re
-
-        with open("/proc/self/maps") as fh:
-            paths = sorted(set(re.findall(r"(/\S*openblas\S*\.so\S*)", fh.read())))
-        for path in paths:
-            lib = ctypes.CDLL(path)
-            for pre in ("scipy_", ""):
-                for suf in ("64_", ""):
-                    try:
-                        set_fn = getattr(lib, f"{pre}openblas_set_num_threads{suf}")
-                        get_fn = getattr(lib, f"{pre}openblas_get_num_threads{suf}")
-                    except AttributeError:
-                        continue
-                    set_fn.argtypes = [ctypes.c_int]
-                    get_fn.restype = ctypes.c_int
-                    found.append((set_fn, get_fn))
-                    break
-                else:
-                    continue
-                break
-    except Exception:  # pragma: no cover - non-Linux or unusual BLAS: no control, no harm
-        found = []
-    _BLAS_LIBS = found
-    return found
-
-
-@contextlib.contextmanager
-def _blas_threads(n):
-    """Limit OpenBLAS to ``n`` threads inside the block.
-
-    The tiles are many small factorisations and products: threaded BLAS spends
-    more time synchronising than computing on them (measured 3 GF/s against
-    30 GF/s single-threaded for n = 1000 on a loaded 2-core VM), so the tiles
-    run single-threaded BLAS on a thread pool instead.
-    """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:
-        threadpool_limits = None
-    if threadpool_limits is not None:
-        with threadpool_limits(limits=n, user_api="blas"):
-            yield
-        return
-    controls = _openblas_controls()
-    old = [get() for _, get in controls]
-    for set_fn, _ in controls:
-        set_fn(n)
-    try:
-        yield
-    finally:
-        for (set_fn, _), o in zip(controls, old):
-            set_fn(o)
 
 
 class SpatialInterpolant:
@@ -951,14 +884,14 @@ class SpatialInterpolant:
             P = _monomials(self.psi, ctr, self.R0, 3, 0)
             # threaded BLAS only pays for large matrices (and its first call can
             # cost seconds on a loaded machine)
-            with _blas_threads(1) if self.n < 4000 else contextlib.nullcontext():
+            with blas_threads(1) if self.n < 4000 else contextlib.nullcontext():
                 self._global = (_Saddle(self._kernel_matrix(), P, rebuild=self._kernel_matrix), ctr)
             log.info("global factorisation of %d points: %.1f s", self.n, _time.perf_counter() - t0)
         return self._global
 
     def _eval_global(self, F, pts, kinds):
         fac, ctr = self._global_factor()
-        with _blas_threads(1) if self.n < 4000 else contextlib.nullcontext():
+        with blas_threads(1) if self.n < 4000 else contextlib.nullcontext():
             alpha, beta = fac.coefficients(F)
         p = self.psi
         out = [np.empty((pts.shape[0], F.shape[1])) for _ in kinds]
@@ -1034,7 +967,7 @@ class SpatialInterpolant:
             Wk = [W[i * ne:(i + 1) * ne] for i in range(len(kinds))] if ne else []
             return idx, nodes, Wk, grow, W[len(kinds) * ne:]
 
-        with _blas_threads(1):
+        with blas_threads(1):
             results = _parallel_map(work, range(len(uc)))
         G = None
         if rows.size:

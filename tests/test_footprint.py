@@ -76,3 +76,26 @@ def test_collinear_points_say_so_without_a_qhull_dump(pts):
         specimen_mask(pts, np.arange(30), np.arange(30))
     msg = str(exc.value)
     assert "QH" not in msg and "qhull" not in msg.lower() and len(msg) < 400
+
+
+def test_triangle_rasterisation_matches_point_location():
+    """The per-triangle rasteriser marks exactly the pixel centres that Delaunay.find_simplex puts in a kept triangle."""
+    from scipy.spatial import Delaunay
+
+    from irdic.footprint import _rasterise
+
+    rng = np.random.default_rng(3)
+    # a jittered, sheared grid with a hole, ~1 px spacing as on the IR sensor
+    g = np.stack(np.meshgrid(np.arange(0, 60, 1.1), np.arange(0, 40, 0.9)), -1).reshape(-1, 2)
+    g = g[np.hypot(g[:, 0] - 30, g[:, 1] - 20) > 6]
+    p = g @ np.array([[1.0, 0.2], [0.0, 1.0]]) + rng.normal(0, 0.2, g.shape) + [5.3, 4.7]
+    tri = Delaunay(p)
+    corners = p[tri.simplices]
+    keep = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1) <= 3.0
+    u, v = np.arange(90), np.arange(60)
+    uu, vv = np.meshgrid(u, v)
+    s = tri.find_simplex(np.c_[uu.ravel(), vv.ravel()])
+    ref = ((s >= 0) & keep[np.maximum(s, 0)]).reshape(uu.shape)
+    got = _rasterise(corners[keep], u, v)
+    assert ref.sum() > 1500
+    assert np.array_equal(got, ref)

@@ -1,0 +1,186 @@
+"""Benchmark of couple + fields on a moving specimen (issue 10), against the scipy way.
+
+The tube in tension-torsion all along (irdic.synthetic, 10 Hz IR and DIC,
+by default 300 x 300 frames and 78 x 168 = 13,104 DIC points) is written to
+temporary stores; ``couple`` and ``fields`` then run in a fresh subprocess
+(``irdic.threads.stage_threads``, so the stage's peak RSS and threads are its
+own). In the same run, the scipy way: ``RBFInterpolator(kernel=
+"inverse_multiquadric", epsilon=0.5, degree=1, neighbors=50)`` on the masked
+pixels of the IR frame at each DIC time, evaluated at the projected points and
+at four offsets for difference-quotient gradients, timed on ``--subset`` DIC
+times and extrapolated to all.
+
+Usage::
+
+    python benchmarks/bench_couple_moving.py [--frames 300] [--points 13104] [--threads 1]
+        [--scaling] [--two-jobs]
+
+``--scaling`` adds rows for 150/300/600 frames and 6k/13k/26k points;
+``--two-jobs`` runs two couple + fields jobs at once (one thread each) and
+compares with one alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _tube  # noqa: E402
+
+_STAGE = """
+import json, resource, sys, time
+from irdic.threads import stage_threads
+from irdic.couple import couple_stores
+from irdic.fields import fields_stores
+root = sys.argv[1]; tag = sys.argv[2]; threads = int(sys.argv[3])
+with stage_threads(threads):
+    t0 = time.perf_counter()
+    couple_stores(root + "/dic.zarr", root + "/ir.zarr", root + "/cal.zarr", root + f"/points{tag}.zarr")
+    t1 = time.perf_counter()
+    fields_stores(root + f"/points{tag}.zarr", root + "/cal.zarr", root + f"/fields{tag}.zarr")
+    t2 = time.perf_counter()
+print(json.dumps({"couple": t1 - t0, "fields": t2 - t1,
+                  "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
+"""
+
+
+def _grid(points: int) -> tuple[int, int]:
+    # the 78 x 168 aspect of the 13,104-point grid
+    n_x = max(3, int(round(np.sqrt(points * 78 / 168))))
+    return n_x, max(3, int(round(points / n_x)))
+
+
+def write_experiment(root: Path, frames: int, points: int, ir_noise: float = 0.05):
+    """Stores of the moving tube under ``root``; returns the experiment."""
+    from irdic.camera import CameraModel
+    from irdic.store import FrameStore, write_dataset
+
+    ex = _tube.tube(frames, _grid(points), ir_noise=ir_noise, dic_noise=0.005 if ir_noise else 0.0)
+    r = ex.renderer
+    with FrameStore(root / "ir.zarr", "temperature", ex.ir_times.size, ("v", "u"),
+                    {"v": r.v.astype(np.int64), "u": r.u.astype(np.int64)}, var_attrs={"units": "degC"}) as fs:
+        for i, frame in enumerate(ex.ir_frames(noise=ir_noise > 0)):
+            fs.write(i, float(ex.ir_times[i]), frame.values)
+    write_dataset(ex.dic(), root / "dic.zarr", stage="bench")
+    cam = ex.camera
+    cal = CameraModel(K=cam.K, R=cam.R, C=cam.C).to_dataset()
+    cal.attrs.update(sensor_width=1024, sensor_height=768)
+    write_dataset(cal, root / "cal.zarr", stage="bench")
+    return ex
+
+
+def run_stage(root: Path, tag: str = "", threads: int = 1) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+                                                        os.environ.get("PYTHONPATH", "")]))
+    return subprocess.Popen([sys.executable, "-c", _STAGE, str(root), tag, str(threads)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+
+
+def result(proc: subprocess.Popen) -> dict:
+    import json
+
+    out, _ = proc.communicate()
+    if proc.returncode:
+        raise SystemExit(f"stage subprocess failed ({proc.returncode})")
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def scipy_way(root: Path, ex, subset: int) -> tuple[float, float]:
+    """Seconds per DIC time of the scipy way, and its T RMS against the truth on those times."""
+    from scipy.interpolate import RBFInterpolator
+
+    from irdic.store import open_store
+
+    pts = open_store(root / "points.zarr")
+    ir = open_store(root / "ir.zarr")
+    tr = ex.truth().sel(point=pts.point)
+    r = ex.renderer
+    u0, v0 = int(r.u[0]), int(r.v[0])
+    ks = np.linspace(1, pts.sizes["time"] - 2, subset).astype(int)
+    spent, errs = 0.0, []
+    h = 0.5
+    for k in ks:
+        n = int(np.argmin(np.abs(ex.ir_times - float(pts.time[k]))))  # DIC times coincide with IR frames
+        frame = ir.temperature[n].values
+        ok = pts.visible.values[k]
+        p = pts.pixel.values[k][ok]
+        t1 = time.perf_counter()
+        from irdic.footprint import specimen_mask
+
+        mk = specimen_mask(p - [u0, v0], np.arange(r.u.size), np.arange(r.v.size), erosion_px=1.0)
+        vv, uu = np.nonzero(mk)
+        rbf = RBFInterpolator(np.c_[uu + u0, vv + v0].astype(float), frame[vv, uu],
+                              kernel="inverse_multiquadric", epsilon=0.5, degree=1, neighbors=50)
+        val = rbf(p)
+        _ = (rbf(p + [h, 0]) - rbf(p - [h, 0])) / (2 * h), (rbf(p + [0, h]) - rbf(p - [0, h])) / (2 * h)
+        spent += time.perf_counter() - t1
+        errs.append(val - tr.temperature.values[k][ok])
+    e = np.concatenate(errs)
+    return spent / len(ks), float(np.sqrt(np.mean(e**2)))
+
+
+def one(frames: int, points: int, threads: int, subset: int, two_jobs: bool = False) -> None:
+    root = Path(tempfile.mkdtemp(prefix="bench_moving_"))
+    try:
+        t0 = time.perf_counter()
+        ex = write_experiment(root, frames, points)
+        print(f"tube: {ex.s.size} points, {ex.dic_times.size} DIC x {ex.ir_times.size} IR frames of "
+              f"{ex.renderer.v.size} x {ex.renderer.u.size} px (written in {time.perf_counter() - t0:.0f} s)", flush=True)
+        alone = result(run_stage(root, "", threads))
+        tot = alone["couple"] + alone["fields"]
+        print(f"  irdic: couple {alone['couple']:.1f} s + fields {alone['fields']:.1f} s = {tot:.1f} s, "
+              f"peak RSS {alone['peak_gb']:.2f} GB ({threads} thread(s))", flush=True)
+        if subset:
+            from irdic.store import open_store
+
+            pts = open_store(root / "points.zarr")
+            tr = ex.truth().sel(point=pts.point)
+            vis = pts.visible.values
+            err = pts.temperature.values[vis] - tr.temperature.values[vis]
+            per, rms = scipy_way(root, ex, subset)
+            full = per * ex.dic_times.size
+            print(f"  scipy way: {per:.2f} s per DIC time x {ex.dic_times.size} = {full:.0f} s "
+                  f"({full / alone['couple']:.1f} x couple); T RMS vs truth on {subset} times: scipy {rms:.4f} K, "
+                  f"irdic (all) {np.sqrt(np.mean(err**2)):.4f} K", flush=True)
+        if two_jobs:
+            a, b = run_stage(root, "_a", 1), run_stage(root, "_b", 1)
+            ra, rb = result(a), result(b)
+            for name, rr in (("job 1", ra), ("job 2", rb)):
+                t = rr["couple"] + rr["fields"]
+                print(f"  two jobs at once, {name}: {t:.1f} s = {t / tot:.2f} x alone", flush=True)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=300)
+    ap.add_argument("--points", type=int, default=13104)
+    ap.add_argument("--threads", type=int, default=1, help="threads of the stage subprocess")
+    ap.add_argument("--subset", type=int, default=4, help="DIC times for the scipy way (0: skip)")
+    ap.add_argument("--scaling", action="store_true", help="rows for 150/300/600 frames and 6k/13k/26k points")
+    ap.add_argument("--two-jobs", action="store_true", help="two jobs at once against one alone")
+    args = ap.parse_args()
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}, "
+          f"python {platform.python_version()}")
+    one(args.frames, args.points, args.threads, args.subset, args.two_jobs)
+    if args.scaling:
+        for f in (150, 300, 600):
+            if f != args.frames:
+                one(f, args.points, args.threads, 0)
+        for p in (6000, 26000):
+            one(args.frames, p, args.threads, 0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,118 @@
+"""Every stage entry limits BLAS/OpenMP to the threads it was given."""
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_info
+
+import irdic.cli
+import irdic.couple
+import irdic.fields
+from irdic import pipeline
+from irdic.cli import main
+from irdic.errors import ConfigError
+from irdic.logs import stage_logging
+from irdic.threads import default_threads, stage_threads, thread_budget
+
+
+def _blas_threads_now():
+    return {p["num_threads"] for p in threadpool_info() if p["user_api"] in ("blas", "openmp")}
+
+
+@pytest.fixture
+def recorder(monkeypatch):
+    seen = []
+
+    def fake(*args, **kwargs):
+        seen.append((_blas_threads_now(), thread_budget()))
+
+    monkeypatch.setattr(irdic.couple, "couple_stores", fake)
+    monkeypatch.setattr(irdic.fields, "fields_stores", fake)
+    return seen
+
+
+_CONFIG = {
+    "setups": {"lab": {}},
+    "experiments": {"tube": {"setup": "lab"}},
+}
+
+
+def test_pipeline_run_uses_the_given_threads(recorder):
+    np.ones((4, 4)) @ np.ones((4, 4))  # make sure BLAS is loaded
+    pipeline.run(_CONFIG, stages=("couple", "fields"), threads=1)
+    assert recorder == [({1}, 1), ({1}, 1)]
+    # the limit ends with the stage
+    assert thread_budget() == default_threads()
+
+
+def test_cli_threads_option(recorder, monkeypatch):
+    monkeypatch.setattr(irdic.cli, "describe_store", lambda path: "")
+    assert main(["--threads", "1", "couple", "--dic", "d", "--ir", "i", "--calibration", "c", "--out", "o"]) == 0
+    assert recorder == [({1}, 1)]
+
+
+def test_cli_rejects_zero_threads(capsys):
+    assert main(["--threads", "0", "info", "x.zarr"]) == 2
+    err = capsys.readouterr().err
+    assert "threads must be a whole number of CPU threads >= 1, got 0" in err
+
+
+def test_snakemake_script_entry(tmp_path):
+    with stage_logging(tmp_path / "log.txt", "couple", threads=1):
+        assert _blas_threads_now() == {1}
+        assert thread_budget() == 1
+    assert "start (1 thread)" in (tmp_path / "log.txt").read_text()
+
+
+def test_default_is_all_cores():
+    with stage_threads() as n:
+        assert n == default_threads() == thread_budget()
+
+
+@pytest.mark.parametrize("bad", [0, -2, 1.5, "2", True])
+def test_bad_thread_counts(bad):
+    with pytest.raises(ConfigError, match="threads must be a whole number"):
+        with stage_threads(bad):
+            pass
+
+
+class _FakeClock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_progress_rate_and_eta_exclude_the_setup():
+    import logging
+
+    from irdic.logs import Progress
+
+    clock = _FakeClock()
+    p = Progress(100, "evaluate_series", unit="times", logger=logging.getLogger("test"), clock=clock)
+    # first chunk: 10 times after 20 s of one-off setup; no rate claimed yet
+    clock.t = 20.0
+    assert p.update(10) == "evaluate_series: 10/100 times, 20.0 s elapsed"
+    # then a steady 2 times/s: rate and ETA are right and do not jump
+    lines = []
+    for done in range(20, 101, 10):
+        clock.t += 5.0
+        lines.append(p.update(done))
+    assert lines[0] == "evaluate_series: 20/100 times, 2 times/s, ETA 40 s"
+    assert lines[3] == "evaluate_series: 50/100 times, 2 times/s, ETA 25 s"
+    assert lines[-1] == "evaluate_series: 100/100 times, 2 times/s, ETA 0 s"
+
+
+def test_progress_reports_about_every_tenth():
+    import logging
+
+    from irdic.logs import Progress
+
+    clock = _FakeClock()
+    p = Progress(1000, "ingest IR", unit="frames", logger=logging.getLogger("test"), clock=clock)
+    said = []
+    for i in range(1, 1001):
+        clock.t += 0.01
+        if p.update(i):
+            said.append(i)
+    assert said == list(range(100, 1001, 100))
