@@ -90,7 +90,7 @@ def _estimate_radius(model: CameraModel, x: np.ndarray, det: xr.Dataset, di: np.
 def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: str = "auto",
               distortion: str = "none", refine: bool = True, correct_bias: bool = True,
               marker_radius_mm: float | None = None, min_radius_px: float = 2.0, max_radius_px: float = 30.0,
-              min_contrast_k: float = 0.3, outlier_factor: float = 5.0, outlier_min_px: float = 0.3,
+              min_contrast_k: float = 0.1, outlier_factor: float = 5.0, outlier_min_px: float = 0.3,
               max_outliers: int | None = None, detections: xr.Dataset | None = None) -> xr.Dataset:
     """Calibrate the IR camera from one IR image of a 3-D marker target.
 
