@@ -108,10 +108,13 @@ def _check_image(img: np.ndarray, min_contrast_k: float) -> tuple[np.ndarray, di
         raise CalibrationError(f"target image is mostly invalid: only {finite.mean():.0%} of its pixels are finite")
     vals = img[finite]
     lo, hi = np.percentile(vals, [0.1, 99.9])
-    if hi - lo < min_contrast_k:
+    # pure Gaussian noise spans 6.2 sigma between these percentiles
+    noise = _noise_sigma(img)
+    if hi - lo < max(min_contrast_k, 7.0 * noise):
         raise CalibrationError(
             f"target image is blank: its temperatures span only {hi - lo:.3f} K (0.1 to 99.9 percentile, "
-            f"{lo:.2f} to {hi:.2f} °C), less than min_contrast_k = {min_contrast_k:g} K; markers cannot be seen"
+            f"{lo:.2f} to {hi:.2f} °C), less than min_contrast_k = {min_contrast_k:g} K or 7 x the pixel noise "
+            f"({noise:.3f} K); markers cannot be seen"
         )
     return_clip = {name: (float(level), float(np.mean(vals == level)))
                    for name, level in (("maximum", vals.max()), ("minimum", vals.min()))}
@@ -202,8 +205,18 @@ def _matched_peaks(snr: np.ndarray, radius: np.ndarray, thr_sigma: float) -> lis
     return [(float(v), float(u), float(radius[v, u])) for v, u in zip(vv, uu)]
 
 
-def _plane_fit(uu, vv, vals):
-    """Least-squares plane a + b u + c v with one 3-sigma rejection pass."""
+def _plane_fit(uu, vv, vals, noise=0.0):
+    """Least-squares plane a + b u + c v with one 3-sigma rejection pass.
+
+    Values more than 8 x ``noise`` (K) from the median are left out first
+    (when at least half remain): a step such as the edge of the target
+    against the room would tilt the first least-squares plane so much that
+    the rejection pass cannot recover.
+    """
+    if noise > 0:
+        ok = np.abs(vals - np.median(vals)) <= 8.0 * noise
+        if 2 * ok.sum() >= len(vals) and not ok.all():
+            uu, vv, vals = uu[ok], vv[ok], vals[ok]
     A = np.column_stack([np.ones_like(uu), uu, vv])
     coef, *_ = np.linalg.lstsq(A, vals, rcond=None)
     r = vals - A @ coef
@@ -256,7 +269,7 @@ def _measure_at(img, sign, vc, uc, r0, a0, others_mask, noise, smooth=0.0):
     ann = (dist >= r_in) & (dist <= r_out) & ~others_mask[v_lo:v_hi, u_lo:u_hi]
     if ann.sum() < 12:
         return None, "crowded"
-    coef = _plane_fit(uu[ann] - uc, vv[ann] - vc, patch[ann])
+    coef = _plane_fit(uu[ann] - uc, vv[ann] - vc, patch[ann], noise)
     s = sign * (patch - (coef[0] + coef[1] * (uu - uc) + coef[2] * (vv - vc)))
     s_shape = ndimage.gaussian_filter(s, smooth, mode="nearest") if smooth > 0 else s
     core = dist <= max(0.5 * r0, 1.0)
@@ -289,13 +302,23 @@ def _measure_at(img, sign, vc, uc, r0, a0, others_mask, noise, smooth=0.0):
     # continuous in the centre (no pull to integer pixels).
     e1 = evecs[:, 1]
     A, B = a_mom + 2.0, b_mom + 2.0
+    # On a wing seen at 70-75 deg the neighbours across the short axis are
+    # only ~1.5 marker widths away and their blur reaches into the window:
+    # pixels nearer to a neighbouring blob (of at least a third of this
+    # one's area) than to this blob carry no weight. Isolated markers are
+    # unaffected (the split lies beyond the window).
+    sizes = np.bincount(lab.ravel())
+    near = (lab > 0) & (lab != li) & (sizes[lab] >= area / 3.0)
+    keep = np.ones_like(region, dtype=np.float64)
+    if near.any():
+        keep = (ndimage.distance_transform_edt(~region) <= ndimage.distance_transform_edt(~near)).astype(np.float64)
 
     def window(cu, cv):
         du, dv = uu - cu, vv - cv
         p1 = du * e1[0] + dv * e1[1]
         p2 = -du * e1[1] + dv * e1[0]
         d_ell = np.sqrt((p1 / A) ** 2 + (p2 / B) ** 2)
-        return np.clip((1.0 - d_ell) * B + 0.5, 0.0, 1.0)
+        return np.clip((1.0 - d_ell) * B + 0.5, 0.0, 1.0) * keep
 
     cu, cv = mu, mv
     for _ in range(30):
@@ -390,7 +413,11 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     """Find the circular markers of a calibration target with sub-pixel centres.
 
     Compact blobs are found on a morphological top-hat (square structuring
-    element larger than the largest marker); each blob is then measured on
+    element larger than the largest marker); markers too faint for it
+    (contrast/noise down to ~3) are found as peaks of a bank of matched
+    filters (disc-sized square minus its surrounding ring, which removes the
+    local background level and gradient; radii from ``min_radius_px`` to
+    ``max_radius_px``). Each blob is then measured on
     the image itself after subtracting a background plane fitted on an
     annulus around it: contrast, region above half contrast (radius,
     moment ellipse, eccentricity, solidity) and an iterative intensity
@@ -410,20 +437,24 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     min_contrast_k : float
         Smallest accepted marker contrast, K.
     max_eccentricity : float
-        Largest accepted eccentricity (0 = circle; 0.95 = axis ratio 0.31).
+        Largest accepted eccentricity (0 = circle; 0.98 = axis ratio 0.2:
+        a disc seen 75 deg from its normal has 0.26).
     min_solidity : float
         Smallest accepted area / convex hull area.
     threshold_sigma : float
-        Segmentation threshold in multiples of the pixel noise (at least
-        half of ``min_contrast_k``).
+        Top-hat segmentation threshold in multiples of the pixel noise (at
+        least half of ``min_contrast_k``).
+    matched_sigma : float
+        Smallest matched-filter response of a faint-marker candidate, in
+        multiples of the filter's noise.
 
     Returns
     -------
     xarray.Dataset
         Dim ``detection``; variables ``u, v`` (px, full sensor), ``radius_px``,
         ``semi_major_px``, ``semi_minor_px``, ``orientation_rad``,
-        ``eccentricity``, ``solidity``, ``contrast_k``, ``area_px``, ``snr``,
-        ``sigma_px``; attrs ``polarity``, ``noise_k``, ``threshold_k``,
+        ``eccentricity``, ``solidity``, ``contrast_k``, ``area_px``, ``snr``
+        (contrast / pixel noise), ``sigma_px``; attrs ``polarity``, ``noise_k``, ``threshold_k``,
         rejection counts, ``sensor_u0``, ``sensor_v0``.
 
     Raises
@@ -434,7 +465,8 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     if polarity not in ("auto", "dark", "bright"):
         raise ConfigError(f"`polarity` must be 'auto', 'dark' or 'bright', got {polarity!r}")
     for name, val in (("min_radius_px", min_radius_px), ("max_radius_px", max_radius_px),
-                      ("min_contrast_k", min_contrast_k), ("threshold_sigma", threshold_sigma)):
+                      ("min_contrast_k", min_contrast_k), ("threshold_sigma", threshold_sigma),
+                      ("matched_sigma", matched_sigma)):
         if not (np.isfinite(val) and val > 0):
             raise ConfigError(f"`{name}` must be a positive number, got {val!r}")
     if min_radius_px >= max_radius_px:
