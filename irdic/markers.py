@@ -297,11 +297,17 @@ def _measure_at(img, sign, vc, uc, r0, a0, others_mask, noise, smooth=0.0):
     hull = convex_hull_image(region)
     solidity = float(area / max(hull.sum(), 1))
     # iterative windowed centroid of the unclipped contrast. The window is the
-    # moment ellipse grown by the blur margin (a circle would reach the close
+    # moment ellipse grown by a margin (a circle would reach the close
     # neighbours of foreshortened markers); its soft edge makes the estimate
     # continuous in the centre (no pull to integer pixels).
     e1 = evecs[:, 1]
-    A, B = a_mom + 2.0, b_mom + 2.0
+    # The margin beyond the moment ellipse holds the blur tails but, at low
+    # contrast/noise, mostly noise, which the lever arm r amplifies: 2 px
+    # above contrast/noise 20, 0.75 px below 10 (the imaged disc is centrally
+    # symmetric, so a tight window centred on it costs no bias), linear between.
+    snr = contrast / noise if noise > 0 else np.inf
+    margin = 0.75 + 1.25 * float(np.clip((snr - 10.0) / 10.0, 0.0, 1.0))
+    A, B = a_mom + margin, b_mom + margin
     # On a wing seen at 70-75 deg the neighbours across the short axis are
     # only ~1.5 marker widths away and their blur reaches into the window:
     # pixels nearer to a neighbouring blob (of at least a third of this
