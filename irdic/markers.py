@@ -913,19 +913,26 @@ def _robust_seed_fit(x: np.ndarray, uv: np.ndarray, tol: float, max_sets: int = 
     # off can extrapolate poorly on an oblique view, where all honest seeds together fit well
     larger = [[j for j in range(n) if j != i] for i in range(n)] + [list(range(n))] if n >= 8 else []
     best, best_key = None, (-1, -np.inf)
+    fatal = None
     for sub in itertools.chain(combos, larger):
         sub = list(sub)
         if planarity(x[sub]) < 1e-3:
             continue
         try:
             res = np.hypot(*(CameraModel(dlt(x[sub], uv[sub])).project(x) - uv).T)
-        except CalibrationError:
+        except CalibrationError as exc:
+            # inconsistent seeds put some markers behind the camera; a mirrored
+            # image puts all of them there, which no choice of seeds mends
+            if getattr(exc, "reason", None) != "inconsistent":
+                fatal = fatal or exc
             continue
         res = np.where(np.isfinite(res), res, np.inf)
         inl = res <= tol
         key = (int(inl.sum()), -float(np.minimum(res, tol) ** 2 @ np.ones(n)))
         if key > best_key:
             best, best_key = inl, key
+    if best is None and fatal is not None:
+        raise fatal
     if best is None or best.sum() < 6:
         return np.zeros(n, bool) if best is None else best, None, np.full(n, np.inf)
     inl = best
