@@ -856,6 +856,8 @@ def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: f
     tol = float(seed_tolerance_px) if seed_tolerance_px is not None else SEED_TOLERANCE_PX
     if not (np.isfinite(tol) and tol > 0):
         raise ConfigError(f"`seed_tolerance_px` must be a positive number of pixels, got {seed_tolerance_px!r}")
+    clicked = suv
+    snap = np.zeros(len(suv), bool)
     if len(D) >= 2:
         # snap a click to a detection only where that is unambiguous (the next detection is 3x
         # farther): on a strongly foreshortened wing the neighbours are closer than a click's error
@@ -869,6 +871,11 @@ def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: f
             "camera; choose seeds spread over both wings of the target"
         )
     inl, model, res = _robust_seed_fit(X[idx], suv, tol)
+    if model is not None and (snap & ~inl).any():
+        # where its marker was not detected, a click may have snapped to a neighbour: the click
+        # itself is what the user said
+        suv = np.where((snap & ~inl)[:, None], clicked, suv)
+        inl, model, res = _robust_seed_fit(X[idx], suv, tol)
     if model is None or not inl.all():
         raise ConfigError(_seed_message(keys, suv, inl, model, res, tol))
     return propagate(model, X, D, gate_px=gate_px)
