@@ -90,7 +90,7 @@ def _estimate_radius(model: CameraModel, x: np.ndarray, det: xr.Dataset, di: np.
 def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: str = "auto",
               distortion: str = "none", refine: bool = True, correct_bias: bool = True,
               marker_radius_mm: float | None = None, min_radius_px: float = 2.0, max_radius_px: float = 30.0,
-              min_contrast_k: float = 0.3, outlier_factor: float = 5.0, outlier_min_px: float = 0.3,
+              min_contrast_k: float = 0.1, outlier_factor: float = 5.0, outlier_min_px: float = 0.3,
               max_outliers: int | None = None, detections: xr.Dataset | None = None) -> xr.Dataset:
     """Calibrate the IR camera from one IR image of a 3-D marker target.
 
@@ -144,7 +144,8 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
         ``reprojected``, ``residual`` (= detected - bias_correction -
         reprojected), ``residual_norm``, ``loo_residual``,
         ``projection_uncertainty``, ``status``, ``detection_index``,
-        ``marker_radius_px``, ``marker_contrast_k``. Detections without a
+        ``marker_radius_px``, ``marker_contrast_k``, ``marker_snr`` (contrast /
+        pixel noise). Detections without a
         marker: ``unassigned_uv(unassigned, axis)``. Scalars ``rms_px``,
         ``max_px`` over the used markers. Attributes: ``method``,
         ``settings`` (JSON), ``sensor_width``, ``sensor_height``, counts and
@@ -281,6 +282,9 @@ def _result(target_image, ids, X_all, vidx, D, det, mi, di, outliers, model, inf
     has = det_index >= 0
     radius_px[has] = det["radius_px"].values[det_index[has]]
     contrast[has] = det["contrast_k"].values[det_index[has]]
+    snr = np.full(n, np.nan)
+    if "snr" in det:
+        snr[has] = det["snr"].values[det_index[has]]
     unassigned = np.setdiff1d(np.arange(len(D)), di)
     ds = model.to_dataset()
     px = {"units": "px"}
@@ -301,6 +305,7 @@ def _result(target_image, ids, X_all, vidx, D, det, mi, di, outliers, model, inf
     ds["detection_index"] = (("marker",), det_index, {"long_name": "index into the detections (-1: none)"})
     ds["marker_radius_px"] = (("marker",), radius_px, {**px, "long_name": "detected radius"})
     ds["marker_contrast_k"] = (("marker",), contrast, {"units": "K", "long_name": "detected contrast"})
+    ds["marker_snr"] = (("marker",), snr, {"units": "1", "long_name": "detected contrast / pixel noise"})
     ds["unassigned_uv"] = (("unassigned", "axis"), D[unassigned].reshape(-1, 2),
                            {**px, "long_name": "detections not assigned to any marker"})
     rms = float(np.sqrt(np.mean(rnorm[used] ** 2)))

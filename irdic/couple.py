@@ -285,6 +285,11 @@ def couple(
         a[~visible] = np.nan
     edge[~visible] = np.nan
     pix_out = np.where(valid[..., None] & np.isfinite(pix), pix, np.nan)
+    # the calibration's share of the position error, for the uncertainty budget downstream
+    pix_std = np.full(n_t * M, np.nan)
+    if camera.covariance is not None and front.any():
+        pix_std[front] = camera.projection_uncertainty(flat[front])
+    pix_std = np.where(np.isfinite(pix_out[..., 0]), pix_std.reshape(n_t, M), np.nan)
 
     counts = {name: int((status == i).sum()) for i, name in enumerate(STATUS_MEANINGS.split())}
     log.info("couple: %d DIC times x %d points in %.1f s; %s", n_t, M, _time.perf_counter() - started,
@@ -297,6 +302,9 @@ def couple(
                             {"units": "degC", "long_name": "temperature at the material point"}),
             "pixel": (("time", "point", "axis"), pix_out,
                       {"units": "px", "long_name": "projected position in the IR image (full sensor, u = column, v = row)"}),
+            "pixel_std": (("time", "point"), pix_std,
+                          {"units": "px", "long_name": "standard uncertainty of the projected position from the "
+                           "calibration covariance (radial RMS)"}),
             "temperature_pixel_gradient": (("time", "point", "axis"), np.stack([gu, gv], axis=-1),
                                            {"units": "K/px", "long_name": "temperature gradient in the IR image plane"}),
             "temperature_local_rate": (("time", "point"), rate,

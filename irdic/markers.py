@@ -26,7 +26,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 from skimage.morphology import convex_hull_image
 
-from .camera import CameraModel, degeneracy, dlt, leave_one_out, planarity
+from .camera import CameraModel, degeneracy, dlt, planarity
 from .errors import CalibrationError, ConfigError, DataError, IrdicWarning
 
 __all__ = [
@@ -129,10 +129,13 @@ def _check_image(img: np.ndarray, min_contrast_k: float, where: str = "") -> tup
         )
     vals = img[finite]
     lo, hi = np.percentile(vals, [0.1, 99.9])
-    if hi - lo < min_contrast_k:
+    # pure Gaussian noise spans 6.2 sigma between these percentiles
+    noise = _noise_sigma(img)
+    if hi - lo < max(min_contrast_k, 7.0 * noise):
         raise CalibrationError(
             f"target image is blank: its temperatures span only {hi - lo:.3f} K (0.1 to 99.9 percentile, "
-            f"{lo:.2f} to {hi:.2f} °C), less than min_contrast_k = {min_contrast_k:g} K; markers cannot be seen"
+            f"{lo:.2f} to {hi:.2f} °C), less than min_contrast_k = {min_contrast_k:g} K or 7 x the pixel noise "
+            f"({noise:.3f} K); markers cannot be seen"
         )
     return_clip = {name: (float(level), float(np.mean(vals == level)))
                    for name, level in (("maximum", vals.max()), ("minimum", vals.min()))}
@@ -168,8 +171,73 @@ def _candidates(img: np.ndarray, sign: float, size: int, thr: float) -> tuple[np
     return labels, n
 
 
-def _plane_fit(uu, vv, vals):
-    """Least-squares plane a + b u + c v with one 3-sigma rejection pass."""
+def _matched_response(img: np.ndarray, noise: float, min_r: float, max_r: float) -> tuple[np.ndarray, np.ndarray]:
+    """Signal-to-noise of a bank of matched filters for bright blobs: ``(snr, radius_px)`` per pixel.
+
+    Each filter is the mean over a square of the area of a disc of radius
+    ``r`` minus the mean over the surrounding square ring three times as
+    wide. The ring removes the local background (level and linear
+    gradient: the kernel is symmetric and sums to zero), so no separate
+    background model is needed. Radii form a geometric bank from ``min_r``
+    to ``max_r`` (ratio 1.5); per pixel the best radius is kept. Dark
+    blobs: call with ``-img``.
+
+    Notes
+    -----
+    With ``n_in`` pixels in the square and ``n_ring`` in the ring, white
+    noise of standard deviation ``sigma`` gives the response the standard
+    deviation ``sigma sqrt(1/n_in + 1/n_ring)``; a marker of contrast ``c``
+    filling the square responds with ``c``, so the filter's signal-to-noise
+    is about ``sqrt(n_in)`` times the pixel contrast/noise: 3 on a marker
+    of 3 px radius becomes ~15. Box sums come from one summed-area table.
+    """
+    radii = [min_r]
+    while radii[-1] * 1.5 < max_r:
+        radii.append(radii[-1] * 1.5)
+    sides = [2 * int(round(0.886 * r)) + 1 for r in radii]  # square of the disc's area, odd side
+    pad = (3 * max(sides)) // 2 + 1
+    sat = np.pad(img, pad, mode="edge").cumsum(axis=0).cumsum(axis=1)
+    sat = np.pad(sat, ((1, 0), (1, 0)))
+    H, W = img.shape
+
+    def box_mean(a):
+        h = a // 2
+        r0, c0 = pad - h, pad - h
+        return (sat[r0 + a:r0 + a + H, c0 + a:c0 + a + W] - sat[r0:r0 + H, c0 + a:c0 + a + W]
+                - sat[r0 + a:r0 + a + H, c0:c0 + W] + sat[r0:r0 + H, c0:c0 + W]) / (a * a)
+
+    best = np.full(img.shape, -np.inf)
+    best_r = np.zeros(img.shape)
+    for r, a in zip(radii, sides):
+        b = 3 * a
+        s_in, s_out = box_mean(a), box_mean(b)
+        n_in, n_ring = a * a, b * b - a * a
+        snr = (s_in - (s_out * b * b - s_in * n_in) / n_ring) / (noise * np.sqrt(1.0 / n_in + 1.0 / n_ring))
+        better = snr > best
+        best[better] = snr[better]
+        best_r[better] = r
+    return best, best_r
+
+
+def _matched_peaks(snr: np.ndarray, radius: np.ndarray, thr_sigma: float) -> list[tuple[float, float, float]]:
+    """Local maxima ``(v, u, radius_px)`` of a matched-filter response above ``thr_sigma``."""
+    peak = (snr >= thr_sigma) & (snr == ndimage.maximum_filter(snr, size=5))
+    vv, uu = np.nonzero(peak)
+    return [(float(v), float(u), float(radius[v, u])) for v, u in zip(vv, uu)]
+
+
+def _plane_fit(uu, vv, vals, noise=0.0):
+    """Least-squares plane a + b u + c v with one 3-sigma rejection pass.
+
+    Values more than 8 x ``noise`` (K) from the median are left out first
+    (when at least half remain): a step such as the edge of the target
+    against the room would tilt the first least-squares plane so much that
+    the rejection pass cannot recover.
+    """
+    if noise > 0:
+        ok = np.abs(vals - np.median(vals)) <= 8.0 * noise
+        if 2 * ok.sum() >= len(vals) and not ok.all():
+            uu, vv, vals = uu[ok], vv[ok], vals[ok]
     A = np.column_stack([np.ones_like(uu), uu, vv])
     coef, *_ = np.linalg.lstsq(A, vals, rcond=None)
     r = vals - A @ coef
@@ -182,7 +250,6 @@ def _plane_fit(uu, vv, vals):
 
 def _measure(img, sign, lab_mask, sl, others_mask, noise, max_radius_px, invalid=None):
     """Sub-pixel centre and shape of one candidate blob; None when it cannot be measured."""
-    H, W = img.shape
     rr, cc = np.nonzero(lab_mask[sl])
     rr = rr + sl[0].start
     cc = cc + sl[1].start
@@ -196,7 +263,20 @@ def _measure(img, sign, lab_mask, sl, others_mask, noise, max_radius_px, invalid
         a0 = 2.0 * np.sqrt(max(np.linalg.eigvalsh(np.cov(np.vstack([cc, rr]), bias=True))[-1], 0.0) + 1 / 12)
     else:
         a0 = r0
-    a0 = max(a0, r0)
+    return _measure_at(img, sign, vc, uc, r0, max(a0, r0), others_mask, noise, invalid=invalid)
+
+
+def _measure_at(img, sign, vc, uc, r0, a0, others_mask, noise, smooth=0.0, invalid=None):
+    """Sub-pixel centre and shape of the blob near (``uc``, ``vc``) of equivalent radius ``r0`` and
+    semi-major axis ``a0`` (px); None when it cannot be measured.
+
+    ``smooth`` > 0 (px, Gaussian sigma) finds the blob's half-contrast region
+    on a smoothed copy of the background-subtracted patch: at a
+    contrast/noise of a few the unsmoothed region is ragged with noise
+    (its shape tests would fail). The centroid is always taken on the
+    unsmoothed contrast.
+    """
+    H, W = img.shape
     r_in = a0 + 3.0
     r_out = r_in + max(3.0, 0.5 * a0)
     half = int(np.ceil(r_out)) + 1
@@ -213,14 +293,15 @@ def _measure(img, sign, lab_mask, sl, others_mask, noise, max_radius_px, invalid
     ann = (dist >= r_in) & (dist <= r_out) & ~others_mask[v_lo:v_hi, u_lo:u_hi]
     if ann.sum() < 12:
         return None, "crowded"
-    coef = _plane_fit(uu[ann] - uc, vv[ann] - vc, patch[ann])
+    coef = _plane_fit(uu[ann] - uc, vv[ann] - vc, patch[ann], noise)
     s = sign * (patch - (coef[0] + coef[1] * (uu - uc) + coef[2] * (vv - vc)))
+    s_shape = ndimage.gaussian_filter(s, smooth, mode="nearest") if smooth > 0 else s
     core = dist <= max(0.5 * r0, 1.0)
-    contrast = float(np.median(s[core]))
+    contrast = float(np.median(s_shape[core]))
     if not contrast > 0:
         return None, "contrast"
     # region at half contrast, the component that holds the blob
-    half_mask = s > 0.5 * contrast
+    half_mask = s_shape > 0.5 * contrast
     lab, _ = ndimage.label(half_mask)
     li = lab[int(round(vc)) - v_lo, int(round(uc)) - u_lo]
     if li == 0:
@@ -240,18 +321,34 @@ def _measure(img, sign, lab_mask, sl, others_mask, noise, max_radius_px, invalid
     hull = convex_hull_image(region)
     solidity = float(area / max(hull.sum(), 1))
     # iterative windowed centroid of the unclipped contrast. The window is the
-    # moment ellipse grown by the blur margin (a circle would reach the close
+    # moment ellipse grown by a margin (a circle would reach the close
     # neighbours of foreshortened markers); its soft edge makes the estimate
     # continuous in the centre (no pull to integer pixels).
     e1 = evecs[:, 1]
-    A, B = a_mom + 2.0, b_mom + 2.0
+    # The margin beyond the moment ellipse holds the blur tails but, at low
+    # contrast/noise, mostly noise, which the lever arm r amplifies: 2 px
+    # above contrast/noise 20, 0.75 px below 10 (the imaged disc is centrally
+    # symmetric, so a tight window centred on it costs no bias), linear between.
+    snr = contrast / noise if noise > 0 else np.inf
+    margin = 0.75 + 1.25 * float(np.clip((snr - 10.0) / 10.0, 0.0, 1.0))
+    A, B = a_mom + margin, b_mom + margin
+    # On a wing seen at 70-75 deg the neighbours across the short axis are
+    # only ~1.5 marker widths away and their blur reaches into the window:
+    # pixels nearer to a neighbouring blob (of at least a third of this
+    # one's area) than to this blob carry no weight. Isolated markers are
+    # unaffected (the split lies beyond the window).
+    sizes = np.bincount(lab.ravel())
+    near = (lab > 0) & (lab != li) & (sizes[lab] >= area / 3.0)
+    keep = np.ones_like(region, dtype=np.float64)
+    if near.any():
+        keep = (ndimage.distance_transform_edt(~region) <= ndimage.distance_transform_edt(~near)).astype(np.float64)
 
     def window(cu, cv):
         du, dv = uu - cu, vv - cv
         p1 = du * e1[0] + dv * e1[1]
         p2 = -du * e1[1] + dv * e1[0]
         d_ell = np.sqrt((p1 / A) ** 2 + (p2 / B) ** 2)
-        return np.clip((1.0 - d_ell) * B + 0.5, 0.0, 1.0)
+        return np.clip((1.0 - d_ell) * B + 0.5, 0.0, 1.0) * keep
 
     cu, cv = mu, mv
     for _ in range(30):
@@ -293,7 +390,8 @@ _FIELDS = {
 }
 
 
-def _detect_polarity(img, sign, *, size, thr, noise, min_r, max_r, min_contrast, max_ecc, min_sol, invalid=None):
+def _detect_polarity(img, sign, *, size, thr, noise, min_r, max_r, min_contrast, max_ecc, min_sol, mf_sigma, mf,
+                     invalid=None):
     labels, n = _candidates(img, sign, size, thr)
     slices = ndimage.find_objects(labels)
     others = labels > 0
@@ -313,27 +411,44 @@ def _detect_polarity(img, sign, *, size, thr, noise, min_r, max_r, min_contrast,
         other = others.copy()
         other[sl] &= ~ndimage.binary_dilation(own, iterations=2)
         m, why = _measure(img, sign, lab_mask, sl, other, noise, max_r, invalid)
-        if m is None:
-            rejected[why] += 1
+        _accept(m, why, rows, rejected, min_r, max_r, max_ecc, min_sol, min_contrast)
+    # faint markers, below the top-hat threshold: matched-filter peaks away from the blobs found so far
+    for vc, uc, r in (_matched_peaks(*mf, mf_sigma) if mf is not None else []):
+        if labels[int(vc), int(uc)] > 0 or any(np.hypot(uc - m["u"], vc - m["v"]) <= max(m["semi_major_px"], 2.0)
+                                               for m in rows):
             continue
-        if not (min_r <= m["radius_px"] <= max_r):
-            rejected["size"] += 1
-        elif m["eccentricity"] > max_ecc or m["solidity"] < min_sol:
-            rejected["shape"] += 1
-        elif m["contrast_k"] < min_contrast:
-            rejected["contrast"] += 1
-        else:
-            rows.append(m)
+        n += 1
+        # the matched filter is circular; a foreshortened marker is up to 1/sqrt(0.26) ~ 2x longer
+        m, why = _measure_at(img, sign, vc, uc, r, 2.0 * r, others, noise, smooth=1.0, invalid=invalid)
+        _accept(m, why, rows, rejected, min_r, max_r, max_ecc, min_sol, min_contrast)
     return rows, rejected, n
 
 
+def _accept(m, why, rows, rejected, min_r, max_r, max_ecc, min_sol, min_contrast):
+    """Append a measured blob to ``rows`` if it passes the size, shape and contrast limits, else count why not."""
+    if m is None:
+        rejected[why] += 1
+    elif not (min_r <= m["radius_px"] <= max_r):
+        rejected["size"] += 1
+    elif m["eccentricity"] > max_ecc or m["solidity"] < min_sol:
+        rejected["shape"] += 1
+    elif m["contrast_k"] < min_contrast:
+        rejected["contrast"] += 1
+    else:
+        rows.append(m)
+
+
 def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0, max_radius_px: float = 30.0,
-                   min_contrast_k: float = 0.3, max_eccentricity: float = 0.95, min_solidity: float = 0.85,
-                   threshold_sigma: float = 5.0) -> xr.Dataset:
+                   min_contrast_k: float = 0.1, max_eccentricity: float = 0.98, min_solidity: float = 0.8,
+                   threshold_sigma: float = 5.0, matched_sigma: float = 7.0) -> xr.Dataset:
     """Find the circular markers of a calibration target with sub-pixel centres.
 
     Compact blobs are found on a morphological top-hat (square structuring
-    element larger than the largest marker); each blob is then measured on
+    element larger than the largest marker); markers too faint for it
+    (contrast/noise down to ~3) are found as peaks of a bank of matched
+    filters (disc-sized square minus its surrounding ring, which removes the
+    local background level and gradient; radii from ``min_radius_px`` to
+    ``max_radius_px``). Each blob is then measured on
     the image itself after subtracting a background plane fitted on an
     annulus around it: contrast, region above half contrast (radius,
     moment ellipse, eccentricity, solidity) and an iterative intensity
@@ -353,20 +468,24 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     min_contrast_k : float
         Smallest accepted marker contrast, K.
     max_eccentricity : float
-        Largest accepted eccentricity (0 = circle; 0.95 = axis ratio 0.31).
+        Largest accepted eccentricity (0 = circle; 0.98 = axis ratio 0.2:
+        a disc seen 75 deg from its normal has 0.26).
     min_solidity : float
         Smallest accepted area / convex hull area.
     threshold_sigma : float
-        Segmentation threshold in multiples of the pixel noise (at least
-        half of ``min_contrast_k``).
+        Top-hat segmentation threshold in multiples of the pixel noise (at
+        least half of ``min_contrast_k``).
+    matched_sigma : float
+        Smallest matched-filter response of a faint-marker candidate, in
+        multiples of the filter's noise.
 
     Returns
     -------
     xarray.Dataset
         Dim ``detection``; variables ``u, v`` (px, full sensor), ``radius_px``,
         ``semi_major_px``, ``semi_minor_px``, ``orientation_rad``,
-        ``eccentricity``, ``solidity``, ``contrast_k``, ``area_px``, ``snr``,
-        ``sigma_px``; attrs ``polarity``, ``noise_k``, ``threshold_k``,
+        ``eccentricity``, ``solidity``, ``contrast_k``, ``area_px``, ``snr``
+        (contrast / pixel noise), ``sigma_px``; attrs ``polarity``, ``noise_k``, ``threshold_k``,
         rejection counts, ``sensor_u0``, ``sensor_v0``.
 
     Raises
@@ -390,7 +509,8 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     if polarity not in ("auto", "dark", "bright"):
         raise ConfigError(f"`polarity` must be 'auto', 'dark' or 'bright', got {polarity!r}")
     for name, val in (("min_radius_px", min_radius_px), ("max_radius_px", max_radius_px),
-                      ("min_contrast_k", min_contrast_k), ("threshold_sigma", threshold_sigma)):
+                      ("min_contrast_k", min_contrast_k), ("threshold_sigma", threshold_sigma),
+                      ("matched_sigma", matched_sigma)):
         if not (np.isfinite(val) and val > 0):
             raise ConfigError(f"`{name}` must be a positive number, got {val!r}")
     if min_radius_px >= max_radius_px:
@@ -407,11 +527,12 @@ def detect_markers(image, *, polarity: str = "auto", min_radius_px: float = 2.0,
     size = 2 * int(np.ceil(max_radius_px)) + 3
     kw = dict(size=size, thr=thr, noise=noise, min_r=min_radius_px, max_r=max_radius_px,
               min_contrast=min_contrast_k, max_ecc=max_eccentricity, min_sol=min_solidity,
-              invalid=invalid if n_invalid else None)
+              mf_sigma=matched_sigma, invalid=invalid if n_invalid else None)
     signs = {"dark": -1.0, "bright": 1.0}
     results = {}
     for pol in (["dark", "bright"] if polarity == "auto" else [polarity]):
-        results[pol] = _detect_polarity(img, signs[pol], **kw)
+        mf = _matched_response(signs[pol] * img, noise, min_radius_px, max_radius_px) if noise > 0 else None
+        results[pol] = _detect_polarity(img, signs[pol], mf=mf, **kw)
     if polarity == "auto":
         pol = max(results, key=lambda p: (len(results[p][0]), sum(r["contrast_k"] for r in results[p][0])))
         other = "bright" if pol == "dark" else "dark"
@@ -613,8 +734,8 @@ def assign(predicted, detected, gate_px: float) -> tuple[np.ndarray, np.ndarray]
         Projected marker positions, px (NaN rows: marker not visible).
     detected : array_like (D, 2)
         Detected centres, px.
-    gate_px : float
-        Largest accepted distance, px.
+    gate_px : float or array_like (M,)
+        Largest accepted distance, px (one for all markers or one per marker).
 
     Returns
     -------
@@ -627,11 +748,12 @@ def assign(predicted, detected, gate_px: float) -> tuple[np.ndarray, np.ndarray]
     if not ok.any() or len(det) == 0:
         return np.zeros(0, int), np.zeros(0, int)
     mi = np.flatnonzero(ok)
+    gate = np.broadcast_to(np.asarray(gate_px, dtype=np.float64), (len(pred),))[mi, None]
     d = np.hypot(pred[mi, None, 0] - det[None, :, 0], pred[mi, None, 1] - det[None, :, 1])
     big = 1e6 + d.max()
-    cost = np.where(d <= gate_px, d, big)
+    cost = np.where(d <= gate, d, big)
     r, c = linear_sum_assignment(cost)
-    good = cost[r, c] <= gate_px
+    good = cost[r, c] <= gate[r, 0]
     order = np.argsort(mi[r[good]])
     return mi[r[good]][order], c[good][order]
 
@@ -642,6 +764,16 @@ def _spacing(uv: np.ndarray) -> float:
         return np.inf
     d, _ = cKDTree(uv).query(uv, k=2)
     return float(np.median(d[:, 1]))
+
+
+def _predicted_spacing(pred: np.ndarray) -> np.ndarray:
+    """Distance (px) of every predicted marker position from the nearest other one (inf if none)."""
+    out = np.full(len(pred), np.inf)
+    ok = np.isfinite(pred).all(axis=1)
+    if ok.sum() >= 2:
+        d, _ = cKDTree(pred[ok]).query(pred[ok], k=2)
+        out[ok] = d[:, 1]
+    return out
 
 
 def propagate(model: CameraModel, marker_x, detected_uv, *, gate_px: float | None = None,
@@ -657,7 +789,10 @@ def propagate(model: CameraModel, marker_x, detected_uv, *, gate_px: float | Non
     detected_uv : array_like (D, 2)
         All detections, px.
     gate_px : float, optional
-        Assignment gate; default 0.4 x the median detection spacing.
+        Assignment gate, px; default per marker 0.4 x the distance of its
+        predicted position from the nearest other predicted marker (on a
+        strongly foreshortened wing the markers are much closer than on the
+        other; spurious detections must not shrink the gate).
 
     Returns
     -------
@@ -667,12 +802,14 @@ def propagate(model: CameraModel, marker_x, detected_uv, *, gate_px: float | Non
     """
     X = np.asarray(marker_x, dtype=np.float64)
     D = np.asarray(detected_uv, dtype=np.float64)
-    if gate_px is None:
-        gate_px = 0.4 * _spacing(D)
     prev = None
     mi = di = np.zeros(0, int)
+    gate = gate_px
     for _ in range(max_iter):
-        mi, di = assign(model.project(X), D, gate_px)
+        pred = model.project(X)
+        if gate_px is None:
+            gate = 0.4 * _predicted_spacing(pred)
+        mi, di = assign(pred, D, gate)
         key = (tuple(mi), tuple(di))
         if key == prev or len(mi) < 6:
             break
@@ -682,8 +819,9 @@ def propagate(model: CameraModel, marker_x, detected_uv, *, gate_px: float | Non
         except CalibrationError:
             break
     if len(mi) < 6:
+        g = np.nanmedian(gate) if np.size(gate) else np.nan
         raise CalibrationError(
-            f"only {len(mi)} markers could be matched to detections (gate {gate_px:.1f} px); the DLT needs 6. "
+            f"only {len(mi)} markers could be matched to detections (gate {g:.1f} px); the DLT needs 6. "
             + SEEDS_HINT
         )
     return mi, di, model
@@ -721,9 +859,12 @@ def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: f
                 seed_tolerance_px: float | None = None) -> tuple[np.ndarray, np.ndarray, CameraModel]:
     """Correspondence from a few user-given marker positions.
 
-    Each seed is snapped to the nearest detection (within 0.5 x the
-    detection spacing), a DLT through the seeds predicts all markers, and
-    :func:`propagate` grows the assignment.
+    Each seed is snapped to the nearest detection where that is unambiguous;
+    the seeds are judged against a camera fitted robustly to all of them
+    (RANSAC over 6-seed DLTs, :func:`_robust_seed_fit`): every seed must lie
+    within ``seed_tolerance_px`` of it, else the ones that do not are named.
+    The DLT through the seeds predicts all markers, and :func:`propagate`
+    grows the assignment.
 
     Parameters
     ----------
@@ -736,10 +877,13 @@ def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: f
     seeds : mapping
         ``{marker_id: (u, v)}`` for at least 6 markers, a few px off at most.
     gate_px : float, optional
-        Assignment gate (default 0.4 x detection spacing).
+        Assignment gate (default per marker: 0.4 x the distance of its
+        predicted position from the nearest other predicted marker).
     seed_tolerance_px : float, optional
-        Largest accepted residual of a seed in the seed DLT (default
-        ``max(3, 0.25 x spacing)`` px).
+        Largest accepted distance of a seed from the camera fitted robustly
+        to all seeds (default :data:`SEED_TOLERANCE_PX` = 6 px: honest
+        clicks are a few px off, a seed on a neighbouring marker a marker
+        spacing).
 
     Returns
     -------
@@ -755,23 +899,31 @@ def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: f
     D = np.asarray(detected_uv, dtype=np.float64)
     X = np.asarray(marker_x, dtype=np.float64)
     idx, suv, keys = _seed_table(seeds, marker_ids)
-    spacing = _spacing(D)
-    tol = seed_tolerance_px if seed_tolerance_px is not None else max(3.0, 0.25 * spacing)
-    if len(D):
-        d, j = cKDTree(D).query(suv)
-        # a seed a whole marker spacing away from every blob points at no
+    tol = float(seed_tolerance_px) if seed_tolerance_px is not None else SEED_TOLERANCE_PX
+    if not (np.isfinite(tol) and tol > 0):
+        raise ConfigError(f"`seed_tolerance_px` must be a positive number of pixels, got {seed_tolerance_px!r}")
+    clicked = suv
+    snap = np.zeros(len(suv), bool)
+    if len(D) >= 2:
+        spacing = _spacing(D)
+        d, j = cKDTree(D).query(suv, k=2)
+        # a seed several marker spacings away from every blob points at no
         # marker at all (off the target, u and v swapped, a typo): say so
-        # rather than letting the DLT report the seeds as degenerate
-        far = np.flatnonzero(d > max(spacing, 3.0)) if len(D) > 1 else np.zeros(0, int)
+        # rather than letting the fit report the seeds as degenerate. (One
+        # spacing is not enough: the neighbours of an undetected marker on a
+        # faint or foreshortened wing may be undetected too.)
+        far = np.flatnonzero(d[:, 0] > max(3.0 * spacing, 3.0))
         if far.size:
-            names = "; ".join(f"seed for marker {keys[f]!r} at ({suv[f, 0]:.1f}, {suv[f, 1]:.1f}) is {d[f]:.1f} px "
-                              "from any detected blob" for f in far[:5])
+            names = "; ".join(f"seed for marker {keys[f]!r} at ({suv[f, 0]:.1f}, {suv[f, 1]:.1f}) is "
+                              f"{d[f, 0]:.1f} px from any detected blob" for f in far[:5])
             raise ConfigError(
                 f"{names} (detections are {spacing:.1f} px apart); give the pixel position (u = column, v = row) "
                 "of a detected marker, read off the detection figure"
             )
-        snap = d <= 0.5 * spacing
-        suv = np.where(snap[:, None], D[j], suv)
+        # snap a click to a detection only where that is unambiguous (the next detection is 3x
+        # farther): on a strongly foreshortened wing the neighbours are closer than a click's error
+        snap = (d[:, 0] <= 0.5 * spacing) & (d[:, 1] > 3.0 * d[:, 0])
+        suv = np.where(snap[:, None], D[j[:, 0]], suv)
     line = degeneracy(X[idx], "seed markers")
     if line is not None and "coplanar" not in line:
         raise ConfigError(f"{line}, so they do not determine a camera; choose seeds spread over both wings of "
@@ -782,60 +934,105 @@ def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: f
             f"the {len(idx)} seed markers are coplanar (thickness ratio {thick:.1e}), so they do not determine a "
             "camera; choose seeds spread over both wings of the target"
         )
-    try:
-        model = CameraModel(dlt(X[idx], suv))
-        res = np.hypot(*(model.project(X[idx]) - suv).T)
-    except CalibrationError as exc:
-        # inconsistent seeds can put some of them behind the camera; a
-        # mirrored image puts all of them there and stays a CalibrationError
-        if getattr(exc, "reason", None) != "inconsistent":
-            raise
-        res = np.full(len(idx), np.inf)
-    # a gross error in one seed is partly absorbed by the fit through all of
-    # them; predicted from the others (leave-one-out) it shows in full
-    loo = leave_one_out(X[idx], suv) if len(idx) >= 7 and np.isfinite(res).all() else np.zeros(len(idx))
-    if res.max() > tol or np.nanmax(loo) > 2 * tol:
-        bad = _culprits(X[idx], suv, tol)
-        misfit = (f"misses them by up to {res.max():.1f} px (by {np.nanmax(loo):.1f} px when one is left out)"
-                  if np.isfinite(res.max())
-                  else "puts some of them behind the camera")
-        if bad:
-            keep = ~np.isin(np.arange(len(idx)), bad)
-            m = CameraModel(dlt(X[idx][keep], suv[keep]))
-            off = np.hypot(*(m.project(X[idx][bad]) - suv[bad]).T)
-            names = " and ".join(f"seed {keys[b]!r} at {suv[b].round(1).tolist()} ({o:.1f} px off)"
-                                 for b, o in zip(bad, off))
-            worst = f"the worst {'is' if len(bad) == 1 else 'are'} {names}, judged by the camera of the other seeds"
-        else:
-            worst = ("no seed can be singled out (with 8 or more seeds one or two wrong ones can be found); "
-                     f"the largest residual is seed {keys[int(np.nanargmax(res))]!r}" if np.isfinite(res).all()
-                     else "no seed can be singled out (with 8 or more seeds one or two wrong ones can be found)")
-        raise ConfigError(
-            f"the seeds contradict each other: the camera through all {len(idx)} seeds {misfit} (tolerance "
-            f"{tol:.1f} px); {worst}. Check their marker IDs and positions"
-        )
+    inl, model, res = _robust_seed_fit(X[idx], suv, tol)
+    if model is not None and (snap & ~inl).any():
+        # where its marker was not detected, a click may have snapped to a neighbour: the click
+        # itself is what the user said
+        suv = np.where((snap & ~inl)[:, None], clicked, suv)
+        inl, model, res = _robust_seed_fit(X[idx], suv, tol)
+    if model is None or not inl.all():
+        raise ConfigError(_seed_message(keys, suv, inl, model, res, tol))
     return propagate(model, X, D, gate_px=gate_px)
 
 
-def _culprits(x: np.ndarray, uv: np.ndarray, tol: float) -> list[int]:
-    """The one or two seeds without which the others fit one camera within ``tol`` px ([] if none)."""
+#: Default largest distance (px) of a clicked seed from the camera fitted to the seeds.
+SEED_TOLERANCE_PX = 6.0
+
+
+def _robust_seed_fit(x: np.ndarray, uv: np.ndarray, tol: float, max_sets: int = 400, seed: int = 0):
+    """Seeds that agree on one camera: RANSAC over minimal (6-point) DLT sets.
+
+    Every 6-seed subset (or ``max_sets`` random ones when there are more),
+    and with 8 or more seeds every set without one seed and the full set,
+    gives a DLT; the one that puts the most seeds within ``tol`` px (ties:
+    smallest sum of squared residuals capped at ``tol``) wins, and the DLT
+    of its inliers is refitted until the inlier set is stable.
+
+    Returns
+    -------
+    inliers : ndarray of bool (n,)
+    model : CameraModel or None
+        DLT of the inliers (None when no subset gives a camera).
+    residuals : ndarray (n,)
+        Distance of every seed from the projection of its marker by ``model``, px.
+
+    Notes
+    -----
+    Leave-one-out DLTs through the other seeds do not work here: with 7 or 8
+    seeds on an oblique view the system is so ill-conditioned that an
+    honest 2 px click error is magnified to tens of px. A minimal set that
+    avoids a wrong seed predicts the honest ones within a few px, and the
+    wrong one by about a marker spacing.
+    """
     n = len(x)
-    for k in (1, 2):
-        if n - k < 6:
+    combos = itertools.combinations(range(n), 6)
+    n_sets = int(np.prod(np.arange(n - 5, n + 1)) // 720)
+    if n_sets > max_sets:
+        rng = np.random.default_rng(seed)
+        combos = (np.sort(rng.choice(n, 6, replace=False)) for _ in range(max_sets))
+    # the sets without one seed and the full set as well: a 6-point DLT through clicks a few px
+    # off can extrapolate poorly on an oblique view, where all honest seeds together fit well
+    larger = [[j for j in range(n) if j != i] for i in range(n)] + [list(range(n))] if n >= 8 else []
+    best, best_key = None, (-1, -np.inf)
+    fatal = None
+    for sub in itertools.chain(combos, larger):
+        sub = list(sub)
+        if planarity(x[sub]) < 1e-3:
+            continue
+        try:
+            res = np.hypot(*(CameraModel(dlt(x[sub], uv[sub])).project(x) - uv).T)
+        except CalibrationError as exc:
+            # inconsistent seeds put some markers behind the camera; a mirrored
+            # image puts all of them there, which no choice of seeds mends
+            if getattr(exc, "reason", None) != "inconsistent":
+                fatal = fatal or exc
+            continue
+        res = np.where(np.isfinite(res), res, np.inf)
+        inl = res <= tol
+        key = (int(inl.sum()), -float(np.minimum(res, tol) ** 2 @ np.ones(n)))
+        if key > best_key:
+            best, best_key = inl, key
+    if best is None and fatal is not None:
+        raise fatal
+    if best is None or best.sum() < 6:
+        return np.zeros(n, bool) if best is None else best, None, np.full(n, np.inf)
+    inl = best
+    model = None
+    for _ in range(5):
+        try:
+            model = CameraModel(dlt(x[inl], uv[inl]))
+        except CalibrationError:
+            return inl, None, np.full(n, np.inf)
+        res = np.hypot(*(model.project(x) - uv).T)
+        new = res <= tol
+        if new.sum() < 6 or (new == inl).all():
             break
-        best, best_err = None, np.inf
-        for drop in itertools.combinations(range(n), k):
-            keep = ~np.isin(np.arange(n), drop)
-            try:
-                m = CameraModel(dlt(x[keep], uv[keep]))
-            except CalibrationError:
-                continue
-            err = float(np.hypot(*(m.project(x[keep]) - uv[keep]).T).max())
-            if err < best_err:
-                best, best_err = list(drop), err
-        if best is not None and best_err <= tol:
-            return best
-    return []
+        inl = new
+    return inl, model, res
+
+
+def _seed_message(keys, suv, inl, model, res, tol) -> str:
+    """User message for seeds that do not agree on one camera (culprits named by marker ID)."""
+    n = len(keys)
+    if model is None:
+        return (f"the seeds contradict each other: no 6 of the {n} seeds fit one camera within {tol:.1f} px "
+                "(the seed tolerance); check their marker IDs and positions (u = column, v = row)")
+    bad = np.flatnonzero(~inl)
+    names = " and ".join(f"seed {keys[b]!r} at {suv[b].round(1).tolist()} ({res[b]:.1f} px off)" for b in bad)
+    return (f"the seeds contradict each other: {n - len(bad)} of the {n} seeds fit one camera within "
+            f"{tol:.1f} px (the seed tolerance), {len(bad)} do not; the worst "
+            f"{'is' if len(bad) == 1 else 'are'} {names}, judged by the camera of the other seeds. A seed "
+            "that far off is probably on another marker: check its marker ID and position")
 
 
 # -- automatic correspondence for grid targets

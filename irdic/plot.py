@@ -133,10 +133,15 @@ def plot_detections(detections, target_image, path) -> Path:
     return _save(fig, path)
 
 
+#: contrast/noise below which a used marker is drawn as faint in :func:`plot_calibration`
+FAINT_SNR = 10.0
+
+
 def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25.0) -> Path:
     """The target image with detections, marker IDs and scaled residual vectors.
 
-    Used markers are green circles, outliers red, markers that were not
+    Used markers are green circles (gold when their contrast/noise is below
+    :data:`FAINT_SNR`; the title gives its minimum and median), outliers red, markers that were not
     detected are drawn at their projected position as crosses. Residual
     vectors (detected - bias - reprojected) are scaled so that the largest is
     ``vector_length_px`` image pixels long; the scale bar gives their size.
@@ -164,12 +169,19 @@ def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25
     title = (f"IR camera calibration: {int((status == 'used').sum())} markers, RMS {rms:.3f} px, max {mx:.3f} px; "
              f"f {g.focal_length_px:.1f} px (IFOV {g.ifov_mrad:.3f} mrad), centre "
              f"({', '.join(f'{c:.0f}' for c in g.C)}) mm")
-    fig, ax = _figure(target_image, title)
+    snr = cal_ds["marker_snr"].values if "marker_snr" in cal_ds else np.full(len(ids), np.nan)
     used = status == "used"
+    if np.isfinite(snr[used]).any():
+        title += f"\nmarker contrast/noise: min {np.nanmin(snr[used]):.1f}, median {np.nanmedian(snr[used]):.1f}"
+    fig, ax = _figure(target_image, title)
     out = status == "outlier"
     missing = np.isin(status, ["not_detected"])
     r = np.where(np.isfinite(cal_ds["marker_radius_px"].values), cal_ds["marker_radius_px"].values, 5.0)
-    _circles(ax, det[used, 0], det[used, 1], r[used], "limegreen", 1.0, "used")
+    # faint markers have noisier centres: they are drawn in their own colour
+    faint = used & (snr < FAINT_SNR)
+    _circles(ax, det[used & ~faint, 0], det[used & ~faint, 1], r[used & ~faint], "limegreen", 1.0, "used")
+    if faint.any():
+        _circles(ax, det[faint, 0], det[faint, 1], r[faint], "gold", 1.0, f"used, contrast/noise < {FAINT_SNR:g}")
     if out.any():
         _circles(ax, det[out, 0], det[out, 1], r[out], "red", 1.5, "outlier")
     if missing.any():

@@ -79,6 +79,26 @@ def test_projection_status_and_layout(demo, coupled, exp):
     assert (ds.edge_distance.values[ds.status.values == 0] >= -0.5).all()
 
 
+def test_pixel_uncertainty_from_the_calibration(demo, coupled):
+    """pixel_std is the calibration's projection uncertainty of each point, where the point has a pixel."""
+    from irdic.calibrate import load_camera
+
+    ds = coupled["halfshell"]
+    has = np.isfinite(ds.pixel.values).all(axis=2)
+    std = ds.pixel_std.values
+    assert ds.pixel_std.dims == ("time", "point") and ds.pixel_std.attrs["units"] == "px"
+    assert np.isnan(std[~has]).all() and np.isfinite(std[has]).all()
+    expect = load_camera(demo["cal"]).projection_uncertainty(ds.x.values[has])
+    np.testing.assert_allclose(std[has], expect, rtol=1e-9)
+    # a noise-free demo calibrates to a few thousandths of a pixel: so must its uncertainty be
+    assert 0 < std[has].max() < 0.05
+    # the true error is of the size of the stated uncertainty (not 10 x larger)
+    truth = demo["halfshell"][2].sel(point=ds.point)
+    ok = has & np.isfinite(truth.pixel.values).all(axis=2)
+    err = np.hypot(*np.moveaxis(ds.pixel.values - truth.pixel.values, -1, 0))[ok]
+    assert np.sqrt(np.mean(err**2)) < 10 * np.sqrt(np.mean(std[ok] ** 2)) + 1e-3
+
+
 def test_dic_times_outside_ir_span(demo):
     dic, ir, _ = demo["tube"]
     shifted = dic.assign_coords(time=dic.time + 0.75 * float(ir.time[-1]))

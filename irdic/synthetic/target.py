@@ -11,7 +11,10 @@ order it finds them, not in grid order).
 
 IR appearance (the target is not heated; markers differ in emissivity): the
 wings at 24.0 degC, markers 2.5 K darker (``polarity="dark"``) or brighter,
-room background 20.0 degC, Gaussian noise (0.04 K by default).
+room background 20.0 degC, Gaussian noise (0.04 K by default). A plate heated
+from one side is modelled by ``gradient_k``: a temperature rise linear in the
+DIC ``x`` coordinate of the hit point, ``gradient_k`` kelvin from one wing tip
+to the other, on wings and markers alike (the marker contrast is unchanged).
 
 Rendering is exact under perspective (and distortion). Pixels outside the
 box that holds the projected wing outlines see the room; inside it, every
@@ -39,7 +42,7 @@ from ._checks import as_finite, as_int, choice, positive
 from ._geometry import TAU_MIN, nearest
 from .camera import TrueCamera
 
-__all__ = ["OpenBook", "TargetImage", "open_book_target", "camera_dataset"]
+__all__ = ["OpenBook", "TargetImage", "open_book_target", "camera_dataset", "clicked_seeds"]
 
 
 @dataclass
@@ -289,7 +292,7 @@ def _footprint(book: OpenBook, camera: TrueCamera):
 
 def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str = "dark", seed: int = 0,
                      supersample: int = 8, book: OpenBook | None = None, body: float = 24.0,
-                     contrast: float = 2.5, background: float = 20.0) -> TargetImage:
+                     contrast: float = 2.5, background: float = 20.0, gradient_k: float = 0.0) -> TargetImage:
     """Render the IR image of the open-book target and return it with its truth.
 
     Parameters
@@ -309,6 +312,10 @@ def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str =
     body, contrast, background : float
         Apparent temperatures: wings ``body``, markers ``body -+ contrast``,
         room ``background`` (deg C).
+    gradient_k : float
+        Temperature difference across the target (K), linear in the DIC
+        ``x`` coordinate from the left wing tip to the right one (a plate
+        heated from one side); 0 = isothermal.
 
     Returns
     -------
@@ -320,18 +327,26 @@ def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str =
     choice(polarity, "polarity", ("dark", "bright"))
     n = as_int(supersample, "supersample")
     book = OpenBook() if book is None else book
+    gradient_k = float(as_finite(gradient_k, "gradient_k", ()))
     T_marker = body - contrast if polarity == "dark" else body + contrast
+    tips = book.hinge_point + book.wing_length * book.w
+    x_lo, x_hi = float(tips[:, 0].min()), float(tips[:, 0].max())
 
-    def temp(label):
-        return np.where(label < 0, background, np.where(label == 0, body, T_marker))
+    def temp(label, o, d, tau):
+        T = np.where(label < 0, background, np.where(label == 0, body, T_marker))
+        if gradient_k == 0.0:
+            return T
+        x = o[..., 0] + np.nan_to_num(tau) * d[..., 0]
+        return T + np.where(label < 0, 0.0, gradient_k * (x - x_lo) / (x_hi - x_lo))
 
     W, H = camera.width, camera.height
     u0, u1, v0, v1 = _footprint(book, camera)
     uu, vv = np.meshgrid(np.arange(u0, u1, dtype=np.float64), np.arange(v0, v1, dtype=np.float64))
     lab = np.full((H, W), -1, np.int64)
     o, d = camera.ray(uu, vv)
-    lab[v0:v1, u0:u1] = book.trace(o, d)[1]
-    img = temp(lab)
+    tau, lab[v0:v1, u0:u1] = book.trace(o, d)
+    img = np.full((H, W), background, np.float64)
+    img[v0:v1, u0:u1] = temp(lab[v0:v1, u0:u1], o, d, tau)
     edge = ndimage.maximum_filter(lab, size=5) != ndimage.minimum_filter(lab, size=5)
     ev, eu = np.nonzero(edge)
     off = (np.arange(n) + 0.5) / n - 0.5
@@ -342,15 +357,15 @@ def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str =
         su = eu[i:i + chunk, None] + ou
         sv = ev[i:i + chunk, None] + ov
         o, d = camera.ray(su, sv)
-        _, sl = book.trace(o, d)
-        img[ev[i:i + chunk], eu[i:i + chunk]] = temp(sl).mean(axis=1)
+        tau_s, sl = book.trace(o, d)
+        img[ev[i:i + chunk], eu[i:i + chunk]] = temp(sl, o, d, tau_s).mean(axis=1)
     if noise > 0:
         img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
     image = xr.DataArray(
         img.astype(np.float32), dims=("v", "u"),
         coords={"v": np.arange(H), "u": np.arange(W)}, name="temperature",
         attrs={"units": "°C", "long_name": "apparent temperature of the open-book target", "noise_K": noise,
-               "polarity": polarity, "supersample": n},
+               "polarity": polarity, "supersample": n, "gradient_K": gradient_k},
     )
     X = book.centres()
     markers = xr.Dataset(
@@ -372,5 +387,44 @@ def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str =
     markers = markers.isel(marker=book.painted).sortby("marker")
     truth = truth.isel(marker=book.painted).sortby("marker")
     truth.attrs.update({"marker_polarity": polarity, "marker_temperature": T_marker, "body_temperature": body,
-                        "background_temperature": background, "noise_K": noise})
+                        "background_temperature": background, "noise_K": noise,
+                        "marker_contrast": float(contrast), "gradient_K": gradient_k})
     return TargetImage(image=image, markers=markers, truth=truth, book=book, camera=camera)
+
+
+def clicked_seeds(target: TargetImage, n: int = 8, *, sigma_px: float = 2.0, seed: int = 0) -> dict:
+    """Seeds as a user clicks them: ``n`` visible markers, true projections + N(0, sigma_px).
+
+    The markers are spread over both wings (every wing gets half of them,
+    picked at random among its visible markers).
+
+    Parameters
+    ----------
+    target : TargetImage
+    n : int
+        Number of seeds (>= 6).
+    sigma_px : float
+        Standard deviation of the click error per axis, px.
+    seed : int
+        Seed of the choice and of the click errors.
+
+    Returns
+    -------
+    dict
+        ``{marker_id: [u, v]}`` (px, full sensor).
+    """
+    n = as_int(n, "n")
+    sigma_px = positive(sigma_px, "sigma_px", allow_zero=True)
+    rng = np.random.default_rng(seed)
+    tr = target.truth
+    ids = tr.marker.values
+    wing = target.book.marker_wing[target.book.painted][np.argsort(target.book.ids[target.book.painted])]
+    seen = tr.marker_visible.values
+    pick = []
+    for w, k in ((0, n // 2), (1, n - n // 2)):
+        cand = np.flatnonzero(seen & (wing == w))
+        if len(cand) < k:
+            raise ConfigError(f"wing {w} shows only {len(cand)} markers; {k} seeds were asked for on it")
+        pick.extend(rng.choice(cand, k, replace=False).tolist())
+    pix = tr.marker_pixel.values
+    return {int(ids[i]): (pix[i] + rng.normal(0.0, sigma_px, 2)).tolist() for i in sorted(pick)}
