@@ -100,13 +100,18 @@ def test_demo_results_unchanged(current):
 
 
 if __name__ == "__main__":
+    import os
     import tempfile
 
     if "--write" not in sys.argv:
         sys.exit("usage: python -m tests.test_golden --write")
-    from threadpoolctl import threadpool_limits
-
-    with tempfile.TemporaryDirectory() as tmp, threadpool_limits(1):
+    # BLAS must be single-threaded from start-up, as tests/conftest.py makes it
+    # for the test run: a thread limit set later (threadpoolctl) picks other
+    # kernels whose rounding differs by ~1e-8.
+    if os.environ.get("OPENBLAS_NUM_THREADS") != "1" or os.environ.get("OMP_NUM_THREADS") != "1":
+        env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+        os.execve(sys.executable, [sys.executable, "-m", "tests.test_golden", *sys.argv[1:]], env)
+    with tempfile.TemporaryDirectory() as tmp:
         arrays = golden_arrays(Path(tmp))
     GOLDEN.parent.mkdir(exist_ok=True)
     np.savez_compressed(GOLDEN, **arrays)
