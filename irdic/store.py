@@ -384,6 +384,12 @@ def _mark_complete(path: Path) -> None:
     group = zarr.open_group(str(path), mode="r+")
     # one metadata write: a store never carries the mark without the manifest
     group.attrs.update({CHUNKS_ATTR: manifest, COMPLETE_ATTR: True})
+    # Consolidated metadata lets plain ``xr.open_zarr`` open the store without
+    # listing its folder (no warning about it missing, none about the
+    # ``.snakemake_timestamp`` file Snakemake puts into directory outputs).
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r"Consolidated metadata is currently not part")
+        zarr.consolidate_metadata(str(path))
 
 
 def write_dataset(

@@ -280,3 +280,18 @@ def test_stale_temporaries_of_other_hosts_are_kept(tmp_path, monkeypatch):
     names = {p.name for p in tmp_path.iterdir()}
     assert other.name in names  # a live job on another node may own it: os.kill cannot tell
     assert mine_dead.name not in names and old_other.name not in names
+
+
+def test_plain_xarray_opens_a_store_without_warnings(tmp_path):
+    """Users read stores with plain ``xr.open_zarr``: no warning, even inside a Snakemake directory output."""
+    import warnings
+
+    ds = xr.Dataset({"a": (("time", "point"), np.arange(12.0).reshape(3, 4))},
+                    coords={"time": [0.0, 1.0, 2.0], "point": [1, 2, 3, 4]})
+    write_dataset(ds, tmp_path / "s.zarr", stage="test")
+    (tmp_path / "s.zarr" / ".snakemake_timestamp").touch()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = xr.open_zarr(tmp_path / "s.zarr")
+        xr.testing.assert_identical(got.a.load(), ds.a)
+    assert open_store(tmp_path / "s.zarr").attrs["irdic_complete"]
