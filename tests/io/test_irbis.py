@@ -10,7 +10,8 @@ import pytest
 
 from irdic.errors import ConfigError, FormatError, IrdicError, IrdicWarning
 from irdic.io import read_ir
-from irdic.io.irbis import _parse_fast, _parse_slow, parse_irbis, read_irbis, read_irbis_header, write_irbis
+from irdic.io.irbis import _parse_fast, _parse_slow, parse_irbis, read_irbis, read_irbis_header
+from irdic.synthetic.writers import write_irbis
 
 
 def _data_section(raw: bytes) -> bytes:

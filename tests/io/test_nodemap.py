@@ -16,7 +16,8 @@ import pytest
 
 from irdic.errors import ConfigError, DataError, FormatError, IrdicError, IrdicWarning
 from irdic.io import detect_dic_format, read_dic
-from irdic.io.nodemap import read_nodemap, write_nodemap
+from irdic.io.nodemap import read_nodemap
+from irdic.synthetic.writers import write_nodemap
 
 SEP = "#" * 100
 
