@@ -1,7 +1,7 @@
 """The table machinery the DIC readers share (package-private to :mod:`irdic.io`).
 
-Header parsing, row parsing with line-precise errors and the stage Dataset,
-used by :mod:`~irdic.io.table` (generic CSV), :mod:`~irdic.io.nodemap`,
+Header parsing and row parsing with line-precise errors (the stage Dataset
+they return is built by :mod:`irdic.io._stage`), used by :mod:`~irdic.io.table` (generic CSV), :mod:`~irdic.io.nodemap`,
 :mod:`~irdic.io.dice`, :mod:`~irdic.io.vic` and :mod:`~irdic.io.markers`, so
 that every DIC reader returns the same structure and reports problems the
 same way.
@@ -11,32 +11,30 @@ Parsing strategy: the field count of every data line is checked in Python
 with NaN; the numbers themselves are parsed by pandas' C parser. Only when a
 column fails to parse as numbers is the offending cell searched for, so that
 the error names its line and column.
+
+Memory: :func:`read_body` parses a :class:`~irdic.io._common.TextFile` a
+block of lines at a time, so that the file's text is never held as a whole
+next to its list of lines and a joined copy; besides the file's bytes only
+the parsed numbers are kept.
 """
 
 from __future__ import annotations
 
 import csv
 import io
-import logging
+import itertools
 import os
-import re
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import pandas as pd
-import xarray as xr
 
-from ..errors import ConfigError, DataError, FormatError, IrdicWarning
-from ._common import read_text
+from ..errors import ConfigError, DataError, FormatError
+from ._common import TextFile, read_text
 from .units import split_unit
 
-
-log = logging.getLogger(__name__)
-
-COMPONENTS = ("x", "y", "z")
 
 # Cell texts that mean "no value" (compared lower-case, stripped).
 NA_TOKENS = frozenset(
@@ -44,8 +42,6 @@ NA_TOKENS = frozenset(
      "1.#qnan", "-1.#qnan", "1.#ind", "-1.#ind"}
 )
 
-# Names the stage Dataset uses itself; extra columns with these names are renamed.
-RESERVED = frozenset({"x", "x_ref", "point", "component", "time", "marker"})
 
 # --------------------------------------------------------------------------- text
 
@@ -200,10 +196,10 @@ class Rows:
     Use :func:`read_rows` to build one.
     """
 
-    def __init__(self, frame: pd.DataFrame, lines: list[str], line_nos: np.ndarray, header: Header,
+    def __init__(self, frame: pd.DataFrame, line_text: Callable[[int], str], line_nos: np.ndarray, header: Header,
                  sep: str | None, decimal: str):
         self.frame = frame
-        self.lines = lines
+        self._line_text = line_text  # row index -> its line as written; only needed for messages
         self.line_nos = line_nos
         self.header = header
         self.sep = sep
@@ -215,7 +211,7 @@ class Rows:
 
     def cell(self, i: int, j: int) -> str:
         """Text of cell (row ``i``, column ``j``) as written, for messages."""
-        fields = split_fields(self.lines[i], self.sep)
+        fields = split_fields(self._line_text(i), self.sep)
         return fields[j] if j < len(fields) else ""
 
     def _expected(self) -> str:
@@ -344,13 +340,100 @@ def read_rows(lines: Sequence[str], line_nos: np.ndarray, header: Header, *, sep
     ------
     FormatError
         No data rows, or a line with a field count other than the header's.
+
+    See Also
+    --------
+    read_body : the same from a :class:`~irdic.io._common.TextFile`, a block at a time.
     """
+    lines = list(lines)
+    line_nos = np.asarray(line_nos, dtype=np.int64)
+    step = 20_000
+    pieces = ((lines[i:i + step], line_nos[i:i + step]) for i in range(0, len(lines), step))
+    frame, nos = _parse_pieces(pieces, header, sep, decimal, quoting)
+    return Rows(frame, lines.__getitem__, nos, header, sep, decimal)
+
+
+def read_body(text: TextFile, start: int, header: Header, *, sep: str | None, decimal: str | None = ".",
+              quoting: int = csv.QUOTE_NONE, comment: str | None = "#") -> Rows:
+    """Parse the data lines of a file from line index ``start`` on, a block at a time.
+
+    The same as :func:`data_lines` followed by :func:`read_rows`, but the
+    file's lines are never all in memory at once: each block of lines
+    (:attr:`TextFile.BLOCK` bytes) is filtered, checked and parsed, and only
+    the parsed numbers are kept. A cell named in an error message is read
+    from the file again.
+
+    Parameters
+    ----------
+    text : TextFile
+    start : int
+        0-based index of the first line that may hold data (the line after
+        the header).
+    header : Header
+    sep : str or None
+        Field separator; None for runs of whitespace.
+    decimal : {".", ",", None}
+        Decimal mark; None detects it from the first 2000 data lines (see
+        :func:`detect_decimal`).
+    quoting : int
+        As in :func:`read_rows`.
+    comment : str, optional
+        Lines starting with it (after blanks) are skipped, as are blank lines.
+
+    Returns
+    -------
+    Rows
+        ``rows.decimal`` is the decimal mark used.
+
+    Raises
+    ------
+    FormatError
+        No data rows, or a line with a field count other than the header's
+        (named by line).
+    """
+    pieces = _data_pieces(text, start, comment)
+    if decimal is None:
+        # the sample of detect_decimal: the first 2000 data lines
+        first: list[tuple[list[str], np.ndarray]] = []
+        for piece in pieces:
+            first.append(piece)
+            if sum(len(lines) for lines, _ in first) >= 2000:
+                break
+        decimal = detect_decimal([ln for lines, _ in first for ln in lines][:2000], sep)
+        pieces = itertools.chain(first, pieces)
+    frame, nos = _parse_pieces(pieces, header, sep, decimal, quoting)
+    return Rows(frame, lambda i: text.line(int(nos[i])), nos, header, sep, decimal)
+
+
+def _data_pieces(text: TextFile, start: int, comment: str | None) -> Iterator[tuple[list[str], np.ndarray]]:
+    """Per block of the file: its data lines from index ``start`` on and their 1-based line numbers."""
+    for k0, lines in text.blocks():
+        if k0 + len(lines) <= start:
+            continue
+        keep, nos = data_lines(lines, max(start - k0, 0), comment)
+        if keep:
+            yield keep, nos + k0
+
+
+def _parse_pieces(pieces: Iterable[tuple[list[str], np.ndarray]], header: Header, sep: str | None, decimal: str,
+                  quoting: int) -> tuple[pd.DataFrame, np.ndarray]:
+    """One DataFrame of all pieces of data lines, and their line numbers."""
+    frames, nos = [], []
+    for lines, line_nos in pieces:
+        frames.append(_parse_piece(lines, line_nos, header, sep, decimal, quoting))
+        nos.append(line_nos)
+    if not frames:
+        where = f" after the header on line {header.line}" if header.line else ""
+        raise FormatError(f"no data rows{where}; expected at least one row of numbers", header.path)
+    frame = frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True)
+    return frame, np.concatenate(nos)
+
+
+def _parse_piece(lines: list[str], line_nos: np.ndarray, header: Header, sep: str | None, decimal: str,
+                 quoting: int) -> pd.DataFrame:
+    """Check the field count of every line (``lines`` may be edited: trailing separators) and parse them."""
     path = header.path
     n = len(header)
-    lines = list(lines)
-    if not lines:
-        where = f" after the header on line {header.line}" if header.line else ""
-        raise FormatError(f"no data rows{where}; expected at least one row of numbers", path)
     counts = _count_fields(lines, sep, quoting)
     for i in np.flatnonzero(counts != n):
         stripped = lines[i].rstrip(" ")
@@ -364,7 +447,7 @@ def read_rows(lines: Sequence[str], line_nos: np.ndarray, header: Header, *, sep
         )
     try:
         frame = pd.read_csv(
-            io.StringIO("\n".join(lines)), sep=r"\s+" if sep is None else sep, header=None,
+            io.BytesIO("\n".join(lines).encode("utf-8")), sep=r"\s+" if sep is None else sep, header=None,
             names=list(range(n)), index_col=False, skipinitialspace=True, decimal=decimal,
             quoting=quoting, engine="c", low_memory=False, skip_blank_lines=False,
         )
@@ -372,7 +455,7 @@ def read_rows(lines: Sequence[str], line_nos: np.ndarray, header: Header, *, sep
         raise FormatError(f"cannot parse the data rows ({exc})", path) from exc
     if len(frame) != len(lines):
         raise FormatError(f"parsed {len(frame)} rows from {len(lines)} data lines; check quotes in the file", path)
-    return Rows(frame, lines, np.asarray(line_nos, dtype=np.int64), header, sep, decimal)
+    return frame
 
 
 def check_unique(ids: np.ndarray, line_nos: np.ndarray, path: Path, *, what: str = "point ID") -> None:
@@ -386,115 +469,6 @@ def check_unique(ids: np.ndarray, line_nos: np.ndarray, path: Path, *, what: str
         k = int(dup[np.argmin(order[dup + 1])])  # the first repetition in file order
         a, b = int(line_nos[order[k]]), int(line_nos[order[k + 1]])
         raise DataError(f"{path}: {what} {s[k]} appears twice, on lines {a} and {b}; each {what} must be unique in a file")
-
-
-# --------------------------------------------------------------------------- the stage Dataset
-
-
-def extra_name(name: str, taken: set[str], suffix: str = "_col") -> str:
-    """A Dataset variable name for an extra column (identifier-safe, not clashing)."""
-    base = re.sub(r"\W+", "_", name).strip("_") or "column"
-    if base[0].isdigit():
-        base = "c_" + base
-    out = base
-    while out in RESERVED or out in taken:
-        out += suffix
-    taken.add(out)
-    return out
-
-
-def extra_columns(rows: Rows, skip: Iterable[int], *, strict: bool, rename: Mapping[str, str] | None = None,
-                  suffix: str = "_col") -> list[tuple[str, np.ndarray, dict[str, Any]]]:
-    """The columns not in ``skip`` as ``(name, values, attrs)`` for :func:`stage_dataset`.
-
-    ``strict`` (numeric export formats): every cell must be a number, else
-    FormatError. Otherwise (generic tables) non-numeric columns are left out.
-    """
-    skip = set(skip)
-    taken: set[str] = set()
-    out = []
-    header = rows.header
-    for j, bare in enumerate(header.bare):
-        if j in skip:
-            continue
-        if not strict and not rows.is_numeric(j):
-            log.info("%s: column %r is not numeric; left out", rows.path, header.names[j])
-            continue
-        values = rows.number(j, finite=False)
-        name = extra_name((rename or {}).get(bare, bare), taken, suffix)
-        attrs: dict[str, Any] = {"long_name": header.names[j]}
-        if header.units[j]:
-            attrs["units"] = header.units[j]
-        out.append((name, values, attrs))
-    return out
-
-
-def stage_dataset(ids: np.ndarray, x: np.ndarray, x_ref: np.ndarray | None = None, *, path: Path, fmt: str,
-                  valid: np.ndarray | None = None, time: float | None = None,
-                  attrs: Mapping[str, Any] | None = None,
-                  extras: Sequence[tuple[str, np.ndarray, dict[str, Any]]] = (),
-                  point_id_source: str = "file") -> xr.Dataset:
-    """Assemble one DIC stage in the common layout of all readers.
-
-    Parameters
-    ----------
-    ids : ndarray of int, shape (n,)
-        Point IDs in file order.
-    x : ndarray, shape (n, 3)
-        Current coordinates, mm.
-    x_ref : ndarray, shape (n, 3), optional
-        Reference (undeformed) coordinates, mm.
-    path : Path
-    fmt : str
-        Format name for ``attrs["format"]``.
-    valid : ndarray of bool, shape (n,), optional
-        False for points the software marks as failed. Rows with any
-        non-finite coordinate are invalid as well; invalid rows are NaN in
-        ``x`` and ``x_ref`` (their IDs are kept).
-    time : float, optional
-        Stage time, s.
-    attrs : mapping, optional
-        Further Dataset attributes.
-    extras : sequence of (name, values (n,), attrs)
-        Extra per-point variables.
-    point_id_source : {"file", "row"}
-
-    Returns
-    -------
-    xarray.Dataset
-        ``x(point, component)``, optionally ``x_ref(point, component)``, extras.
-    """
-    x = np.array(x, dtype=np.float64)
-    bad = ~np.isfinite(x).all(axis=1)
-    if x_ref is not None:
-        x_ref = np.array(x_ref, dtype=np.float64)
-        bad |= ~np.isfinite(x_ref).all(axis=1)
-    if valid is not None:
-        bad |= ~np.asarray(valid, dtype=bool)
-    x[bad] = np.nan
-    data_vars: dict[str, Any] = {
-        "x": (("point", "component"), x, {"units": "mm", "long_name": "current coordinates"}),
-    }
-    if x_ref is not None:
-        x_ref[bad] = np.nan
-        data_vars["x_ref"] = (("point", "component"), x_ref,
-                              {"units": "mm", "long_name": "reference (undeformed) coordinates"})
-    for name, values, vattrs in extras:
-        data_vars[name] = ("point", np.asarray(values), dict(vattrs))
-    coords = {
-        "point": ("point", np.asarray(ids, dtype=np.int64), {"long_name": "point ID"}),
-        "component": ("component", np.array(COMPONENTS, dtype=object)),
-    }
-    ds = xr.Dataset(data_vars, coords=coords)
-    if time is not None:
-        ds = ds.assign_coords(time=((), float(time), {"units": "s", "long_name": "stage time"}))
-    n_bad = int(bad.sum())
-    ds.attrs = {"format": fmt, "source": os.fspath(path), "point_id_source": point_id_source,
-                "n_points": int(x.shape[0]), "n_invalid": n_bad, **dict(attrs or {})}
-    if x.shape[0] and n_bad == x.shape[0]:
-        warnings.warn(f"{path}: none of the {n_bad} points is valid (all failed or NaN)", IrdicWarning, stacklevel=3)
-    log.info("%s: %d points (%d invalid) read as %s", path, x.shape[0], n_bad, fmt)
-    return ds
 
 
 # --------------------------------------------------------------------------- user-named columns

@@ -24,8 +24,9 @@ import numpy as np
 import xarray as xr
 
 from ..errors import FormatError
-from ._tables import (Header, check_unique, data_lines, extra_columns, read_lines, read_rows, split_fields,
-                     stage_dataset)
+from ._common import TextFile
+from ._stage import extra_columns, stage_dataset
+from ._tables import Header, check_unique, read_body, split_fields
 
 __all__ = ["read_dice", "MODEL_COLUMNS"]
 
@@ -67,11 +68,13 @@ def read_dice(path: str | os.PathLike) -> xr.Dataset:
     DataError
         A SUBSET_ID occurs twice.
     """
-    p, lines = read_lines(path)
-    k = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("***")), None)
+    text = TextFile(path)
+    p = text.path
+    k, line = next(((i, ln) for i, ln in text.lines() if ln.strip() and not ln.lstrip().startswith("***")),
+                   (None, ""))
     if k is None:
         raise FormatError("no column header row after the *** lines; expected SUBSET_ID, MODEL_COORDINATES_X, ...", p)
-    header = Header.from_fields(split_fields(lines[k], ","), k + 1, p)
+    header = Header.from_fields(split_fields(line, ","), k + 1, p)
     found = {b.upper() for b in header.bare}
     if not any(name in found for name in MODEL_COLUMNS):
         if {"COORDINATE_X", "DISPLACEMENT_X"} & found:
@@ -83,8 +86,7 @@ def read_dice(path: str | os.PathLike) -> xr.Dataset:
         raise FormatError(f"not a DICe solution header: found {header.describe()}; expected the comma-separated "
                           f"names SUBSET_ID, {', '.join(MODEL_COLUMNS)}, SIGMA", p, k + 1)
     j_model = header.require(MODEL_COLUMNS, what="a DICe stereo solution")
-    body, nos = data_lines(lines, k + 1, comment="***")
-    rows = read_rows(body, nos, header, sep=",", decimal=".")
+    rows = read_body(text, k + 1, header, sep=",", decimal=".", comment="***")
     j_id = header.find("SUBSET_ID")
     if j_id is not None:
         ids = rows.integers(j_id, what="SUBSET_ID")

@@ -31,7 +31,9 @@ import numpy as np
 import xarray as xr
 
 from ..errors import DataError, FormatError, IrdicWarning
-from ._tables import COMPONENTS, Header, check_unique, data_lines, detect_decimal, read_lines, read_rows, split_fields
+from ._common import TextFile
+from ._stage import COMPONENTS
+from ._tables import Header, check_unique, data_lines, read_body, split_fields
 from .units import length_scale
 
 __all__ = ["read_markers"]
@@ -59,7 +61,7 @@ def _header_columns(header: Header) -> list[int] | None:
 
 
 def _find_header(lines: list[str], path: Path) -> tuple[int, str | None, Header, list[int]] | None:
-    for k, ln in enumerate(lines[:1000]):
+    for k, ln in enumerate(lines):
         s = ln.strip().lstrip("#").strip()
         if not s:
             continue
@@ -112,25 +114,27 @@ def read_markers(path: str | os.PathLike) -> xr.Dataset:
     DataError
         A marker ID occurs twice, or no marker has coordinates.
     """
-    p, lines = read_lines(path)
-    found = _find_header(lines, p)
+    text = TextFile(path)
+    p = text.path
+    found = _find_header(text.head(1000), p)
     if found is not None:
         k, sep, header, idx = found
-        body, nos = data_lines(lines, k + 1)
+        start = k + 1
     else:
-        body, nos = data_lines(lines, 0)
-        if not body:
+        start = 0
+        first = next(((k, ln) for k, ln in text.lines() if data_lines([ln], 0)[0]), None)
+        if first is None:
             raise FormatError("no data rows; expected lines 'ID; x; y; z' (mm)", p)
-        sep = _headerless_sep(body[0])
-        fields = split_fields(body[0], sep)
+        sep = _headerless_sep(first[1])
+        fields = split_fields(first[1], sep)
         if len(fields) != 4:
             raise FormatError(
                 f"found no header naming the columns ID, x, y, z and {len(fields)} fields in the first data row; "
                 "expected a header such as '# ID; x [mm]; y [mm]; z [mm]' or four columns ID x y z",
-                p, int(nos[0]))
+                p, first[0] + 1)
         header = Header.from_fields(["ID", "x", "y", "z"], 0, p)
         idx = [0, 1, 2, 3]
-    rows = read_rows(body, nos, header, sep=sep, decimal=detect_decimal(body, sep))
+    rows = read_body(text, start, header, sep=sep, decimal=None)
     j_id, *j_xyz = idx
     col = rows.frame.iloc[:, j_id]
     if not rows.is_numeric(j_id):

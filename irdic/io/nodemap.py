@@ -32,15 +32,16 @@ import os
 import re
 import warnings
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 import xarray as xr
 
 from ..errors import FormatError, IrdicWarning
 from .signals import parse_signals, stage_signals
-from ._tables import (Header, check_unique, data_lines, detect_decimal, extra_columns, read_lines, read_rows,
-                      split_fields, stage_dataset)
+from ._common import TextFile
+from ._stage import extra_columns, stage_dataset
+from ._tables import Header, check_unique, read_body, split_fields
 from .units import length_scale, parse_date, parse_duration
 
 __all__ = ["read_nodemap", "RBM_WARNING"]
@@ -144,8 +145,8 @@ def _stage_int(flat: Mapping[str, tuple[str, int]], key: str, path: Path) -> int
         raise FormatError(f"{key} must be an integer stage index, found {value!r}", path, line) from None
 
 
-def _find_header(lines: list[str], path: Path) -> tuple[int, Header]:
-    for k, ln in enumerate(lines):
+def _find_header(lines: Iterable[tuple[int, str]], path: Path) -> tuple[int, Header]:
+    for k, ln in lines:
         s = ln.strip()
         if ";" not in s:
             continue
@@ -198,11 +199,12 @@ def read_nodemap(path: str | os.PathLike) -> xr.Dataset:
     DataError
         A facet ID occurs twice.
     """
-    p, lines = read_lines(path)
-    k, header = _find_header(lines, p)
-    flat, sections = _metadata(lines[:k])
-    body, nos = data_lines(lines, k + 1)
-    rows = read_rows(body, nos, header, sep=";", decimal=detect_decimal(body, ";"))
+    text = TextFile(path)
+    p = text.path
+    k, header = _find_header(text.lines(), p)
+    head = text.head(k)
+    flat, sections = _metadata(head)
+    rows = read_body(text, k + 1, header, sep=";", decimal=None)
     j_id, *j_xyz = header.require(_REQUIRED, what="a nodemap")
 
     def coord(j: int) -> np.ndarray:
@@ -253,7 +255,7 @@ def read_nodemap(path: str | os.PathLike) -> xr.Dataset:
     if rbm:
         warnings.warn(f"{p}: {RBM_WARNING}", IrdicWarning, stacklevel=2)
     ds = stage_dataset(ids, x, x_ref, path=p, fmt="nodemap", time=time, attrs=attrs, extras=extras)
-    signals = parse_signals(lines[:k], p)
+    signals = parse_signals(head, p)
     if signals:
         ds = ds.merge(stage_signals(signals))
     return ds

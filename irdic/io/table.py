@@ -18,8 +18,9 @@ import pandas as pd
 import xarray as xr
 
 from ..errors import ConfigError, DataError, FormatError
-from ._tables import (check_unique, data_lines, detect_decimal, extra_columns, find_named_header, match_column,
-                      read_lines, read_rows, stage_dataset)
+from ._common import TextFile
+from ._stage import extra_columns, stage_dataset
+from ._tables import check_unique, find_named_header, match_column, read_body
 from .units import length_scale, parse_duration, time_scale
 
 __all__ = ["read_table"]
@@ -120,13 +121,21 @@ def read_table(path: str | os.PathLike, *, columns: Mapping[str, str], sep: str 
     if not np.isfinite(invalid_value):
         raise ConfigError(f"invalid_value must be a finite number, got {invalid_value!r}")
 
-    p, lines = read_lines(path)
-    k, sep_found, header = find_named_header(lines, list(cols.values()), sep, header_line, p)
-    body, nos = data_lines(lines, k + 1)
-    dec = decimal if decimal is not None else detect_decimal(body, sep_found)
-    if dec == "," and sep_found == ",":
+    text = TextFile(path)
+    p = text.path
+    # the header is searched in the first 1000 lines, or up to header_line; an invalid header_line is
+    # reported with the file's line count, so then all lines are read (an error path only)
+    limit: int | None = 1000
+    if header_line is not None:
+        valid_line = isinstance(header_line, (int, np.integer)) and not isinstance(header_line, bool) \
+            and header_line >= 1
+        limit = max(1000, int(header_line)) if valid_line else None
+    head = text.head(limit) if limit is not None else [ln for _k, ln in text.lines()]
+    k, sep_found, header = find_named_header(head, list(cols.values()), sep, header_line, p)
+    if decimal == "," and sep_found == ",":
         raise ConfigError(f"{p} is comma-separated, so decimal ',' is impossible; use decimal='.'")
-    rows = read_rows(body, nos, header, sep=sep_found, decimal=dec, quoting=csv.QUOTE_MINIMAL)
+    rows = read_body(text, k + 1, header, sep=sep_found, decimal=decimal, quoting=csv.QUOTE_MINIMAL)
+    dec = rows.decimal
     idx = {role: match_column(header, name) for role, name in cols.items()}
 
     def coord(role: str) -> np.ndarray:

@@ -23,7 +23,9 @@ import numpy as np
 import xarray as xr
 
 from ..errors import FormatError
-from ._tables import Header, data_lines, extra_columns, read_lines, read_rows, split_fields, stage_dataset
+from ._common import TextFile
+from ._stage import extra_columns, stage_dataset
+from ._tables import Header, read_body, split_fields
 from .units import length_scale
 
 __all__ = ["read_vic", "REQUIRED_COLUMNS"]
@@ -70,12 +72,13 @@ def read_vic(path: str | os.PathLike) -> xr.Dataset:
         Missing X/Y/Z/U/V/W columns (e.g. a VIC-2D export), bad cells
         (named by line and column), rows of the wrong length, no rows.
     """
-    p, lines = read_lines(path)
-    k = next((i for i, ln in enumerate(lines) if ln.strip()), None)
+    text = TextFile(path)
+    p = text.path
+    k, line = next(((i, ln) for i, ln in text.lines() if ln.strip()), (None, ""))
     if k is None:
         raise FormatError("file holds only blank lines; expected a VIC-3D CSV header", p)
-    sep = _sep_of(lines[k])
-    header = Header.from_fields(split_fields(lines[k], sep), k + 1, p)
+    sep = _sep_of(line)
+    header = Header.from_fields(split_fields(line, sep), k + 1, p)
     if any(header.find(n, case=True) is None for n in REQUIRED_COLUMNS):
         present = set(header.bare)
         if {"x", "y"} <= present and "Z" not in present:
@@ -83,8 +86,7 @@ def read_vic(path: str | os.PathLike) -> xr.Dataset:
                 f"no 3-D columns: found {header.describe()}; this looks like a 2-D (image plane) export, irdic "
                 "needs a VIC-3D export with X, Y, Z, U, V, W in mm", p, k + 1)
     j_all = header.require(REQUIRED_COLUMNS, what="a VIC-3D export", case=True)
-    body, nos = data_lines(lines, k + 1)
-    rows = read_rows(body, nos, header, sep=sep, decimal=".")
+    rows = read_body(text, k + 1, header, sep=sep, decimal=".")
 
     def coord(j: int) -> np.ndarray:
         return rows.number(j) * length_scale(header.units[j], header.names[j], p, header.line)
