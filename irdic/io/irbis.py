@@ -27,13 +27,13 @@ the first row of the data section (``;`` also separates list values inside
 
 Parsing speed matters: a test series has thousands of these files of 1.5 MB
 each. The data section is parsed by a vectorised fixed-point decoder
-(:func:`irdic.io._decimals.parse_fast`) in blocks of whole lines: every number is located by
-its first and last byte, its characters are gathered a position at a time
-(counted from its last character) and the digits are summed with their powers
-of ten, all in NumPy and in scratch arrays that are reused from block to block.
-On the sample files that is about three times the speed of
-:func:`numpy.loadtxt` and faster than :func:`pandas.read_csv`, and it gives the
-correctly rounded value of each decimal number (the same as :func:`float`).
+(:func:`irdic.io._decimals.parse_fast`) in blocks of whole lines: every number
+is located by its first and last byte, its characters are gathered a position
+at a time (counted from its last character) and the digits are summed with
+their powers of ten, all in NumPy and in scratch arrays that are reused from
+block to block. It gives the correctly rounded value of each decimal number
+(the same as :func:`float`); its throughput next to :func:`numpy.loadtxt` and
+:func:`pandas.read_csv` is in ``benchmarks/README.md``.
 Anything the fast decoder does not expect (exponents, stray characters, empty
 cells, ragged rows, a truncated file) sends the file through a plain
 line-by-line parser (:func:`parse_slow`) that either reads it (exponents) or
