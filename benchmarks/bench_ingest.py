@@ -27,7 +27,7 @@ import numpy as np
 import xarray as xr
 
 from irdic.ingest import ingest_ir
-from irdic.io.irbis import write_irbis
+from irdic.synthetic.writers import write_irbis
 
 
 def write_series(folder: Path, n: int, width: int, height: int) -> int:

@@ -39,7 +39,8 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from irdic.io.irb import count_irb_frames, iter_irb_frames, read_irb, write_irb  # noqa: E402
+from irdic.io.irb import count_irb_frames, iter_irb_frames, read_irb  # noqa: E402
+from irdic.synthetic.writers import write_irb  # noqa: E402
 from irdic.io.irbis import parse_irbis, read_irbis  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

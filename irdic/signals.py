@@ -43,7 +43,8 @@ import xarray as xr
 
 from .errors import ConfigError, DataError, FormatError, IrdicWarning
 from .io.signals import signal_coords, standard_name
-from .io.table import _find_header, _match, data_lines, detect_decimal, read_lines, read_rows, split_unit, time_scale
+from .io._tables import data_lines, detect_decimal, find_named_header, match_column, read_lines, read_rows
+from .io.units import split_unit, time_scale
 from .store import write_dataset
 
 __all__ = ["read_machine", "ingest_machine", "signals_at", "MACHINE_PREFIX"]
@@ -126,13 +127,13 @@ def read_machine(path: str | os.PathLike, *, columns: Mapping[str, str], format:
     if not np.isfinite(time_offset):
         raise ConfigError(f"machine.time_offset must be a finite number of seconds, got {time_offset!r}")
     p, lines = read_lines(path)
-    k, sep_found, header = _find_header(lines, list(cols.values()), sep, None, p)
+    k, sep_found, header = find_named_header(lines, list(cols.values()), sep, None, p)
     body, nos = data_lines(lines, k + 1)
     dec = decimal if decimal is not None else detect_decimal(body, sep_found)
     if dec == "," and sep_found == ",":
         raise ConfigError(f"{p} is comma-separated, so machine.decimal ',' is impossible; use '.'")
     rows = read_rows(body, nos, header, sep=sep_found, decimal=dec)
-    idx = {role: _match(header, name) for role, name in cols.items()}
+    idx = {role: match_column(header, name) for role, name in cols.items()}
     jt = idx["time"]
     t = rows.number(jt) * time_scale(header.units[jt], header.names[jt], p, header.line)
     if len(t) < 2:

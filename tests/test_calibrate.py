@@ -220,7 +220,7 @@ def test_dlt_only_matches_the_paper_method(lab):
 
 
 def test_figures_and_files(lab, lab_cal, tmp_path):
-    from irdic.io.markers import write_markers
+    from irdic.synthetic.writers import write_markers
 
     png = plot_calibration(lab_cal, lab.image, tmp_path / "cal.png")
     assert png.stat().st_size > 20_000

@@ -7,9 +7,8 @@ import pytest
 
 from irdic.errors import DataError, FormatError, IrdicError
 from irdic.ingest import frame_times, ingest_dic, ingest_ir, list_inputs
-from irdic.io.irbis import write_irbis
-from irdic.io.nodemap import write_nodemap
 from irdic.store import open_store
+from irdic.synthetic.writers import write_irbis, write_nodemap
 
 T0 = dt.datetime(2025, 3, 14, 9, 26, 53)
 
@@ -148,7 +147,7 @@ def test_ingest_dic_bad_file_in_series(tmp_path):
 
 
 def test_mixed_dic_formats_are_refused_naming_both(tmp_path):
-    from irdic.io.dice import write_dice
+    from irdic.synthetic.writers import write_dice
 
     _write_dic_series(tmp_path / "dic")
     write_dice(tmp_path / "dic" / "DICe_solution_0.txt", np.arange(3), np.ones((3, 3)), np.zeros((3, 3)))
@@ -221,10 +220,11 @@ def test_some_nan_pixels_warn_with_their_fraction(tmp_path, caplog):
 
 def test_duplicate_irb_time_stamps_are_refused_before_decoding(tmp_path, monkeypatch):
     import irdic.io.irb as irb
+    from irdic.synthetic.writers import write_irb
 
     src = tmp_path / "ir"
     src.mkdir()
-    irb.write_irb(src / "seq.irb", 20 + np.zeros((3, 3, 4)), [0.0, 0.5, 0.5])
+    write_irb(src / "seq.irb", 20 + np.zeros((3, 3, 4)), [0.0, 0.5, 0.5])
 
     def no_decoding(path):
         raise AssertionError("frames decoded before the time stamps were checked")
@@ -237,7 +237,7 @@ def test_duplicate_irb_time_stamps_are_refused_before_decoding(tmp_path, monkeyp
 
 
 def test_irb_series_still_ingests(tmp_path):
-    from irdic.io.irb import write_irb
+    from irdic.synthetic.writers import write_irb
 
     src = tmp_path / "ir"
     src.mkdir()

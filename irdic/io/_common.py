@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import codecs
 import os
 import stat
 from pathlib import Path
+from typing import Iterator
 
 from ..errors import FormatError
 
-__all__ = ["check_file", "decode_text", "read_text", "head_bytes", "non_regular_kind"]
+__all__ = ["check_file", "decode_text", "read_text", "head_bytes", "non_regular_kind", "TextFile"]
 
 
 def non_regular_kind(mode: int) -> str | None:
@@ -86,3 +88,81 @@ def read_text(path: str | os.PathLike) -> str:
     fails. CRLF and CR line ends are kept; use ``str.splitlines``.
     """
     return decode_text(check_file(path).read_bytes())
+
+
+class TextFile:
+    """A text export read once as bytes and decoded a block of lines at a time.
+
+    Parsing a large export line by line must not hold the whole text several
+    times over (the text, a list of its lines, a joined copy...): only the
+    bytes are kept, and lines are decoded in blocks of about
+    :attr:`BLOCK` bytes that end at a line end. The lines are those of
+    :meth:`str.splitlines` on the whole decoded text (CRLF, CR and LF alike),
+    and the encoding is that of :func:`decode_text`.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Raises
+    ------
+    FormatError
+        The file is missing, empty, not a regular file, or binary (contains
+        NUL bytes).
+    """
+
+    BLOCK = 1 << 18
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = check_file(path)
+        raw = self.path.read_bytes()
+        if b"\x00" in raw:
+            raise FormatError("contains NUL bytes: this is a binary file, expected a text export", self.path)
+        self._raw = raw
+        self._start = 3 if raw.startswith(b"\xef\xbb\xbf") else 0
+        self.encoding = "utf-8" if _is_utf8(raw, self._start, self.BLOCK) else "cp1252"
+
+    def blocks(self) -> Iterator[tuple[int, list[str]]]:
+        """``(k, lines)`` for successive blocks; ``k`` = 0-based index of the block's first line."""
+        raw, pos, k = self._raw, self._start, 0
+        while pos < len(raw):
+            cut = raw.find(b"\n", pos + self.BLOCK - 1)
+            # cutting just after a LF keeps CRLF pairs and UTF-8 sequences whole
+            cut = len(raw) if cut < 0 else cut + 1
+            lines = raw[pos:cut].decode(self.encoding, errors="replace").splitlines()
+            yield k, lines
+            k += len(lines)
+            pos = cut
+
+    def lines(self) -> Iterator[tuple[int, str]]:
+        """``(k, line)`` for every line, ``k`` 0-based (line ``k + 1`` of the file)."""
+        for k0, lines in self.blocks():
+            yield from enumerate(lines, start=k0)
+
+    def head(self, n: int) -> list[str]:
+        """The first ``n`` lines (all of them when the file has fewer)."""
+        out: list[str] = []
+        for _k0, lines in self.blocks():
+            out += lines[: n - len(out)]
+            if len(out) >= n:
+                break
+        return out
+
+    def line(self, number: int) -> str:
+        """Text of the 1-based line ``number`` ("" beyond the end), for messages."""
+        for k0, lines in self.blocks():
+            if number - 1 < k0 + len(lines):
+                return lines[number - 1 - k0]
+        return ""
+
+
+def _is_utf8(raw: bytes, start: int, block: int) -> bool:
+    """Whether ``raw[start:]`` is valid UTF-8, checked a block at a time (no full decoded copy)."""
+    dec = codecs.getincrementaldecoder("utf-8")()
+    try:
+        for pos in range(start, len(raw), block):
+            dec.decode(raw[pos:pos + block], final=False)
+        dec.decode(b"", final=True)
+    except UnicodeDecodeError:
+        return False
+    return True

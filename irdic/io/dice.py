@@ -18,21 +18,21 @@ from __future__ import annotations
 import logging
 import os
 import re
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from ..errors import ConfigError, FormatError
-from .table import (Header, check_unique, data_lines, extra_columns, read_lines, read_rows, split_fields,
-                    stage_dataset)
+from ..errors import FormatError
+from ._common import TextFile
+from ._stage import extra_columns, stage_dataset
+from ._tables import Header, check_unique, read_body, split_fields
 
-__all__ = ["read_dice", "write_dice"]
+__all__ = ["read_dice", "MODEL_COLUMNS"]
 
 log = logging.getLogger(__name__)
 
-_MODEL = ("MODEL_COORDINATES_X", "MODEL_COORDINATES_Y", "MODEL_COORDINATES_Z",
+MODEL_COLUMNS = ("MODEL_COORDINATES_X", "MODEL_COORDINATES_Y", "MODEL_COORDINATES_Z",
           "MODEL_DISPLACEMENT_X", "MODEL_DISPLACEMENT_Y", "MODEL_DISPLACEMENT_Z")
 _FRAME_IN_NAME = re.compile(r"_(\d+)$")
 
@@ -68,13 +68,15 @@ def read_dice(path: str | os.PathLike) -> xr.Dataset:
     DataError
         A SUBSET_ID occurs twice.
     """
-    p, lines = read_lines(path)
-    k = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("***")), None)
+    text = TextFile(path)
+    p = text.path
+    k, line = next(((i, ln) for i, ln in text.lines() if ln.strip() and not ln.lstrip().startswith("***")),
+                   (None, ""))
     if k is None:
         raise FormatError("no column header row after the *** lines; expected SUBSET_ID, MODEL_COORDINATES_X, ...", p)
-    header = Header.from_fields(split_fields(lines[k], ","), k + 1, p)
+    header = Header.from_fields(split_fields(line, ","), k + 1, p)
     found = {b.upper() for b in header.bare}
-    if not any(name in found for name in _MODEL):
+    if not any(name in found for name in MODEL_COLUMNS):
         if {"COORDINATE_X", "DISPLACEMENT_X"} & found:
             raise FormatError(
                 "this is a 2-D DICe solution (image COORDINATE_/DISPLACEMENT_ columns only); irdic needs the "
@@ -82,10 +84,9 @@ def read_dice(path: str | os.PathLike) -> xr.Dataset:
                 p, k + 1,
             )
         raise FormatError(f"not a DICe solution header: found {header.describe()}; expected the comma-separated "
-                          f"names SUBSET_ID, {', '.join(_MODEL)}, SIGMA", p, k + 1)
-    j_model = header.require(_MODEL, what="a DICe stereo solution")
-    body, nos = data_lines(lines, k + 1, comment="***")
-    rows = read_rows(body, nos, header, sep=",", decimal=".")
+                          f"names SUBSET_ID, {', '.join(MODEL_COLUMNS)}, SIGMA", p, k + 1)
+    j_model = header.require(MODEL_COLUMNS, what="a DICe stereo solution")
+    rows = read_body(text, k + 1, header, sep=",", decimal=".", comment="***")
     j_id = header.find("SUBSET_ID")
     if j_id is not None:
         ids = rows.integers(j_id, what="SUBSET_ID")
@@ -113,61 +114,3 @@ def read_dice(path: str | os.PathLike) -> xr.Dataset:
         attrs["frame_index"] = int(m.group(1))
     return stage_dataset(ids, x, x_ref, path=p, fmt="dice", valid=valid, attrs=attrs, extras=extras,
                          point_id_source=id_source)
-
-
-def write_dice(path: str | os.PathLike, ids: Any, model_coordinates: Any, model_displacement: Any, *,
-               sigma: Any = None, image_coordinates: Any = None, header_lines: Any = None) -> Path:
-    """Write a DICe-style stereo solution file (for tests and demos).
-
-    Parameters
-    ----------
-    path : path-like
-    ids : array_like of int, shape (n,)
-        SUBSET_ID values.
-    model_coordinates, model_displacement : array_like, shape (n, 3)
-        mm. Rows with NaN in either are written as DICe writes failed
-        subsets: displacement 0 and SIGMA -1.
-    sigma : array_like, shape (n,), optional
-        Matching uncertainty; 0.01 where not given.
-    image_coordinates : array_like, shape (n, 2), optional
-        COORDINATE_X/Y in px; written (with zero DISPLACEMENT_X/Y) when given.
-    header_lines : sequence of str, optional
-        Text written as ``*** <line>`` before the header row.
-
-    Returns
-    -------
-    Path
-    """
-    ids_arr = np.asarray(ids)
-    if ids_arr.ndim != 1 or not np.issubdtype(ids_arr.dtype, np.integer):
-        raise ConfigError(f"ids must be a 1-D integer array, got dtype {ids_arr.dtype} shape {ids_arr.shape}")
-    n = ids_arr.size
-    mc = np.asarray(model_coordinates, dtype=np.float64)
-    md = np.asarray(model_displacement, dtype=np.float64)
-    for name, a in (("model_coordinates", mc), ("model_displacement", md)):
-        if a.shape != (n, 3):
-            raise ConfigError(f"{name} must have shape ({n}, 3), got {a.shape}")
-    sg = np.full(n, 0.01) if sigma is None else np.asarray(sigma, dtype=np.float64)
-    if sg.shape != (n,):
-        raise ConfigError(f"sigma must have shape ({n},), got {sg.shape}")
-    failed = ~(np.isfinite(mc).all(1) & np.isfinite(md).all(1))
-    mc = np.where(np.isfinite(mc), mc, 0.0)
-    md = np.where(failed[:, None], 0.0, md)
-    sg = np.where(failed, -1.0, sg)
-    names = ["SUBSET_ID"]
-    cols = []
-    if image_coordinates is not None:
-        ic = np.asarray(image_coordinates, dtype=np.float64)
-        if ic.shape != (n, 2):
-            raise ConfigError(f"image_coordinates must have shape ({n}, 2), got {ic.shape}")
-        names += ["COORDINATE_X", "COORDINATE_Y", "DISPLACEMENT_X", "DISPLACEMENT_Y"]
-        cols += [ic, np.zeros((n, 2))]
-    names += [*_MODEL, "SIGMA"]
-    cols += [mc, md, sg[:, None]]
-    values = np.column_stack(cols)
-    fmt = "%d," + ",".join(["%.4E"] * values.shape[1])
-    head = [f"*** {ln}" for ln in (header_lines or [])]
-    body = [fmt % (i, *row) for i, row in zip(ids_arr.tolist(), values.tolist())]
-    out = Path(path)
-    out.write_text("\n".join(head + [",".join(names)] + body) + "\n", encoding="utf-8", newline="\n")
-    return out

@@ -27,16 +27,16 @@ the first row of the data section (``;`` also separates list values inside
 
 Parsing speed matters: a test series has thousands of these files of 1.5 MB
 each. The data section is parsed by a vectorised fixed-point decoder
-(:func:`_parse_fast`) in blocks of whole lines: every number is located by
-its first and last byte, its characters are gathered a position at a time
-(counted from its last character) and the digits are summed with their powers
-of ten, all in NumPy and in scratch arrays that are reused from block to block.
-On the sample files that is about three times the speed of
-:func:`numpy.loadtxt` and faster than :func:`pandas.read_csv`, and it gives the
-correctly rounded value of each decimal number (the same as :func:`float`).
+(:func:`irdic.io._decimals.parse_fast`) in blocks of whole lines: every number
+is located by its first and last byte, its characters are gathered a position
+at a time (counted from its last character) and the digits are summed with
+their powers of ten, all in NumPy and in scratch arrays that are reused from
+block to block. It gives the correctly rounded value of each decimal number
+(the same as :func:`float`); its throughput next to :func:`numpy.loadtxt` and
+:func:`pandas.read_csv` is in ``benchmarks/README.md``.
 Anything the fast decoder does not expect (exponents, stray characters, empty
 cells, ragged rows, a truncated file) sends the file through a plain
-line-by-line parser (:func:`_parse_slow`) that either reads it (exponents) or
+line-by-line parser (:func:`parse_slow`) that either reads it (exponents) or
 says exactly which line and column is wrong.
 """
 
@@ -47,24 +47,21 @@ import logging
 import math
 import os
 import re
-import threading
 import warnings
-from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 import xarray as xr
 
-from ..errors import ConfigError, FormatError, IrdicWarning
+from ..errors import FormatError, IrdicWarning
 from ._common import check_file, decode_text
+from ._decimals import parse_fast
 from .stack import check_temperatures, normalise_unit, temperature_dataarray, to_celsius
 
-__all__ = ["read_irbis", "read_irbis_header", "write_irbis", "parse_irbis"]
+__all__ = ["read_irbis", "read_irbis_header", "parse_irbis"]
 
 log = logging.getLogger(__name__)
 
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
-_POW10 = 10.0 ** np.arange(0, 23)
 _NON_BLANK = re.compile(rb"[^ \t\r\n]")
 _LINE_END = re.compile(rb"[\r\n]")
 _MAX_PIXELS = 100_000  # bound on image sizes and sensor positions (px)
@@ -326,234 +323,6 @@ def _detect_layout(first_row: bytes, width: int | None, path, line: int) -> tupl
     return sep, mark
 
 
-_BLOCK = 1 << 18  # bytes per block of the fast decoder: temporaries stay cache- and allocator-friendly
-
-
-def _parse_fast(data: bytes, sep: bytes, mark: int, newline: int, expected: int | None = None,
-                start: int = 0, stop: int | None = None,
-                convert: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray] | None:
-    """Vectorised decoder of plain decimal numbers.
-
-    The section is cut into blocks of whole lines (~256 KiB) so that the
-    temporaries stay small (repeated large temporaries cost more in page
-    faults than in arithmetic). In each block every number is located by its
-    first and last byte; its characters, counted from the last one, are
-    gathered a row at a time (row ``j`` = ``j``-th character from the end of
-    every number) and the digits are summed with their powers of ten in
-    float64. The integer sum is exact, so dividing by ``10**decimals`` gives
-    the correctly rounded value, the same as :func:`float` on the text.
-
-    Parameters
-    ----------
-    data : bytes
-        The data section, or the whole file with ``start``/``stop`` marking
-        the data section (saves a copy of the section).
-    sep : bytes
-        Separator (one byte).
-    mark : int
-        Decimal mark byte.
-    newline : int
-        Line end byte.
-    expected : int, optional
-        Expected number of values (ImageWidth x ImageHeight).
-    start, stop : int, optional
-        Byte range of the data section in ``data``.
-    convert : (scale, offset), optional
-        Return ``float32(value * scale + offset)`` (computed in float64),
-        for example (1, -273.15) for kelvin to °C; default: float64 values.
-
-    Returns
-    -------
-    (values, per_line) or None
-        ``values``: float64 (N,) in file order (float32 with ``convert``);
-        ``per_line``: number of
-        values on each line. None when the section holds anything beyond
-        ``[sign] digits [mark digits]`` numbers separated by ``sep``, or more
-        numbers than expected (the caller then uses the line-by-line parser,
-        which says what is wrong).
-    """
-    end = len(data) if stop is None else stop
-    b_all = np.frombuffer(data, np.uint8)
-    size = end - start
-    capacity = min(expected, size // 2 + 1) if expected is not None else size // 2 + 1
-    values = np.empty(capacity, np.float64 if convert is None else np.float32)
-    counts = []
-    n_done = 0
-    pos = start
-    nl = bytes([newline])
-    while pos < end:
-        cut = data.find(nl, min(pos + _BLOCK, end - 1), end)
-        cut = end if cut < 0 else cut + 1
-        found = _decode_block(b_all[pos:cut], sep[0], mark, newline, values, n_done, convert)
-        if found is None:
-            return None
-        n, per_line = found
-        counts.append(per_line)
-        n_done += n
-        pos = cut
-    per_line = np.concatenate(counts) if counts else np.zeros(0, np.int64)
-    # the last line may lack its line end; every block reported its lines so far
-    return values[:n_done], per_line
-
-
-class _Workspace(threading.local):
-    """Scratch arrays of the fast decoder, kept per thread and reused.
-
-    Fresh multi-100-kB temporaries for every block would be page-faulted in
-    again and again (the allocator hands large blocks back to the system);
-    reusing them keeps the decoder at memory speed whatever the allocator's
-    state.
-    """
-
-    def __init__(self):
-        self.arrays: dict = {}
-
-    def get(self, name: str, dtype, n: int) -> np.ndarray:
-        a = self.arrays.get(name)
-        if a is None or a.size < n:
-            a = np.empty(max(n, 2 * (0 if a is None else a.size), 1024), dtype)
-            self.arrays[name] = a
-        return a[:n]
-
-
-_WORK = _Workspace()
-
-
-def _decode_block(b: np.ndarray, sep0: int, mark: int, newline: int, out: np.ndarray,
-                  offset: int, convert: tuple[float, float] | None = None) -> tuple[int, np.ndarray] | None:
-    """Decode one block of whole lines into ``out[offset:]``; see :func:`_parse_fast`."""
-    ws = _WORK
-    size = b.size
-    tmp = ws.get("tmp", bool, size)
-    delim = ws.get("delim", bool, size)
-    np.equal(b, sep0, out=delim)
-    for other in ((10, 13, 9) if sep0 == 32 else (10, 13)):
-        np.equal(b, other, out=tmp)
-        delim |= tmp
-    digit = ws.get("digit", np.uint8, size)
-    np.subtract(b, np.uint8(48), out=digit)
-    ok = ws.get("ok", bool, size)
-    np.less(digit, 10, out=ok)
-    is_mark = ws.get("mark", bool, size)
-    np.equal(b, mark, out=is_mark)
-    ok |= is_mark
-    ok |= delim
-    is_sign = ws.get("sign", bool, size)
-    np.equal(b, 45, out=is_sign)
-    np.equal(b, 43, out=tmp)
-    is_sign |= tmp
-    ok |= is_sign
-    if not ok.all():
-        return None
-    if sep0 != 32:
-        # an empty cell (a separator after a separator or at a line start) would shift the row silently
-        if b[0] == sep0:
-            return None
-        t = tmp[:size - 1]
-        np.equal(b[1:], sep0, out=t)
-        t &= delim[:size - 1]
-        if t.any():
-            return None
-    inside = ws.get("inside", bool, size + 2)
-    inside[0] = inside[-1] = False
-    np.logical_not(delim, out=inside[1:-1])
-    np.greater(inside[1:-1], inside[:-2], out=tmp)
-    n = int(np.count_nonzero(tmp))
-    if n == 0:
-        return 0, np.zeros(np.count_nonzero(b == newline) + 1, np.int64)
-    if offset + n > out.size:
-        return None
-    # (np.compress into a kept buffer would avoid these two allocations but is 4x slower)
-    start = np.flatnonzero(tmp)
-    np.greater(inside[1:-1], inside[2:], out=tmp)  # last byte of each number
-    end = np.flatnonzero(tmp)
-    length = ws.get("length", np.intp, n)
-    np.subtract(end, start, out=length)
-    length += 1
-    width = int(length.max())
-    signed = ws.get("signed", bool, n)
-    np.take(is_sign, start, out=signed, mode="clip")
-    n_signed = int(np.count_nonzero(signed))
-    # a sign only in front, something after it, and digit sums that float64 holds exactly
-    if n_signed != np.count_nonzero(is_sign) or width > 15 or (n_signed and (length[signed] < 2).any()):
-        return None
-    padded = ws.get("padded", np.uint8, size + width)
-    padded[:width] = ord(" ")
-    padded[width:] = b
-    last = ws.get("last", np.intp, n)
-    np.add(end, width, out=last)  # each number's last byte in ``padded``
-    idx = ws.get("idx", np.intp, n)
-    row = ws.get("row", np.uint8, n)
-    use = ws.get("use", bool, n)
-    use2 = ws.get("use2", bool, n)
-    prod = ws.get("prod", np.float64, n)
-    acc = out[offset:offset + n] if convert is None else ws.get("acc", np.float64, n)
-    acc[:] = 0.0
-
-    k = None
-    if np.count_nonzero(is_mark) == n:
-        first = padded[last[0] - np.arange(min(width, int(length[0])))]
-        hits = np.flatnonzero(first == mark)
-        if hits.size == 1:
-            np.subtract(last, hits[0], out=idx)
-            np.take(padded, idx, out=row, mode="clip")
-            if (row == mark).all():
-                k = int(hits[0])
-    if k is not None:
-        # the usual export: one decimal mark per number, same number of decimals
-        if (length - signed).min() < 2:  # a lone mark
-            return None
-        for j in range(width):
-            if j == k:
-                continue
-            np.subtract(last, j, out=idx)
-            np.take(padded, idx, out=row, mode="clip")
-            row -= 48
-            np.less(row, 10, out=use)
-            if j:
-                np.greater(length, j, out=use2)
-                use &= use2
-            np.multiply(row, use, out=row)
-            np.multiply(row, _POW10[j - (j > k)], out=prod)
-            acc += prod
-        acc /= _POW10[k]
-    else:
-        rows = [padded.take(last - j) for j in range(width)]
-        n_mark = np.zeros(n, np.int64)
-        kk = np.full(n, width + 1)
-        for j, r in enumerate(rows):
-            m = (r == mark) & (length > j)
-            n_mark += m
-            kk[m] = j
-        if n_mark.max() > 1 or (length - signed - n_mark).min() < 1:
-            return None
-        for j, r in enumerate(rows):
-            dj = r - np.uint8(48)
-            ok_j = (dj < 10) & (length > j)
-            dj[~ok_j] = 0
-            acc += dj * _POW10[j - (j > kk)]
-        acc /= _POW10[np.where(n_mark == 1, kk, 0)]
-    if n_signed:
-        np.take(b, start, out=row, mode="clip")
-        np.equal(row, ord("-"), out=use)
-        np.negative(acc, out=acc, where=use)
-    if convert is not None:
-        scale, shift = convert
-        if scale != 1.0:
-            acc *= scale
-        if shift != 0.0:
-            acc += shift
-        out[offset:offset + n] = acc
-    # values per line; the part after the block's last line end is one more (possibly empty) line
-    np.equal(b, newline, out=tmp)
-    ends_of_lines = np.flatnonzero(tmp)
-    before = np.searchsorted(end, ends_of_lines)
-    per_line = np.diff(np.concatenate(([0], before, [n])))
-    if ends_of_lines.size and ends_of_lines[-1] == size - 1:
-        per_line = per_line[:-1]  # the block ends with a line end: no partial line
-    return n, per_line
-
-
 def _split_row(text: str, sep: str) -> list[str]:
     if sep == " ":
         return text.split()
@@ -563,7 +332,7 @@ def _split_row(text: str, sep: str) -> list[str]:
     return cells
 
 
-def _parse_slow(data: bytes, sep: bytes, mark: int, newline: int, first_line: int, width: int | None,
+def parse_slow(data: bytes, sep: bytes, mark: int, newline: int, first_line: int, width: int | None,
                 height: int | None, path, width_line: int | None, height_line: int | None) -> np.ndarray:
     """Line-by-line parser: exact error messages, and exponent notation."""
     sep_s = sep.decode()
@@ -689,7 +458,7 @@ def parse_irbis(raw: bytes, path: str | os.PathLike | None = None, *,
 
     expected = width * height if width is not None and height is not None else None
     convert = _TO_CELSIUS[header["unit"]] if celsius else None
-    fast = _parse_fast(raw, sep, mark, newline, expected, start, stop, convert)
+    fast = parse_fast(raw, sep, mark, newline, expected, start, stop, convert)
     if fast is not None:
         values, per_line = fast
         rows = per_line[per_line > 0]
@@ -697,7 +466,7 @@ def parse_irbis(raw: bytes, path: str | os.PathLike | None = None, *,
         h = height if height is not None else rows.size
         if rows.size == h and (rows == w).all() and values.size == w * h and w * h > 0:
             return header, values.reshape(h, w)
-    values = _parse_slow(raw[start:stop], sep, mark, newline, first_line, width, height, where,
+    values = parse_slow(raw[start:stop], sep, mark, newline, first_line, width, height, where,
                          header["width_line"], header["height_line"])
     return header, (to_celsius(values, header["unit"]) if celsius else values)
 
@@ -788,163 +557,3 @@ def read_irbis(path: str | os.PathLike) -> xr.DataArray:
         attrs["irbis_version"] = header["version"]
     time = None if header["ms"] is None else header["ms"] / 1000.0
     return temperature_dataarray(temps, u0=u0, v0=v0, time=time, attrs=attrs)
-
-
-# ----------------------------------------------------------------------------
-# writer
-# ----------------------------------------------------------------------------
-def _fmt_number(value: float, decimals: int, mark: str) -> str:
-    return f"{value:.{decimals}f}".replace(".", mark)
-
-
-def write_irbis(
-    path: str | os.PathLike,
-    temperature,
-    *,
-    ms: float | None = None,
-    frame_index: int | None = None,
-    rec_datetime: _dt.datetime | None = None,
-    start_pos: tuple[int, int] | None = None,
-    sensor_size: tuple[int, int] | None = None,
-    sep: str = "\t",
-    decimal: str = ".",
-    trailing_sep: bool = False,
-    decimals: int = 2,
-    temp_unit: str = "°C",
-    filename: str | None = None,
-    parameters: Mapping[str, object] | None = None,
-) -> Path:
-    """Write one frame as an IRBIS 3 text export (cp1252, CRLF).
-
-    Parameters
-    ----------
-    path : path-like
-        Output file (its folder must exist).
-    temperature : array_like, shape (H, W)
-        Temperatures in °C, rows = v (top row first). Must be finite.
-    ms : float, optional
-        Time of the frame in the recording (ms): written as ``ms=``;
-        :func:`read_irbis` returns ``time = ms / 1000``.
-    frame_index : int, optional
-        ``FrameIndex=``.
-    rec_datetime : datetime.datetime, optional
-        ``RecDate=dd.mm.yyyy`` and ``RecTime=hh:mm:ss`` (seconds truncated;
-        sub-second time belongs in ``ms``).
-    start_pos : (int, int), optional
-        Sensor position (u0, v0) of the top left pixel of a crop export:
-        written as ``StartPos=u0;v0`` and ``EndPos=u0+W-1;v0+H-1``.
-    sensor_size : (int, int), optional
-        Full sensor (width, height) in px; written as irdic's own
-        ``SensorWidth``/``SensorHeight`` keys (IRBIS ignores them).
-    sep : {"\\t", ";", " ", ","}
-        Cell separator.
-    decimal : {".", ","}
-        Decimal mark (also used in ``ms`` and ``ShotRange``).
-    trailing_sep : bool
-        End every data row with a separator (as IRBIS does).
-    decimals : int
-        Digits after the decimal mark (0 to 8); the file holds the values
-        rounded to this many decimals.
-    temp_unit : {"°C", "K"}
-        Unit of the written numbers (``TempUnit=``); °C input is converted.
-    filename : str, optional
-        ``Filename=`` (name of the recording the frame was exported from).
-    parameters : mapping, optional
-        More ``key=value`` lines for the ``[Parameter]`` section
-        (for example ``{"Distance": 2.0, "EnvTemp": 25.0, "Emissivity": 0.95}``).
-
-    Returns
-    -------
-    pathlib.Path
-        The written file.
-
-    Raises
-    ------
-    ConfigError
-        An argument is invalid (named), or the file cannot be written.
-    """
-    arr = np.asarray(temperature)
-    if arr.ndim != 2 or 0 in arr.shape:
-        raise ConfigError(f"temperature must be a non-empty 2-D array (rows, columns), got shape {arr.shape}")
-    if arr.dtype.kind not in "fiu":
-        raise ConfigError(f"temperature must hold real numbers, got dtype {arr.dtype}")
-    arr = arr.astype(np.float64)
-    if not np.isfinite(arr).all():
-        idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
-        raise ConfigError(f"temperature[{idx[0]}, {idx[1]}] = {arr[idx]}; IRBIS text cannot hold non-finite values")
-    if sep not in ("\t", ";", " ", ","):
-        raise ConfigError(f"sep={sep!r}; expected one of '\\t', ';', ' ', ','")
-    if decimal not in (".", ","):
-        raise ConfigError(f"decimal={decimal!r}; expected '.' or ','")
-    if sep == decimal:
-        raise ConfigError(f"sep and decimal are both {sep!r}; the numbers could not be told apart")
-    if isinstance(decimals, bool) or not isinstance(decimals, (int, np.integer)) or not 0 <= decimals <= 8:
-        raise ConfigError(f"decimals={decimals!r}; expected an integer from 0 to 8")
-    unit = normalise_unit(temp_unit)
-    if unit not in ("degC", "K"):
-        raise ConfigError(f"temp_unit={temp_unit!r}; expected '°C' or 'K'")
-    h, w = arr.shape
-    if start_pos is not None:
-        try:
-            u0, v0 = (int(x) for x in start_pos)
-        except (TypeError, ValueError):
-            raise ConfigError(f"start_pos={start_pos!r}; expected (u0, v0) integers") from None
-        if u0 < 0 or v0 < 0:
-            raise ConfigError(f"start_pos={start_pos!r}; expected non-negative pixel positions")
-    if sensor_size is not None:
-        try:
-            sw, sh = (int(x) for x in sensor_size)
-        except (TypeError, ValueError):
-            raise ConfigError(f"sensor_size={sensor_size!r}; expected (width, height) integers") from None
-        su, sv = (u0, v0) if start_pos is not None else (0, 0)
-        if su + w > sw or sv + h > sh:
-            raise ConfigError(f"a {w} x {h} frame at start_pos=({su}, {sv}) does not fit on a "
-                              f"{sw} x {sh} sensor_size")
-    if ms is not None:
-        ms = float(ms)
-        if not math.isfinite(ms):
-            raise ConfigError(f"ms={ms}; expected a finite time in ms")
-    if frame_index is not None:
-        if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
-            raise ConfigError(f"frame_index={frame_index!r}; expected a non-negative integer")
-    if rec_datetime is not None and not isinstance(rec_datetime, _dt.datetime):
-        raise ConfigError(f"rec_datetime must be a datetime.datetime, got {type(rec_datetime).__name__}")
-
-    if unit == "K":
-        arr = arr + 273.15
-    unit_text = "°C" if unit == "degC" else "K"
-    lines = ["[Settings]", "Version=3", f"ImageWidth={w}", f"ImageHeight={h}"]
-    if start_pos is not None:
-        lines += [f"StartPos={u0};{v0}", f"EndPos={u0 + w - 1};{v0 + h - 1}"]
-    if sensor_size is not None:
-        lines += [f"SensorWidth={sw}", f"SensorHeight={sh}"]
-    lo, hi = float(arr.min()), float(arr.max())
-    lines += [f"ShotRange={_fmt_number(lo, 2, decimal)};{_fmt_number(hi, 2, decimal)}",
-              f"TempUnit={unit_text}", "", "[Parameter]"]
-    if filename is not None:
-        lines.append(f"Filename={filename}")
-    if frame_index is not None:
-        lines.append(f"FrameIndex={int(frame_index)}")
-    if rec_datetime is not None:
-        lines += [f"RecDate={rec_datetime:%d.%m.%Y}", f"RecTime={rec_datetime:%H:%M:%S}"]
-    if ms is not None:
-        text = f"{ms:.4f}".rstrip("0")
-        lines.append("ms=" + (text + "0" if text.endswith(".") else text).replace(".", decimal))
-    for key, value in (parameters or {}).items():
-        if isinstance(value, (float, np.floating)):
-            value = repr(float(value)).replace(".", decimal)
-        lines.append(f"{key}={value}")
-    lines += ["", "[Data]", ""]
-    head = "\r\n".join(lines)
-
-    cell = f"%.{decimals}f"
-    row_fmt = sep.join([cell] * w) + (sep if trailing_sep else "")
-    body = "\r\n".join([row_fmt % tuple(row) for row in arr.tolist()]) + "\r\n"
-    if decimal == ",":
-        body = body.replace(".", ",")
-    p = Path(path)
-    try:
-        p.write_bytes(head.encode("cp1252") + body.encode("ascii"))
-    except (OSError, UnicodeEncodeError) as exc:
-        raise ConfigError(f"cannot write {p}: {exc}") from exc
-    return p

@@ -1,4 +1,6 @@
-"""Marker centres of the calibration target as measured by the DIC system.
+"""Marker-centre exports of the DIC software: the calibration target's marker centres as the DIC system measured them.
+
+(Detection of the markers in the IR image is a different matter, in the calibration code.)
 
 Accepted layouts:
 
@@ -24,16 +26,17 @@ import logging
 import os
 import warnings
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from ..errors import ConfigError, DataError, FormatError, IrdicWarning
-from .table import (COMPONENTS, Header, check_unique, data_lines, detect_decimal, length_scale, read_lines,
-                    read_rows, split_fields)
+from ..errors import DataError, FormatError, IrdicWarning
+from ._common import TextFile
+from ._stage import COMPONENTS
+from ._tables import Header, check_unique, data_lines, read_body, split_fields
+from .units import length_scale
 
-__all__ = ["read_markers", "write_markers"]
+__all__ = ["read_markers"]
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +61,7 @@ def _header_columns(header: Header) -> list[int] | None:
 
 
 def _find_header(lines: list[str], path: Path) -> tuple[int, str | None, Header, list[int]] | None:
-    for k, ln in enumerate(lines[:1000]):
+    for k, ln in enumerate(lines):
         s = ln.strip().lstrip("#").strip()
         if not s:
             continue
@@ -111,25 +114,27 @@ def read_markers(path: str | os.PathLike) -> xr.Dataset:
     DataError
         A marker ID occurs twice, or no marker has coordinates.
     """
-    p, lines = read_lines(path)
-    found = _find_header(lines, p)
+    text = TextFile(path)
+    p = text.path
+    found = _find_header(text.head(1000), p)
     if found is not None:
         k, sep, header, idx = found
-        body, nos = data_lines(lines, k + 1)
+        start = k + 1
     else:
-        body, nos = data_lines(lines, 0)
-        if not body:
+        start = 0
+        first = next(((k, ln) for k, ln in text.lines() if data_lines([ln], 0)[0]), None)
+        if first is None:
             raise FormatError("no data rows; expected lines 'ID; x; y; z' (mm)", p)
-        sep = _headerless_sep(body[0])
-        fields = split_fields(body[0], sep)
+        sep = _headerless_sep(first[1])
+        fields = split_fields(first[1], sep)
         if len(fields) != 4:
             raise FormatError(
                 f"found no header naming the columns ID, x, y, z and {len(fields)} fields in the first data row; "
                 "expected a header such as '# ID; x [mm]; y [mm]; z [mm]' or four columns ID x y z",
-                p, int(nos[0]))
+                p, first[0] + 1)
         header = Header.from_fields(["ID", "x", "y", "z"], 0, p)
         idx = [0, 1, 2, 3]
-    rows = read_rows(body, nos, header, sep=sep, decimal=detect_decimal(body, sep))
+    rows = read_body(text, start, header, sep=sep, decimal=None)
     j_id, *j_xyz = idx
     col = rows.frame.iloc[:, j_id]
     if not rows.is_numeric(j_id):
@@ -164,42 +169,3 @@ def read_markers(path: str | os.PathLike) -> xr.Dataset:
                 "dropped_markers": dropped.tolist()}
     log.info("%s: %d markers read, %d dropped", p, int(seen.sum()), dropped.size)
     return ds
-
-
-def write_markers(path: str | os.PathLike, ids: Any, x: Any, *, decimals: int = 6) -> Path:
-    """Write marker centres in the ``;`` style read by :func:`read_markers`.
-
-    Parameters
-    ----------
-    path : path-like
-    ids : array_like of int, shape (n,)
-        Unique marker IDs.
-    x : array_like, shape (n, 3)
-        Marker centres, mm; NaN rows are written as ``nan`` (markers not seen).
-    decimals : int
-        Decimals written (mm).
-
-    Returns
-    -------
-    Path
-    """
-    ids_arr = np.asarray(ids)
-    if ids_arr.ndim != 1 or ids_arr.size == 0 or not np.issubdtype(ids_arr.dtype, np.integer):
-        raise ConfigError(f"ids must be a non-empty 1-D integer array, got dtype {ids_arr.dtype} "
-                          f"shape {ids_arr.shape}")
-    if np.unique(ids_arr).size != ids_arr.size:
-        raise ConfigError("ids must be unique")
-    xs = np.asarray(x, dtype=np.float64)
-    if xs.shape != (ids_arr.size, 3):
-        raise ConfigError(f"x must have shape ({ids_arr.size}, 3), got {xs.shape}")
-    if np.isinf(xs).any():
-        raise ConfigError("x holds infinite values; use NaN for markers not seen")
-    if not isinstance(decimals, (int, np.integer)) or isinstance(decimals, bool) or not 0 <= decimals <= 15:
-        raise ConfigError(f"decimals must be an integer from 0 to 15, got {decimals!r}")
-    head = ["# Calibration target marker centres (irdic)",
-            "#" + "; ".join([f"{'ID':>9}"] + [f"{c + ' [mm]':>19}" for c in COMPONENTS])]
-    fmt = "%10d; " + "; ".join([f"%19.{decimals}f"] * 3)
-    body = [fmt % (i, *row) for i, row in zip(ids_arr.tolist(), xs.tolist())]
-    out = Path(path)
-    out.write_text("\n".join(head + body) + "\n", encoding="utf-8", newline="\n")
-    return out

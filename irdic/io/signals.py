@@ -32,7 +32,8 @@ import numpy as np
 import xarray as xr
 
 from ..errors import FormatError, IrdicWarning
-from .table import NA_TOKENS, split_unit
+from ._tables import NA_TOKENS
+from .units import split_unit
 
 __all__ = ["Signal", "parse_signals", "standard_name", "signal_coords", "format_signals", "STANDARD_NAMES"]
 

@@ -18,21 +18,21 @@ from __future__ import annotations
 
 import logging
 import os
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from ..errors import ConfigError, FormatError
-from .table import (Header, data_lines, extra_columns, length_scale, read_lines, read_rows, split_fields,
-                    stage_dataset)
+from ..errors import FormatError
+from ._common import TextFile
+from ._stage import extra_columns, stage_dataset
+from ._tables import Header, read_body, split_fields
+from .units import length_scale
 
-__all__ = ["read_vic", "write_vic"]
+__all__ = ["read_vic", "REQUIRED_COLUMNS"]
 
 log = logging.getLogger(__name__)
 
-_REQUIRED = ("X", "Y", "Z", "U", "V", "W")
+REQUIRED_COLUMNS = ("X", "Y", "Z", "U", "V", "W")
 # image-plane columns would clash with the Dataset's own x
 _IMAGE_NAMES = {"x": "x_image", "y": "y_image", "u": "u_image", "v": "v_image"}
 
@@ -72,21 +72,21 @@ def read_vic(path: str | os.PathLike) -> xr.Dataset:
         Missing X/Y/Z/U/V/W columns (e.g. a VIC-2D export), bad cells
         (named by line and column), rows of the wrong length, no rows.
     """
-    p, lines = read_lines(path)
-    k = next((i for i, ln in enumerate(lines) if ln.strip()), None)
+    text = TextFile(path)
+    p = text.path
+    k, line = next(((i, ln) for i, ln in text.lines() if ln.strip()), (None, ""))
     if k is None:
         raise FormatError("file holds only blank lines; expected a VIC-3D CSV header", p)
-    sep = _sep_of(lines[k])
-    header = Header.from_fields(split_fields(lines[k], sep), k + 1, p)
-    if any(header.find(n, case=True) is None for n in _REQUIRED):
+    sep = _sep_of(line)
+    header = Header.from_fields(split_fields(line, sep), k + 1, p)
+    if any(header.find(n, case=True) is None for n in REQUIRED_COLUMNS):
         present = set(header.bare)
         if {"x", "y"} <= present and "Z" not in present:
             raise FormatError(
                 f"no 3-D columns: found {header.describe()}; this looks like a 2-D (image plane) export, irdic "
                 "needs a VIC-3D export with X, Y, Z, U, V, W in mm", p, k + 1)
-    j_all = header.require(_REQUIRED, what="a VIC-3D export", case=True)
-    body, nos = data_lines(lines, k + 1)
-    rows = read_rows(body, nos, header, sep=sep, decimal=".")
+    j_all = header.require(REQUIRED_COLUMNS, what="a VIC-3D export", case=True)
+    rows = read_body(text, k + 1, header, sep=sep, decimal=".")
 
     def coord(j: int) -> np.ndarray:
         return rows.number(j) * length_scale(header.units[j], header.names[j], p, header.line)
@@ -108,46 +108,3 @@ def read_vic(path: str | os.PathLike) -> xr.Dataset:
         attrs["point_key"] = "x_image,y_image"
     return stage_dataset(ids, x, x_ref, path=p, fmt="vic", valid=valid, extras=extras, attrs=attrs,
                          point_id_source="row")
-
-
-def write_vic(path: str | os.PathLike, x_ref: Any, displacement: Any, *, sigma: Any = None,
-              spacing: str = " ") -> Path:
-    """Write a VIC-3D-style CSV (for tests and demos).
-
-    Parameters
-    ----------
-    path : path-like
-    x_ref, displacement : array_like, shape (n, 3)
-        X, Y, Z and U, V, W in mm. Rows with NaN are written as VIC writes
-        invalid points: zeros and ``sigma = -1``.
-    sigma : array_like, shape (n,), optional
-        0.01 where not given.
-    spacing : str
-        Text after each comma (``" "`` as in VIC-3D 7, ``""`` in older versions).
-
-    Returns
-    -------
-    Path
-    """
-    xr_ = np.asarray(x_ref, dtype=np.float64)
-    d = np.asarray(displacement, dtype=np.float64)
-    if xr_.ndim != 2 or xr_.shape[1] != 3:
-        raise ConfigError(f"x_ref must have shape (n, 3), got {xr_.shape}")
-    n = xr_.shape[0]
-    if d.shape != (n, 3):
-        raise ConfigError(f"displacement must have shape ({n}, 3), got {d.shape}")
-    sg = np.full(n, 0.01) if sigma is None else np.asarray(sigma, dtype=np.float64)
-    if sg.shape != (n,):
-        raise ConfigError(f"sigma must have shape ({n},), got {sg.shape}")
-    if spacing.strip():
-        raise ConfigError(f"spacing must be whitespace, got {spacing!r}")
-    bad = ~(np.isfinite(xr_).all(1) & np.isfinite(d).all(1))
-    values = np.column_stack([np.where(bad[:, None], 0.0, xr_), np.where(bad[:, None], 0.0, d),
-                              np.where(bad, -1.0, sg)])
-    sep = "," + spacing
-    head = sep.join(f'"{c}"' for c in (*_REQUIRED, "sigma"))
-    fmt = sep.join(["%.6f"] * 7)
-    body = [fmt % tuple(row) for row in values.tolist()]
-    out = Path(path)
-    out.write_text("\n".join([head] + body) + "\n", encoding="utf-8", newline="\n")
-    return out

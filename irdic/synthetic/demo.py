@@ -87,8 +87,7 @@ def write_setup(outdir, *, camera=None, seed: int = 0, noise: float = 0.04) -> d
     dict
         Paths of the written files.
     """
-    from ..io.irbis import write_irbis
-    from ..io.markers import write_markers
+    from .writers import write_irbis, write_markers
 
     camera = lab_camera() if camera is None else camera
     target = open_book_target(camera, noise=noise, seed=seed, book=demo_book())
@@ -133,8 +132,7 @@ def write_experiment(outdir, ex: Experiment, *, write_ir: bool = True) -> dict:
     dict
         ``{"dic": [paths], "ir": [paths], "truth": path}``.
     """
-    from ..io.irbis import write_irbis
-    from ..io.nodemap import write_nodemap
+    from .writers import write_irbis, write_nodemap
 
     name = ex.name
     final = Path(outdir) / name

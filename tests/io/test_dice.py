@@ -7,7 +7,8 @@ import pytest
 
 from irdic.errors import DataError, FormatError
 from irdic.io import detect_dic_format, read_dic
-from irdic.io.dice import read_dice, write_dice
+from irdic.io.dice import read_dice
+from irdic.synthetic.writers import write_dice
 
 HEADER = ("SUBSET_ID,COORDINATE_X,COORDINATE_Y,DISPLACEMENT_X,DISPLACEMENT_Y,MODEL_COORDINATES_X,"
           "MODEL_COORDINATES_Y,MODEL_COORDINATES_Z,MODEL_DISPLACEMENT_X,MODEL_DISPLACEMENT_Y,"

@@ -18,11 +18,12 @@ from hypothesis import strategies as st
 
 from irdic.errors import IrdicError
 from irdic.io import read_dic
-from irdic.io.dice import read_dice, write_dice
-from irdic.io.markers import read_markers, write_markers
-from irdic.io.nodemap import read_nodemap, write_nodemap
+from irdic.io.dice import read_dice
+from irdic.io.markers import read_markers
+from irdic.io.nodemap import read_nodemap
 from irdic.io.table import read_table
-from irdic.io.vic import read_vic, write_vic
+from irdic.io.vic import read_vic
+from irdic.synthetic.writers import write_dice, write_markers, write_nodemap, write_vic
 
 SETTINGS = settings(max_examples=200, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

@@ -15,8 +15,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from irdic.errors import IrdicError
-from irdic.io.irb import count_irb_frames, read_irb, write_irb
-from irdic.io.irbis import read_irbis, write_irbis
+from irdic.io.irb import count_irb_frames, read_irb
+from irdic.io.irbis import read_irbis
+from irdic.synthetic.writers import write_irb, write_irbis
 
 # fixed examples in the normal run; IRDIC_FUZZ_EXAMPLES=5000 explores new ones
 _EXPLORE = int(os.environ.get("IRDIC_FUZZ_EXAMPLES", "0"))

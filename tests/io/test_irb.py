@@ -10,8 +10,8 @@ import pytest
 
 from irdic.errors import ConfigError, FormatError
 from irdic.io import read_ir
-from irdic.io.irb import (count_irb_frames, iter_irb_dataarrays, iter_irb_frames, iter_irb_headers, read_irb,
-                          write_irb)
+from irdic.io.irb import count_irb_frames, iter_irb_dataarrays, iter_irb_frames, iter_irb_headers, read_irb
+from irdic.synthetic.writers import write_irb
 
 BLOCK = 5216  # offset of the image block in both sample files (from their directories)
 

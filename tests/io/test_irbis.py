@@ -10,7 +10,9 @@ import pytest
 
 from irdic.errors import ConfigError, FormatError, IrdicError, IrdicWarning
 from irdic.io import read_ir
-from irdic.io.irbis import _parse_fast, _parse_slow, parse_irbis, read_irbis, read_irbis_header, write_irbis
+from irdic.io._decimals import parse_fast
+from irdic.io.irbis import parse_irbis, parse_slow, read_irbis, read_irbis_header
+from irdic.synthetic.writers import write_irbis
 
 
 def _data_section(raw: bytes) -> bytes:
@@ -187,10 +189,10 @@ def test_fast_and_exact_parsers_agree_on_mixed_numbers():
         cells.append(f"{v:.{d}f}")
     rows = ["\t".join(cells[r * 30:(r + 1) * 30]) for r in range(40)]
     data = ("\r\n".join(rows) + "\r\n").encode()
-    fast = _parse_fast(data, b"\t", ord("."), ord("\n"), 1200)
+    fast = parse_fast(data, b"\t", ord("."), ord("\n"), 1200)
     assert fast is not None  # the vectorised path handles mixed decimals
     values, per_line = fast
-    slow = _parse_slow(data, b"\t", ord("."), ord("\n"), 1, 30, 40, "x", None, None)
+    slow = parse_slow(data, b"\t", ord("."), ord("\n"), 1, 30, 40, "x", None, None)
     np.testing.assert_array_equal(values, slow.ravel())
     np.testing.assert_array_equal(values, [float(c) for c in cells])
     assert set(per_line[per_line > 0].tolist()) == {30}

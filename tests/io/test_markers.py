@@ -9,7 +9,8 @@ import pytest
 
 from irdic.errors import ConfigError, DataError, FormatError, IrdicWarning
 from irdic.io import read_markers as read_markers_dispatch
-from irdic.io.markers import read_markers, write_markers
+from irdic.io.markers import read_markers
+from irdic.synthetic.writers import write_markers
 
 SEMI = """# Reference object: open book, brass, 8 markers
 # exported from point components

@@ -8,6 +8,7 @@ header ``#  ID; x_undef [mm]; ...``, rows formatted ``{:10.0f}; {:20.10f}; ...``
 from __future__ import annotations
 
 import time
+import tracemalloc
 import warnings
 from datetime import datetime
 
@@ -16,7 +17,8 @@ import pytest
 
 from irdic.errors import ConfigError, DataError, FormatError, IrdicError, IrdicWarning
 from irdic.io import detect_dic_format, read_dic
-from irdic.io.nodemap import read_nodemap, write_nodemap
+from irdic.io.nodemap import read_nodemap
+from irdic.synthetic.writers import write_nodemap
 
 SEP = "#" * 100
 
@@ -373,4 +375,51 @@ def test_all_errors_are_irdic_errors(tmp_path):
     p = tmp_path / "garbage.txt"
     p.write_bytes(b"\x00\x01binary")
     with pytest.raises(IrdicError, match="NUL bytes"):
+        read_nodemap(p)
+
+
+# ----------------------------------------------------------------------------- memory (issue 9)
+
+
+def _big_nodemap(path, n, seed=3):
+    rng = np.random.default_rng(seed)
+    xu = rng.uniform(-50, 50, (n, 3))
+    d = rng.normal(0, 0.2, (n, 3))
+    return write_nodemap(path, np.arange(1, n + 1), xu, d, stage_index=2, relative_time=1.0,
+                         strains=rng.normal(0, 1, (n, 4))), xu, d
+
+
+def test_large_nodemap_is_parsed_in_bounded_memory(tmp_path):
+    # regression: the text, its list of lines and a joined copy (plus pandas' UCS-4 buffer of it) were all
+    # held at once, about 6.4 times the file; now the file is parsed a block of lines at a time
+    p, xu, d = _big_nodemap(tmp_path / "big_0_2.txt", 40_000)
+    size = p.stat().st_size
+    read_nodemap(p)  # imports and caches out of the measurement
+    tracemalloc.start()
+    try:
+        ds = read_nodemap(p)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    out = sum(v.nbytes for v in ds.variables.values())
+    assert peak < 3 * size + out, f"peak {peak / size:.2f} x the file size ({size} B) plus the output ({out} B)"
+    # the blocks join seamlessly: every point, in file order, to the written precision
+    np.testing.assert_array_equal(ds["point"].values, np.arange(1, 40_001))
+    np.testing.assert_allclose(ds["x_ref"].values, xu, rtol=0, atol=0.5e-4 + 1e-12)
+    np.testing.assert_allclose(ds["x"].values, np.round(xu, 4) + np.round(d, 4), rtol=0, atol=1e-9)
+
+
+def test_bad_cell_beyond_the_first_block_names_its_line(tmp_path):
+    p, _, _ = _big_nodemap(tmp_path / "big_0_2.txt", 20_000)
+    lines = p.read_text().splitlines()
+    k = len(lines) - 7  # far past the first block of lines
+    cells = lines[k].split(";")
+    cells[3] = " 1.2.3"
+    lines[k] = ";".join(cells)
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(FormatError, match=rf"line {k + 1}: column 'z_undef \[mm\]': cannot read '1\.2\.3' as a number"):
+        read_nodemap(p)
+    lines[k] = ";".join(cells[:3])
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(FormatError, match=rf"line {k + 1}: found 3 fields, expected 11"):
         read_nodemap(p)

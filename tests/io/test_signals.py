@@ -7,7 +7,8 @@ import pytest
 
 from irdic.errors import DataError, FormatError, IrdicWarning
 from irdic.ingest import ingest_dic
-from irdic.io.nodemap import read_nodemap, write_nodemap
+from irdic.io.nodemap import read_nodemap
+from irdic.synthetic.writers import write_nodemap
 from irdic.io.signals import parse_signals, standard_name
 from irdic.store import open_store
 

@@ -7,7 +7,8 @@ import pytest
 
 from irdic.errors import ConfigError, DataError, FormatError
 from irdic.io import read_dic
-from irdic.io.table import parse_date, parse_duration, read_table
+from irdic.io.table import read_table
+from irdic.io.units import parse_date, parse_duration
 
 GOM_CSV = """Project: tube
 Stage: 4

@@ -7,7 +7,8 @@ import pytest
 
 from irdic.errors import FormatError
 from irdic.io import detect_dic_format, read_dic
-from irdic.io.vic import read_vic, write_vic
+from irdic.io.vic import read_vic
+from irdic.synthetic.writers import write_vic
 
 VIC7 = ('"X", "Y", "Z", "U", "V", "W", "sigma", "x", "y", "u", "v", "exx", "eyy", "exy"\n'
         "-12.5, 3.25, 0.125, 0.0125, -0.002, 0.001, 0.0123, 512, 384, 0.12, -0.03, 0.001, -0.0004, 0.00001\n"
