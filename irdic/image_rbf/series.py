@@ -153,50 +153,30 @@ def _combined_frames(F, sel, Wv, Wd, n_mask):
     return vals
 
 
-def evaluate_series(
-    frames,
-    frame_times,
-    eval_times,
-    points,
-    mask,
-    *,
-    method="rbf",
-    c=2.0,
-    R0=1.0,
-    c_time=1.0,
-    R0_time=1.0,
-    halo=12,
-    tile=8,
-    chunk=32,
-    u=None,
-    v=None,
-    name="frames",
-):
+def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rbf", c=2.0, R0=1.0, c_time=1.0,
+                    R0_time=1.0, halo=12, tile=8, chunk=32, u=None, v=None, name="frames"):
     """Temperatures, gradients and rates at moving points over a frame series.
 
     Parameters
     ----------
     frames : array_like, shape (n_frames, H, W)
-        Pixel temperatures (°C). Any array-like with numpy slicing (numpy,
-        zarr, memmap); it is read frame block by frame block, and only the
-        masked pixels are kept.
+        Pixel temperatures (°C); any array-like with numpy slicing (numpy,
+        zarr, memmap), read frame block by frame block.
     frame_times : array_like, shape (n_frames,)
         Frame times in s, strictly increasing.
     eval_times : array_like, shape (n_times,)
-        Evaluation times in s, any order. Times outside the frame span give
-        NaN (an :class:`~irdic.errors.IrdicWarning` names them).
+        Evaluation times in s, any order; outside the frame span NaN (with an
+        :class:`~irdic.errors.IrdicWarning`).
     points : array_like, shape (n_times, M, 2) or (M, 2)
-        (u, v) in px of the frame array per evaluation time (or fixed). NaN
+        (u, v) in px of the frame array per evaluation time (or fixed); NaN
         points give NaN.
     mask : array_like of bool, shape (H, W) or (n_times, H, W)
         Pixels on the specimen, fixed or per evaluation time. Consecutive
         identical masks share all setup; a change refactorises the edge tiles
-        whose local mask pattern changed, so prefer masks that stay fixed over
-        runs of times (e.g. the intersection of the per-frame masks over a
-        run). Every masked pixel (of any time) must have finite values in
-        every frame.
+        whose local pattern changed, so prefer masks fixed over runs of times.
+        Every masked pixel (of any time) needs finite values in every frame.
     method : {"rbf", "bilinear", "cubic"}
-        Spatial method; the temporal one is always the IMQ interpolant.
+        Spatial method; in time always the IMQ interpolant.
     c, R0 : float
         Spatial IMQ shape parameter and normalisation (px): 2, 1 in the paper.
     c_time, R0_time : float
@@ -219,16 +199,15 @@ def evaluate_series(
     Raises
     ------
     DataError
-        A masked pixel with a non-finite value in some frame (naming the
-        first: frame index, frame time and pixel), or a mask without 3 pixels
-        off a line.
+        A masked pixel with a non-finite value (naming the first: frame,
+        frame time, pixel), or a mask without 3 pixels off a line.
 
     Notes
     -----
-    With a moving mask the tensor product ansatz interpolates each pixel's
-    time series over all frames, so pixels that changed between specimen and
-    background within a few frames of ``t_k`` carry mixed values in ``G_k``;
-    an eroded mask avoids that.
+    With a moving mask the tensor product interpolates each pixel's series
+    over all frames, so pixels that changed between specimen and background
+    within a few frames of ``t_k`` carry mixed values in ``G_k``; an eroded
+    mask avoids that.
     """
     method = choice(method, "method", METHODS)
     chunk = as_int(chunk, "chunk", 1)
@@ -251,6 +230,13 @@ def evaluate_series(
         raise DataError("mask: no pixel is masked; at least 3 pixels not on one line are needed")
     labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
     F, lookup = _pixel_series(frames, union, ft, *labels, name)
+    interp_args = dict(method=method, c=c, R0=R0, halo=halo, tile=tile)
+    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
+    return SeriesEvaluation(*out, in_span)
+
+
+def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args):
+    """theta, d/du, d/dv, d/dt, edge distance (n_times, M) for the in-span times, chunk by chunk."""
     ks = np.flatnonzero(in_span)
     Wv = temporal.weights(te[ks], 0) if ks.size else None
     Wd = temporal.weights(te[ks], 1) if ks.size else None
@@ -265,8 +251,7 @@ def evaluate_series(
         mi = int(mask_of[ch[0]])
         if mi != current:  # masks come in runs: keep only the current one
             interp, current = None, mi
-            interp = MaskedGridInterpolant(masks[mi], method=method, c=c, R0=R0, halo=halo, tile=tile,
-                                           tile_cache=cache)
+            interp = MaskedGridInterpolant(masks[mi], tile_cache=cache, **interp_args)
         sel = lookup[interp.pixels[:, 1], interp.pixels[:, 0]]
         if sel.size == F.shape[0]:
             sel = slice(None)  # the mask is the union: no copy
@@ -281,4 +266,4 @@ def evaluate_series(
         "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised",
         te.size, pts.shape[1], F.shape[0], len(masks), cache.built,
     )
-    return SeriesEvaluation(*out, in_span)
+    return out

@@ -13,7 +13,7 @@ import logging
 import numpy as np
 import scipy.linalg
 
-__all__ = ["SaddleFactor"]
+__all__ = ["SaddleFactor", "solve_dense"]
 
 log = logging.getLogger(__name__)
 
@@ -122,3 +122,30 @@ class SaddleFactor:
         beta = self.S_inv @ (self.Y.T @ F)
         Z -= self.Y @ beta
         return Z, beta
+
+
+def solve_dense(A, P, f, q):
+    """Solve one small saddle-point system ``[[A, P], [P^T, 0]] [x; y] = [f; q]`` by dense LU.
+
+    For systems solved once, where a factorisation is not reused (e.g. the
+    few-sample temporal fill of a gap).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+    P : ndarray, shape (n, m)
+    f : ndarray, shape (n,) or (n, k)
+    q : ndarray, shape (m,) or (m, k)
+
+    Returns
+    -------
+    x : ndarray, shape (n,) or (n, k)
+    y : ndarray, shape (m,) or (m, k)
+    """
+    n, m = P.shape
+    S = np.zeros((n + m, n + m))
+    S[:n, :n] = A
+    S[:n, n:] = P
+    S[n:, :n] = P.T
+    sol = np.linalg.solve(S, np.concatenate([f, q]))
+    return sol[:n], sol[n:]

@@ -75,8 +75,16 @@ tiles (they decay like the cardinal functions), so a stage's fill is one small
 valid-points interpolant to ~1e-4 of the data's variation (h = 0.6 mm), and
 near the edge it is closer to the truth than that interpolant (as above).
 The velocities ``dx/dt`` use a second fill (``fill="both"``, the default):
-short gaps filled from the point's own time series, so that a filled value
-does not put a bump into its point's series (see :func:`fit_surface`). Points
+short gaps (at most ``max_gap`` stages, valid stages on both sides) filled
+from the point's own time series (temporal interpolant over the nearest 8
+valid stages on each side), so that a filled value does not put a bump into
+its point's series: each derivative sees the fill that is smooth along its
+direction. Measured on the tube test (1 mm grid, 0.5 s stages, 1.5 % missing
+in every other stage): filled in space only, the velocity error reached
+0.09 mm/s next to filled values (a filled value errs by the interpolant's
+0.02-0.1 mm between points, a bump in its series); filled in time only, the
+strain error RMS of the synthetic tube rose from 5e-4 to 1.4e-3 (bumps in the
+stage surfaces). Points
 missing in the reference stage take their parameters ``Psi`` from their first
 valid stage (a small approximation: the point has moved by then). Stages with
 fewer than ``min_stage_fraction`` valid points are left out of the temporal fit.

@@ -11,6 +11,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, DataError, IrdicWarning
+from ..numerics.imq import imq
+from ..numerics.saddle import solve_dense
 from ..numerics.temporal import TemporalInterpolant, gcv_temporal
 from ..validation import as_int, choice, float_array, increasing_times, psi_array, smoothing_factor
 from .geometry import edge_distance
@@ -49,11 +51,13 @@ def _temporal_fill(X, valid, times, c, R0, max_gap, window=8):
             ok = valid_of[i] = np.flatnonzero(valid[:, i])
         j = np.searchsorted(ok, k)
         sel = ok[max(0, j - window):j + window]
-        rel = times[sel] - times[k]
-        key = tuple(np.round(rel / R0, 9))
+        s = (times[sel] - times[k]) / R0
+        key = tuple(np.round(s, 9))
         w = cache.get(key)
         if w is None:
-            w = cache[key] = TemporalInterpolant(rel, c=c, R0=R0).weights(0.0)[0]
+            # the cardinal weights at t_k: the kernel and monomials {1, s} evaluated at s = 0
+            A = imq(s[:, None] - s[None, :], c)
+            w = cache[key] = solve_dense(A, np.c_[np.ones(s.size), s], imq(-s, c), np.array([1.0, 0.0]))[0]
         out[k, i] = w @ X[sel, i]
     return out, todo
 
@@ -99,25 +103,9 @@ class SurfaceFields(NamedTuple):
     """Solver, smoothing, GCV tables, parametrisation, timings."""
 
 
-def fit_surface(
-    x,
-    times,
-    psi=None,
-    *,
-    t_eval=None,
-    c=0.95,
-    R0=1.0,
-    c_t=1.0,
-    R0_t=1.0,
-    smoothing=None,
-    smoothing_t=None,
-    solver="auto",
-    halo=None,
-    parametrisation="auto",
-    min_stage_fraction=0.5,
-    fill="both",
-    max_gap=3,
-):
+def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_t=1.0, smoothing=None,
+                smoothing_t=None, solver="auto", halo=None, parametrisation="auto", min_stage_fraction=0.5,
+                fill="both", max_gap=3):
     """The continuous surface ``x(Psi, t)`` of DIC stages, evaluated at the points.
 
     Parameters
@@ -127,19 +115,18 @@ def fit_surface(
     times : array_like, shape (M,)
         Stage times (s), strictly increasing; stage 0 is the reference.
     psi : array_like, shape (N, 2), optional
-        Surface parameters; default from :func:`surface_parameters`
-        (``parametrisation``).
+        Surface parameters; default from :func:`surface_parameters` (``parametrisation``).
     t_eval : array_like, shape (T,), optional
         Evaluation times (s); default ``times``. Outside the stage span: NaN.
     c, R0 : float
-        Spatial IMQ shape factor and distance normalisation (mm). Default c =
-        0.95 (the paper: 0.969 half-shell, 0.9328 tube), R0 = 1 mm.
+        Spatial IMQ shape factor and distance normalisation (mm); the paper:
+        c = 0.969 half-shell, 0.9328 tube, R0 = 1 mm.
     c_t, R0_t : float
         Temporal shape factor and normalisation (s); the paper: 1, 1 s.
     smoothing, smoothing_t : None, float >= 1 or "gcv"
-        Spatial / temporal regression (module Notes); None = interpolation.
+        Spatial / temporal regression (:mod:`irdic.surface` Notes); None = interpolation.
     solver : {"auto", "global", "local"}
-        Spatial interpolation solver (module Notes).
+        Spatial interpolation solver (:mod:`irdic.surface` Notes).
     halo : float, optional
         Halo of the local tiles (mm).
     parametrisation : {"auto", "plane", "cylinder"}
@@ -148,31 +135,20 @@ def fit_surface(
         Stages with fewer valid points than this fraction are left out of the
         temporal fit (and warned about); the reference stage must pass.
     fill : {"both", "space", "time"}
-        How a point missing in a stage is filled. In space: from the stage's
-        valid points (module Notes), so the stage's surface is the smooth
-        interpolant of its valid points and the neighbours' tangents hardly
-        notice the gap. In time: from the point's own valid stages (temporal
-        interpolant over the nearest 8 valid stages on each side) when the gap
-        is at most ``max_gap`` stages with valid stages on both sides (else in
-        space), so the point's series stays smooth. ``"both"`` (default):
-        positions and tangents from the space-filled data, velocities from the
-        time-filled data: each derivative sees the fill that is smooth along
-        its direction. Measured on the tube test (1 mm grid, 0.5 s stages,
-        1.5 % missing in every other stage): filled in space only, the
-        velocity error reached 0.09 mm/s next to filled values (a filled value
-        errs by the interpolant's 0.02-0.1 mm between points, a bump in its
-        series); filled in time only, the strain error RMS of the synthetic
-        tube rose from 5e-4 to 1.4e-3 (bumps in the stage surfaces).
+        How a point missing in a stage is filled: from the stage's valid
+        points, from the point's own valid stages (gaps of at most
+        ``max_gap`` stages, else in space), or (default) positions and
+        tangents from the former, velocities from the latter
+        (:mod:`irdic.surface` Notes, Missing points).
     max_gap : int
         Longest run of missing stages filled in time.
 
     Returns
     -------
     SurfaceFields
-
-    Points with the same surface parameters as an earlier point (duplicate
-    DIC points) are left out with a logged warning: NaN results, listed in
-    ``info["duplicates"]``.
+        Points with the same surface parameters as an earlier point (duplicate
+        DIC points) are left out with a logged warning: NaN results, listed in
+        ``info["duplicates"]``.
 
     Raises
     ------
@@ -204,35 +180,52 @@ def fit_surface(
     ed_nodes = edge_distance(psi[nodes])
     Xu, Vu = X[:, nodes][used], valid[:, nodes][used]
     Xs, Xt = _fill_missing(sp, Xu, Vu, tu, te.size, ks, fill, c_t, R0_t, max_gap, info)
+    fields = _fit_stages(sp, psi[nodes], Xs, Xt, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info)
+    return _assemble(fields, psi, te, nodes, used, ~Vu, ed_nodes, (M, N), info, (c, R0, c_t, R0_t), t0)
+
+
+def _fit_stages(sp, psi_n, Xs, Xt, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info):
+    """Temporal then spatial operator on the filled stage data: value, d1, d2 (n, 3 T_ok + 3), velocity, ok times."""
+    n = psi_n.shape[0]
     # --- temporal
     if kt == "gcv":
         kt, info["gcv_t"] = gcv_temporal(tu, Xt.reshape(tu.size, -1), c=c_t, R0=R0_t)
     ts = TemporalInterpolant(tu, c=c_t, R0=R0_t, smoothing=kt)
-    Y0, Y1, Yr, ok_t = _temporal_columns(ts, te, t[:1], Xs, Xt)
+    Y0, Y1, Yr, ok_t = _temporal_columns(ts, te, t_ref, Xs, Xt)
     # --- spatial
     if ks == "gcv":
         pick = np.linspace(0, tu.size - 1, min(tu.size, 8)).astype(int)
-        ks, info["gcv"] = gcv_spatial(psi[nodes], Xs[pick].transpose(1, 0, 2).reshape(n, -1), c=c, R0=R0)
+        ks, info["gcv"] = gcv_spatial(psi_n, Xs[pick].transpose(1, 0, 2).reshape(n, -1), c=c, R0=R0)
     if ks > 1.0:
-        sp = SpatialInterpolant(psi[nodes], c=c, R0=R0, smoothing=ks)
+        sp = SpatialInterpolant(psi_n, c=c, R0=R0, smoothing=ks)
     cols = np.flatnonzero(np.repeat(ok_t, 3))
-    val, d1, d2 = sp.evaluate(np.concatenate([Y0[:, cols], Yr], axis=1))
-    del Y0
+    Yall = np.concatenate([Y0[:, cols], Yr], axis=1)
+    del Y0  # the stage data of many times are large: free each as soon as it is used
+    val, d1, d2 = sp.evaluate(Yall)
+    del Yall
     vel = sp.evaluate(Y1[:, cols], derivatives=False)[0]
     del Y1
-    x_out, tang, v_out, ref_x, ref_t = _place_fields(val, d1, d2, vel, np.flatnonzero(ok_t), nodes, te.size, N)
-    del val, d1, d2, vel
+    info.update(sp.info)
+    info.update(smoothing=float(ks), smoothing_t=float(kt))
+    return val, d1, d2, vel, np.flatnonzero(ok_t)
+
+
+def _assemble(fields, psi, te, nodes, used, was_filled, ed_nodes, shape, info, kernel, t0):
+    """The :class:`SurfaceFields` of all N points from the results at the nodes."""
+    M, N = shape
+    c, R0, c_t, R0_t = kernel
+    val, d1, d2, vel, tk = fields
+    x_out, tang, v_out, ref_x, ref_t = _place_fields(val, d1, d2, vel, tk, nodes, te.size, N)
     filled = np.zeros((M, N), bool)
-    filled[np.ix_(np.flatnonzero(used), nodes)] = ~Vu
+    filled[np.ix_(np.flatnonzero(used), nodes)] = was_filled
     ed = np.full(N, np.nan)
     ed[nodes] = ed_nodes
-    info.update(sp.info)
     info.update(
-        smoothing=float(ks), smoothing_t=float(kt), c=float(c), R0=float(R0), c_t=float(c_t), R0_t=float(R0_t),
-        n_nodes=int(n), n_filled=int((~Vu).sum()), stages_used=int(used.sum()),
+        c=float(c), R0=float(R0), c_t=float(c_t), R0_t=float(R0_t),
+        n_nodes=int(nodes.size), n_filled=int(was_filled.sum()), stages_used=int(used.sum()),
         seconds=_time.perf_counter() - t0,
     )
-    log.info("surface: %d points x %d times in %.1f s", n, te.size, info["seconds"])
+    log.info("surface: %d points x %d times in %.1f s", nodes.size, te.size, info["seconds"])
     return SurfaceFields(psi, te, x_out, tang, v_out, ref_x, ref_t, filled, used, ed, info)
 
 

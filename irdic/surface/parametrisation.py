@@ -226,6 +226,25 @@ def _fold_message(order, candidates, max_normal_angle):
     return "every parametrisation folds the surface: " + "; ".join(parts)
 
 
+def _first_unfolded(order, xv, hint, max_normal_angle):
+    """The first parametrisation of ``order`` that does not fold: name, psi, diagnostics, all candidates."""
+    normals = local_normals(xv)
+    candidates = {}
+    for name in order:
+        if name == "plane":
+            psi_v, diag = _plane_candidate(xv, hint, normals)
+        else:
+            psi_v, diag = _cylinder_candidate(xv, normals)
+            if psi_v is None:
+                candidates["cylinder"] = diag
+                continue
+        diag["ok"] = ok = diag["normal_angle_p99_deg"] <= max_normal_angle and diag["flipped_triangles"] == 0
+        candidates[name] = diag
+        if ok:
+            return name, psi_v, diag, candidates
+    raise GeometryError(_fold_message(order, candidates, max_normal_angle))
+
+
 def _reference_points(x, normal_hint):
     """Reference coordinates (N, 3), which points have data, which take a later stage, the normal hint."""
     X = float_array(x, "x")
@@ -303,26 +322,8 @@ def surface_parameters(x, method="auto", *, normal_hint=None, max_normal_angle=M
         raise DataError(
             f"x: {xv.shape[0]} point(s) with valid coordinates; the surface needs at least {MIN_POINTS}"
         )
-    normals = local_normals(xv)
-    candidates = {}
     order = ["plane", "cylinder"] if method == "auto" else [method]
-    chosen = None
-    for name in order:
-        if name == "plane":
-            psi_v, diag = _plane_candidate(xv, hint, normals)
-        else:
-            psi_v, diag = _cylinder_candidate(xv, normals)
-            if psi_v is None:
-                candidates["cylinder"] = diag
-                continue
-        diag["ok"] = ok = diag["normal_angle_p99_deg"] <= max_normal_angle and diag["flipped_triangles"] == 0
-        candidates[name] = diag
-        if ok:
-            chosen = (name, psi_v, diag)
-            break
-    if chosen is None:
-        raise GeometryError(_fold_message(order, candidates, max_normal_angle))
-    name, psi_v, diag = chosen
+    name, psi_v, diag, candidates = _first_unfolded(order, xv, hint, max_normal_angle)
     psi = np.full((N, 2), np.nan)
     psi[has] = psi_v
     info = {k: v for k, v in diag.items() if k != "ok"}
