@@ -100,8 +100,8 @@ class MaskedGridInterpolant:
     -----
     Typical use: ``MaskedGridInterpolant(mask).fit(fields).evaluate(points)``.
     The object depends on the mask only; :meth:`fit` may be called again with
-    new fields (all setup, including edge factorisations, is reused). Setup
-    costs ~2-3 s for a 47k-pixel ellipse (edge tiles factorised on first use).
+    new fields (all setup, including edge factorisations, is reused); edge
+    tiles are factorised on first use (setup times: ``benchmarks/README.md``).
     """
 
     def __init__(self, mask, *, method="rbf", c=2.0, R0=1.0, halo=12, tile=8, tile_cache=None):
