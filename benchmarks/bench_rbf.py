@@ -1,4 +1,4 @@
-"""Benchmark of irdic.rbf at the paper's scale, against the obvious scipy approach.
+"""Benchmark of irdic.image_rbf at the paper's scale, against the obvious scipy approach.
 
 Scene: a 1024 x 768 IR frame series in which an elliptical specimen region
 (semi-axes 150 x 100 px, ~47k masked px) carries a drifting, growing hot spot
@@ -55,12 +55,12 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.interpolate import RBFInterpolator  # noqa: E402
 
-from irdic.rbf import (  # noqa: E402
+from irdic.image_rbf import (  # noqa: E402
     MaskedGridInterpolant,
-    TemporalInterpolant,
     evaluate_series,
     exact_global_interpolant,
 )
+from irdic.numerics.temporal import TemporalInterpolant  # noqa: E402
 
 
 def rss_mb():
@@ -169,7 +169,7 @@ def band_stats(err, d, edges=(0, 0.5, 2, 5, 12, np.inf)):
 def main(args):
     if args.quick:
         args.frames, args.points, args.scipy_frames = 40, 2000, 1
-    print(f"irdic.rbf benchmark: {args.frames} frames, {args.points} points, frame {args.width} x "
+    print(f"irdic.image_rbf benchmark: {args.frames} frames, {args.points} points, frame {args.width} x "
           f"{args.height}, ellipse {args.axes[0]:g} x {args.axes[1]:g} px, BLAS threads "
           f"{os.environ.get('OPENBLAS_NUM_THREADS', 'default')}, CPUs {os.cpu_count()}")
 
@@ -188,7 +188,7 @@ def main(args):
     per_cpu = (time.process_time() - c0) / args.scipy_frames
     full = per * args.frames
     print(f"   {per:8.2f} s per time (mean of {args.scipy_frames}; CPU {per_cpu:.2f} s), extrapolated to "
-          f"{args.frames} times: {full:8.1f} s  -> irdic.rbf is {full / wall:5.1f} x faster "
+          f"{args.frames} times: {full:8.1f} s  -> irdic.image_rbf is {full / wall:5.1f} x faster "
           f"(CPU: {per_cpu * args.frames / cpu:5.1f} x)")
     for k, (val, gu, gv, rate) in enumerate(sp):
         ok = np.isfinite(res.theta[k])

@@ -21,10 +21,12 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "demo": ("synthetic", "io", "store.py"),
     "ingest": ("io", "ingest.py", "signals.py", "store.py"),
     "calibrate": ("io", "camera.py", "markers.py", "calibrate.py", "plot.py", "store.py"),
-    "couple": ("camera.py", "calibrate.py", "footprint.py", "rbf.py", "couple.py", "store.py"),
+    "couple": ("camera.py", "calibrate.py", "footprint.py", "pointcloud.py", "image_rbf", "numerics", "validation.py",
+               "couple.py", "store.py"),
     "figures": ("plot.py", "export.py", "pipeline.py", "store.py"),
     "export": ("export.py", "pipeline.py", "store.py"),
-    "fields": ("camera.py", "calibrate.py", "surface.py", "thermal.py", "strain.py", "fields.py", "signals.py",
+    "fields": ("camera.py", "calibrate.py", "surface", "numerics", "gradient.py", "strain.py", "pointcloud.py",
+               "validation.py", "fields.py", "signals.py",
                "io/signals.py", "io/table.py", "store.py"),
 }
 

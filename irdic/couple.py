@@ -7,7 +7,7 @@ specimen feed the interpolant: a mask per time from the projected point cloud
 (:func:`irdic.footprint.specimen_mask`, eroded by ``mask_erosion_px``), also
 intersected with the masks of the neighbouring DIC times so that pixels the
 moving edge crosses are left out. The pixel temperatures are interpolated in
-space and time (:func:`irdic.rbf.evaluate_series`, IMQ with the paper's
+space and time (:func:`irdic.image_rbf.evaluate_series`, IMQ with the paper's
 shape factors by default) and evaluated at the projected points: temperature,
 pixel gradient and local rate ∂Θ/∂t at the fixed pixel.
 
@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 import time as _time
 from pathlib import Path
 
@@ -45,7 +44,7 @@ from scipy import ndimage
 from .calibrate import load_camera
 from .errors import CalibrationError, ConfigError, DataError
 from .footprint import facing_camera, point_normals, specimen_mask
-from .rbf import evaluate_series
+from .image_rbf import evaluate_series
 from .store import open_store, write_dataset
 
 __all__ = ["couple", "couple_stores", "STATUS_MEANINGS"]
@@ -126,33 +125,6 @@ def _masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle):
     log.info("specimen masks: %d built for %d DIC times, %d to %d px", rebuilt, n_t,
              int(both.sum(axis=(1, 2)).min()), int(both.sum(axis=(1, 2)).max()))
     return both, facing
-
-
-_LOCAL_PIXEL = re.compile(r"(?:in frame (\d+) )?at pixel \(u=(\d+), v=(\d+)\)")
-
-
-def _raise_in_sensor_pixels(exc: DataError, u: np.ndarray, v: np.ndarray, t_ir: np.ndarray) -> None:
-    """Raise the interpolator's error with its frame-array pixel named in full-sensor pixels (u, v).
-
-    Returns (and the caller re-raises ``exc``) when the message names no pixel.
-
-    The interpolator works on the frame array, whose pixel (0, 0) is the
-    crop window's corner; users know the sensor pixels of their exports.
-    """
-    def sensor(m: re.Match) -> str:
-        iu, iv = int(m.group(2)), int(m.group(3))
-        if not (0 <= iu < u.size and 0 <= iv < v.size):
-            return m.group(0)
-        when = ""
-        if m.group(1) is not None and int(m.group(1)) < t_ir.size:
-            k = int(m.group(1))
-            when = f"in IR frame {k} (t = {t_ir[k]:g} s) "
-        return f"{when}at sensor pixel (u={u[iu]}, v={v[iv]})"
-
-    text, n = _LOCAL_PIXEL.subn(sensor, str(exc))
-    if n:
-        raise DataError(f"ir: {text}; NaN temperatures under the specimen cannot be coupled (see the NaN "
-                        "fraction reported by ingest-ir)") from exc
 
 
 def couple(
@@ -257,12 +229,9 @@ def couple(
     inmask = _in_mask(masks, local)
     outside = seen & ~inmask
     samples, cols = _extrapolation_samples(local, masks, outside, max_extrapolation_px)
-    try:
-        res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
-                              method=method, c=c_space, R0=R0_space, c_time=c_time, R0_time=R0_time, halo=halo)
-    except DataError as exc:
-        _raise_in_sensor_pixels(exc, u, v, t_ir)
-        raise
+    res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
+                          method=method, c=c_space, R0=R0_space, c_time=c_time, R0_time=R0_time, halo=halo,
+                          u=u, v=v, name="ir: frames")
     theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)

@@ -37,7 +37,7 @@ from .errors import ConfigError, DataError
 from .store import open_store, write_dataset
 from .strain import strain
 from .surface import fit_surface, surface_geometry
-from .thermal import material_rate, rate_from_series, surface_gradient
+from .gradient import material_rate, rate_from_series, surface_gradient
 
 __all__ = ["fields", "fields_stores"]
 

@@ -3,7 +3,7 @@
 Only pixels that lie on the specimen may feed the temperature interpolant:
 the specimen edge is a temperature discontinuity (specimen against a hot
 plate or a cool room), and an interpolant that uses background pixels rings
-(METHOD.md §2: up to 38 K at edge points). The mask is built from the
+(docs/method.md: up to 38 K at edge points). The mask is built from the
 projected DIC point cloud itself: its triangulation, with triangles longer
 than a few point spacings removed (so concave outlines and holes stay
 open), rasterised on the pixel centres triangle by triangle (cost linear in
@@ -17,6 +17,7 @@ from scipy import ndimage
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from .errors import ConfigError, GeometryError
+from .pointcloud import local_normals
 
 __all__ = ["point_normals", "facing_camera", "specimen_mask", "edge_distance"]
 
@@ -46,12 +47,7 @@ def point_normals(x: np.ndarray, *, k: int = 12, towards: np.ndarray | None = No
     pts = x[ok]
     if pts.shape[0] < 3:
         raise GeometryError(f"need at least 3 valid points to estimate surface normals, got {pts.shape[0]}")
-    k = min(k, pts.shape[0])
-    _, idx = cKDTree(pts).query(pts, k=k)
-    nb = pts[idx] - pts[idx].mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", nb, nb)
-    _, vecs = np.linalg.eigh(cov)
-    normals = vecs[:, :, 0]
+    normals = local_normals(pts, k)
     if towards is not None:
         sign = np.sign(np.einsum("ni,ni->n", normals, np.asarray(towards, float) - pts))
     else:

@@ -129,7 +129,7 @@ def make_demo(outdir: str | os.PathLike, *, scale: str = "demo", ir_noise: float
         write, is a file or is a symbolic link.
     """
     from . import synthetic
-    from .synthetic._checks import as_int, choice, positive
+    from .validation import as_int, choice, positive
     from .synthetic.experiments import SCALES
 
     # every argument is checked before the disk is touched

@@ -24,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import ConfigError
+from .validation import shaped_array
 
 __all__ = [
     "Strain",
@@ -46,16 +47,6 @@ def _dot(x, y):
     """Dot product over the last axis (einsum on equal shapes: 4x faster than sum(x * y, -1))."""
     x, y = np.broadcast_arrays(x, y)
     return np.einsum("...i,...i->...", x, y)
-
-
-def _tangents(name, value):
-    try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{name} must be an array of numbers: {exc}") from None
-    if a.ndim < 2 or a.shape[-2:] != (2, 3):
-        raise ConfigError(f"{name} must have shape (..., 2, 3) (two tangent vectors), got {a.shape}")
-    return a
 
 
 def _dual(a):
@@ -88,8 +79,8 @@ def deformation_gradient(tangents, ref_tangents):
     ndarray, shape (..., 3, 3)
         ``F`` (dimensionless); ``F A_alpha = a_alpha``, ``F N = 0``.
     """
-    a = _tangents("tangents", tangents)
-    A = _tangents("ref_tangents", ref_tangents)
+    a = shaped_array(tangents, "tangents", (2, 3))
+    A = shaped_array(ref_tangents, "ref_tangents", (2, 3))
     with np.errstate(invalid="ignore", divide="ignore"):
         Ad, _ = _dual(A)
         return np.einsum("...ai,...aj->...ij", a, Ad)
@@ -109,7 +100,7 @@ def reference_basis(ref_tangents):
     normal : ndarray, shape (..., 3)
         ``N = A_1 x A_2 / |A_1 x A_2|``.
     """
-    A = _tangents("ref_tangents", ref_tangents)
+    A = shaped_array(ref_tangents, "ref_tangents", (2, 3))
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.cross(A[..., 0, :], A[..., 1, :])
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
@@ -249,8 +240,8 @@ def strain(tangents, ref_tangents, *, tensors=True):
     ``E = E2_ij E_i (x) E_j``. Written out component by component (no
     ``einsum`` over the large arrays): 500 stages x 10,000 points take ~2 s.
     """
-    a = _tangents("tangents", tangents)
-    A = _tangents("ref_tangents", ref_tangents)
+    a = shaped_array(tangents, "tangents", (2, 3))
+    A = shaped_array(ref_tangents, "ref_tangents", (2, 3))
     try:
         shape = np.broadcast_shapes(a.shape, A.shape)
     except ValueError:

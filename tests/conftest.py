@@ -1,6 +1,6 @@
 import os
 
-# Many small factorisations (irdic.rbf tiles) run far slower with multi-threaded
+# Many small factorisations (irdic.image_rbf tiles) run far slower with multi-threaded
 # BLAS on a busy 2-core machine; tests run one BLAS thread unless told otherwise.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")

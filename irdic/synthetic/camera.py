@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, GeometryError
-from ._checks import as_finite, as_int, as_points, positive
+from ..validation import as_finite, as_int, as_points, positive
 
 __all__ = ["TrueCamera", "look_at", "lab_camera", "IR_F", "IR_SIZE", "LAB_TARGET"]
 

@@ -47,7 +47,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..store import atomic_directory, write_dataset
-from ._checks import choice
+from ..validation import choice
 from .camera import lab_camera
 from .experiments import EXPERIMENTS, SCALES, Experiment, experiment
 from .target import OpenBook, open_book_target

@@ -40,7 +40,7 @@ import numpy as np
 import xarray as xr
 
 from ..errors import ConfigError
-from ._checks import choice, positive
+from ..validation import choice, positive
 from .camera import TrueCamera, lab_camera
 from .render import FrameRenderer, check_window
 from .specimens import HalfShell, Specimen, Tube

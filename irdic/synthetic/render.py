@@ -20,7 +20,7 @@ import numpy as np
 import xarray as xr
 
 from ..errors import ConfigError
-from ._checks import positive
+from ..validation import positive
 from .camera import TrueCamera
 from .specimens import LABEL_SURFACE, Hit
 

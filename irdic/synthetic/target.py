@@ -38,7 +38,7 @@ import xarray as xr
 from scipy import ndimage
 
 from ..errors import ConfigError
-from ._checks import as_finite, as_int, choice, positive
+from ..validation import as_finite, as_int, choice, positive
 from ._geometry import TAU_MIN, nearest
 from .camera import TrueCamera
 

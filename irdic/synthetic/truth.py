@@ -45,7 +45,7 @@ import numpy as np
 import xarray as xr
 
 from ..errors import ConfigError
-from ._checks import as_finite
+from ..validation import as_finite
 from .camera import TrueCamera
 from .render import check_window, pixel_derivatives, visibility
 

@@ -1,4 +1,4 @@
-"""Tests of irdic.rbf against analytic truth and the exact dense global interpolant."""
+"""Tests of irdic.image_rbf against analytic truth and the exact dense global interpolant."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import pytest
 from scipy import ndimage
 
 from irdic.errors import ConfigError, DataError, IrdicWarning
-from irdic.rbf import (
+from irdic.numerics.temporal import TemporalInterpolant
+from irdic.image_rbf import (
     MaskedGridInterpolant,
     MaskedGridRBF,
-    TemporalInterpolant,
     evaluate_series,
     exact_global_interpolant,
     imq,
@@ -75,83 +75,6 @@ def test_imq_values_and_derivative():
     x = np.linspace(-5, 5, 41)
     fd = (imq(x + h, 2.0) - imq(x - h, 2.0)) / (2 * h)
     np.testing.assert_allclose(imq_dr(x, 2.0), fd, atol=1e-9)
-
-
-# --------------------------------------------------------------------------
-# time
-# --------------------------------------------------------------------------
-
-
-def irregular_times():
-    t = np.arange(40) * 0.5
-    return np.delete(t, [7, 8, 20])  # dropped frames
-
-
-def test_temporal_identity_at_frame_times():
-    t = irregular_times()
-    ti = TemporalInterpolant(t)
-    W0 = ti.weights(t)
-    assert np.array_equal(W0, np.eye(t.size))
-
-
-def test_temporal_reproduces_linear_functions_exactly():
-    t = irregular_times()
-    ti = TemporalInterpolant(t, c=1.0, R0=1.0)
-    te = np.linspace(t[0], t[-1], 97)
-    f = 3.0 - 0.7 * t
-    np.testing.assert_allclose(ti.weights(te) @ f, 3.0 - 0.7 * te, atol=1e-10)
-    np.testing.assert_allclose(ti.weights(te, 1) @ f, -0.7, atol=1e-9)
-    np.testing.assert_allclose(ti.weights(te).sum(axis=1), 1.0, atol=1e-12)
-    np.testing.assert_allclose(ti.weights(te, 1).sum(axis=1), 0.0, atol=1e-10)
-
-
-def test_temporal_derivative_weights_match_finite_differences():
-    t = irregular_times()
-    ti = TemporalInterpolant(t, c=1.0, R0=2.0)
-    te = np.array([0.3, 3.71, 9.9, 17.25])
-    h = 1e-5
-    fd = (ti.weights(te + h) - ti.weights(te - h)) / (2 * h)
-    np.testing.assert_allclose(ti.weights(te, 1), fd, atol=1e-6)
-
-
-def test_temporal_accuracy_on_smooth_function():
-    t = np.arange(60) * 0.5
-    ti = TemporalInterpolant(t)
-    te = np.linspace(0.1, 29.4, 301)
-    f = np.sin(t / 3.0)
-    err = np.abs(ti(f, te) - np.sin(te / 3.0))
-    derr = np.abs(ti(f, te, 1) - np.cos(te / 3.0) / 3.0)
-    inner = (te > 6) & (te < 23.5)
-    # period 38 frames: ~5e-6 (rate 3e-5) from 12 frames off the ends of the
-    # span on, 1e-2 within the first and last 2 frames (RBF boundary error)
-    assert err[inner].max() < 1e-5
-    assert derr[inner].max() < 1e-4
-    assert err.max() < 2e-2
-
-
-def test_temporal_outside_span_is_nan():
-    ti = TemporalInterpolant([0.0, 1.0, 2.5])
-    W = ti.weights([-0.1, 0.0, 2.5, 2.6, np.nan])
-    assert np.isnan(W[[0, 3, 4]]).all()
-    assert np.isfinite(W[[1, 2]]).all()
-    assert ti.in_span([-0.1, 0.0, 2.5, 2.6, np.nan]).tolist() == [False, True, True, False, False]
-
-
-def test_temporal_bad_arguments():
-    with pytest.raises(DataError, match=r"strictly increasing: times\[2\] = 1\.0 s is followed by times\[3\] = 1\.0 s"):
-        TemporalInterpolant([0.0, 0.5, 1.0, 1.0, 2.0])
-    with pytest.raises(DataError, match="at least 2 frames"):
-        TemporalInterpolant([1.0])
-    with pytest.raises(DataError, match=r"times: non-finite time at index 1"):
-        TemporalInterpolant([0.0, np.nan, 1.0])
-    with pytest.raises(ConfigError, match="times must be 1-D"):
-        TemporalInterpolant(np.zeros((2, 2)))
-    with pytest.raises(ConfigError, match="c must be a positive"):
-        TemporalInterpolant([0.0, 1.0], c=0)
-    with pytest.raises(ConfigError, match="derivative must be 0 or 1"):
-        TemporalInterpolant([0.0, 1.0]).weights([0.5], derivative=2)
-    with pytest.raises(ConfigError, match="values must have n_frames = 2 rows"):
-        TemporalInterpolant([0.0, 1.0])(np.zeros(3), [0.5])
 
 
 # --------------------------------------------------------------------------
@@ -444,13 +367,13 @@ def test_bad_arguments_space():
         MaskedGridInterpolant(line)
     with pytest.raises(DataError, match=r"mask: 2 pixel\(s\)"):
         MaskedGridInterpolant(np.eye(5, dtype=bool)[:2])
-    with pytest.raises(ConfigError, match="method must be one of 'rbf', 'bilinear', 'cubic', got 'spline'"):
+    with pytest.raises(ConfigError, match="`method` must be one of 'rbf', 'bilinear', 'cubic'; got 'spline'"):
         MaskedGridInterpolant(mask, method="spline")
-    with pytest.raises(ConfigError, match="halo must be an integer >= 1, got 0"):
+    with pytest.raises(ConfigError, match="`halo` must be an integer >= 1; got 0"):
         MaskedGridInterpolant(mask, halo=0)
-    with pytest.raises(ConfigError, match="halo must be an integer"):
+    with pytest.raises(ConfigError, match="`halo` must be an integer"):
         MaskedGridInterpolant(mask, halo=2.5)
-    with pytest.raises(ConfigError, match="c must be a positive finite number, got -2"):
+    with pytest.raises(ConfigError, match="`c` must be finite and > 0; got -2"):
         MaskedGridInterpolant(mask, c=-2)
     it = MaskedGridInterpolant(mask)
     with pytest.raises(ConfigError, match="call fit"):
@@ -609,10 +532,25 @@ def test_series_bad_arguments():
     bad = frames.copy()
     vv, uu = np.nonzero(mask)
     bad[3, vv[10], uu[10]] = np.nan
-    with pytest.raises(DataError, match=rf"first in frame 3 at pixel \(u={uu[10]}, v={vv[10]}\)"):
+    with pytest.raises(DataError, match=rf"first in IR frame 3 \(t = 1\.5 s\) at pixel \(u={uu[10]}, v={vv[10]}\)"):
         evaluate_series(bad, t, [1.0], pts, mask)
-    with pytest.raises(ConfigError, match="chunk must be an integer >= 1"):
+    with pytest.raises(ConfigError, match="`chunk` must be an integer >= 1"):
         evaluate_series(frames, t, [1.0], pts, mask, chunk=0)
+
+
+def test_series_names_sensor_pixels_with_grid_labels():
+    # a crop window: the frame array starts at sensor pixel (100, 40); the
+    # message must name the sensor pixel and the frame time, not array indices
+    t, mask, frames = series_case()
+    pts = points_in(mask, 10)
+    bad = frames.copy()
+    vv, uu = np.nonzero(mask)
+    bad[4, vv[7], uu[7]] = np.inf
+    u = np.arange(W) + 100
+    v = np.arange(H) + 40
+    with pytest.raises(DataError, match=rf"^ir: frames: 1 non-finite value\(s\) at masked pixels, first in IR frame 4 "
+                                        rf"\(t = 2 s\) at sensor pixel \(u={uu[7] + 100}, v={vv[7] + 40}\)"):
+        evaluate_series(bad, t, [1.0], pts, mask, u=u, v=v, name="ir: frames")
 
 
 # --------------------------------------------------------------------------

@@ -9,9 +9,9 @@ from scipy.interpolate import RBFInterpolator
 
 from irdic.errors import ConfigError, DataError, GeometryError, IrdicWarning
 from irdic.strain import strain
+from irdic.numerics.temporal import TemporalInterpolant
 from irdic.surface import (
     SpatialInterpolant,
-    TemporalSmoother,
     edge_distance,
     fit_surface,
     gcv_spatial,
@@ -168,7 +168,7 @@ def test_missing_reference_points_take_their_first_valid_stage():
 def test_parameter_errors():
     with pytest.raises(ConfigError, match=r"x must have shape \(N, 3\) or \(stages, N, 3\), got \(10, 2\)"):
         surface_parameters(np.zeros((10, 2)))
-    with pytest.raises(ConfigError, match="method must be one of 'auto', 'plane', 'cylinder', got 'sphere'"):
+    with pytest.raises(ConfigError, match="`method` must be one of 'auto', 'plane', 'cylinder'; got 'sphere'"):
         surface_parameters(np.zeros((10, 3)), "sphere")
     with pytest.raises(DataError, match="x: 4 point.* the surface needs at least 6"):
         surface_parameters(np.r_[np.random.rand(4, 3), np.full((3, 3), np.nan)])
@@ -300,9 +300,9 @@ def test_spatial_interpolant_errors():
         SpatialInterpolant(np.c_[np.arange(10.0), 2 * np.arange(10.0)])
     with pytest.raises(ConfigError, match=r"psi must be finite .* row 2"):
         SpatialInterpolant(np.r_[psi[:2], [[np.nan, 0]], psi[3:]])
-    with pytest.raises(ConfigError, match="c must be a positive finite number, got -1"):
+    with pytest.raises(ConfigError, match="`c` must be finite and > 0; got -1"):
         SpatialInterpolant(psi, c=-1)
-    with pytest.raises(ConfigError, match="solver must be one of 'auto', 'global', 'local', got 'dense'"):
+    with pytest.raises(ConfigError, match="`solver` must be one of 'auto', 'global', 'local'; got 'dense'"):
         SpatialInterpolant(psi, solver="dense")
     with pytest.raises(ConfigError, match="smoothing is the centre spacing .* must be >= 1"):
         SpatialInterpolant(psi, smoothing=0.5)
@@ -320,7 +320,7 @@ def test_spatial_interpolant_errors():
 
 def test_temporal_interpolant_identity_and_linear_exactness():
     t = np.r_[0.0, 0.5, 1.0, 2.0, 2.5, 4.0]  # irregular (a dropped stage)
-    ts = TemporalSmoother(t)
+    ts = TemporalInterpolant(t)
     np.testing.assert_array_equal(ts.weights(), np.eye(6))
     f = 3 - 2 * t
     te = np.array([0.25, 1.7, 3.9])
@@ -328,9 +328,9 @@ def test_temporal_interpolant_identity_and_linear_exactness():
     np.testing.assert_allclose(ts.weights(te, 1) @ f, -2, atol=1e-12)
     assert np.isnan(ts.weights([-0.1, 4.1])).all()
     with pytest.raises(DataError, match=r"times must be strictly increasing: times\[1\] = 1.0 s is followed by"):
-        TemporalSmoother([0.0, 1.0, 1.0])
-    with pytest.raises(DataError, match="1 stage.*needs at least 2"):
-        TemporalSmoother([0.0])
+        TemporalInterpolant([0.0, 1.0, 1.0])
+    with pytest.raises(DataError, match=r"times: 1 time\(s\); .* needs at least 2"):
+        TemporalInterpolant([0.0])
 
 
 def test_smooth_series_fills_gaps_from_the_own_series():
@@ -571,7 +571,7 @@ def test_edge_distance_of_a_square_with_a_hole():
 @pytest.mark.parametrize("name", ["tube", "halfshell"])
 def test_synthetic_experiment_truth(name):
     synthetic = pytest.importorskip("irdic.synthetic")
-    from irdic.thermal import material_rate, surface_gradient
+    from irdic.gradient import material_rate, surface_gradient
 
     ex = synthetic.experiment(name, "demo", dic_noise=0.0)
     tr = ex.truth()

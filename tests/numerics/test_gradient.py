@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from irdic.errors import ConfigError
-from irdic.thermal import (
+from irdic.gradient import (
     material_rate,
     parameter_derivatives,
     projected_gradient,

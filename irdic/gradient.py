@@ -34,6 +34,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import ConfigError
+from .numerics.temporal import smooth_series
+from .validation import float_array, shaped_array
 
 __all__ = [
     "spatial_gradient",
@@ -46,17 +48,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-def _arr(name, value, tail):
-    try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{name} must be an array of numbers: {exc}") from None
-    if a.ndim < len(tail) or a.shape[a.ndim - len(tail):] != tail:
-        want = "(..., " + ", ".join(map(str, tail)) + ")"
-        raise ConfigError(f"{name} must have shape {want}, got {a.shape}")
-    return a
 
 
 def _dot(x, y):
@@ -92,15 +83,15 @@ def spatial_gradient(g_pix, J):
         see it); only the tangential part, :func:`projected_gradient`, is the
         surface gradient.
     """
-    g = _arr("g_pix", g_pix, (2,))
-    Jm = _arr("J", J, (2, 3))
+    g = shaped_array(g_pix, "g_pix", (2,))
+    Jm = shaped_array(J, "J", (2, 3))
     _lead(("g_pix", g, 1), ("J", Jm, 2))
     return g[..., 0, None] * Jm[..., 0, :] + g[..., 1, None] * Jm[..., 1, :]
 
 
 def parameter_derivatives(g_pix, J, tangents):
     """``dTheta/dPsi^alpha = g_pix^T J a_alpha`` (K/mm), shape (..., 2)."""
-    t = _arr("tangents", tangents, (2, 3))
+    t = shaped_array(tangents, "tangents", (2, 3))
     g3 = spatial_gradient(g_pix, J)
     _lead(("g_pix/J", g3, 1), ("tangents", t, 2))
     return np.stack([_dot(g3, t[..., 0, :]), _dot(g3, t[..., 1, :])], -1)
@@ -124,7 +115,7 @@ def surface_gradient(g_pix, J, tangents):
         Tangent to the current surface; NaN where any input is NaN or the
         tangents are degenerate (parallel or zero).
     """
-    t = _arr("tangents", tangents, (2, 3))
+    t = shaped_array(tangents, "tangents", (2, 3))
     g3 = spatial_gradient(g_pix, J)
     shape = _lead(("g_pix/J", g3, 1), ("tangents", t, 2))
     a1, a2 = t[..., 0, :], t[..., 1, :]
@@ -154,7 +145,7 @@ def projected_gradient(g_pix, J, normal):
     -------
     ndarray, shape (..., 3)
     """
-    n = _arr("normal", normal, (3,))
+    n = shaped_array(normal, "normal", (3,))
     g3 = spatial_gradient(g_pix, J)
     _lead(("g_pix/J", g3, 1), ("normal", n, 1))
     return g3 - _dot(g3, n)[..., None] * n
@@ -189,11 +180,8 @@ def material_rate(dtheta_dt, g_pix, J, velocity):
     -------
     Rate
     """
-    try:
-        local = np.asarray(dtheta_dt, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"dtheta_dt must be an array of numbers: {exc}") from None
-    v = _arr("velocity", velocity, (3,))
+    local = float_array(dtheta_dt, "dtheta_dt")
+    v = shaped_array(velocity, "velocity", (3,))
     g3 = spatial_gradient(g_pix, J)
     shape = _lead(("dtheta_dt", local, 0), ("g_pix/J", g3, 1), ("velocity", v, 1))
     conv = _dot(g3, v)
@@ -207,7 +195,7 @@ def rate_from_series(theta, times, t_eval=None, *, smoothing=None, c=1.0, R0=1.0
     ``Theta_k(t) = Theta(x(Psi_k, t), t)``, so ``d Theta_k / dt`` is the material
     rate (eq:tempVeloc) without pixel derivatives or velocities. With
     ``smoothing="gcv"`` the series are smoothed by temporal IMQ regression first
-    (see :func:`irdic.surface.smooth_series`): the way to a usable rate from
+    (see :func:`irdic.numerics.temporal.smooth_series`): the way to a usable rate from
     noisy IR data.
 
     Parameters
@@ -231,7 +219,5 @@ def rate_from_series(theta, times, t_eval=None, *, smoothing=None, c=1.0, R0=1.0
     value : ndarray, shape (T, ...)
         The (smoothed) temperatures at ``t_eval``.
     """
-    from .surface import smooth_series
-
     fit = smooth_series(theta, times, t_eval, smoothing=smoothing, c=c, R0=R0)
     return fit.rate, fit.value

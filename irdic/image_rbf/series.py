@@ -1,0 +1,269 @@
+"""Temperatures, gradients and rates at moving points over a frame series (the couple stage's use).
+
+For each evaluation time ``t_k`` the frames are combined by the temporal
+cardinal weights, ``G_k = F l_t(t_k)`` and ``G'_k = F l_t'(t_k)``, and both are
+interpolated in space at the points ``P_k`` (see :mod:`irdic.image_rbf`).
+"""
+
+from __future__ import annotations
+
+import logging
+import warnings
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import ConfigError, DataError, IrdicWarning
+from ..logs import Progress
+from ..numerics.temporal import TemporalInterpolant
+from ..validation import as_int, bool_mask, choice, float_array
+from .interpolant import METHODS, MaskedGridInterpolant
+from .tiles import TileCache
+
+__all__ = ["SeriesEvaluation", "evaluate_series"]
+
+log = logging.getLogger(__name__)
+
+# Bytes of frames read per block (float32 frames: 128 MB).
+_READ_BYTES = 2**27
+
+
+class SeriesEvaluation(NamedTuple):
+    """Result of :func:`evaluate_series`; arrays (n_times, M) unless noted.
+
+    theta : temperature (unit of the frames, °C)
+    dtheta_du, dtheta_dv : spatial derivatives, K/px
+    dtheta_dt : local time derivative at fixed pixel position, K/s
+    edge_distance : px from the mask edge (see :class:`Evaluation`)
+    in_span : (n_times,) bool, False where the time lies outside the frame
+        span (all values NaN there)
+    """
+
+    theta: np.ndarray
+    dtheta_du: np.ndarray
+    dtheta_dv: np.ndarray
+    dtheta_dt: np.ndarray
+    edge_distance: np.ndarray
+    in_span: np.ndarray
+
+
+def _frame_shape(frames):
+    shape = getattr(frames, "shape", None)
+    if shape is None:
+        frames = np.asarray(frames)
+        shape = frames.shape
+    if len(shape) != 3:
+        raise ConfigError(f"frames must have shape (n_frames, H, W), got {tuple(shape)}")
+    return frames, shape
+
+
+def _points(points, n_times):
+    pts = float_array(points, "points")
+    if pts.ndim == 2 and pts.shape[1] == 2:
+        pts = np.broadcast_to(pts, (n_times,) + pts.shape)
+    if pts.ndim != 3 or pts.shape[0] != n_times or pts.shape[2] != 2:
+        raise ConfigError(
+            f"points must have shape (n_times, M, 2) = ({n_times}, M, 2) or (M, 2), got {pts.shape}"
+        )
+    return pts
+
+
+def _masks(mask, n_times, H, W):
+    """Distinct consecutive masks and the index of each time's mask."""
+    mk = np.asarray(mask)
+    if mk.ndim == 2:
+        masks = [bool_mask(mk)]
+        mask_of = np.zeros(n_times, np.int64)
+    elif mk.ndim == 3 and mk.shape[0] == n_times:
+        masks, mask_of = [], np.empty(n_times, np.int64)
+        for k in range(n_times):
+            m = bool_mask(mk[k], f"mask[{k}]")
+            if not (masks and np.array_equal(m, masks[-1])):
+                masks.append(m)
+            mask_of[k] = len(masks) - 1
+    else:
+        raise ConfigError(f"mask must have shape (H, W) or (n_times, H, W) = ({n_times}, H, W), got {mk.shape}")
+    for m in masks:
+        if m.shape != (H, W):
+            raise ConfigError(f"mask must have the frame shape (H, W) = ({H}, {W}), got {m.shape}")
+    return masks, mask_of
+
+
+def _pixel_label(j, uu, uv, u, v):
+    """``pixel (u=.., v=..)`` of the frame array, or ``sensor pixel`` with the grid's coordinate labels."""
+    if u is None or v is None:
+        return f"pixel (u={uu[j]}, v={uv[j]})"
+    return f"sensor pixel (u={u[uu[j]]}, v={v[uv[j]]})"
+
+
+def _pixel_series(frames, union, ft, u, v, name):
+    """Time series (n_u, n_frames) of the pixels of ``union``, read frame block by frame block."""
+    n_frames, H, W = frames.shape
+    uv, uu = np.nonzero(union)
+    F = np.empty((uv.size, n_frames))
+    step = max(1, int(_READ_BYTES // max(1, H * W * 4)))
+    for f0 in range(0, n_frames, step):
+        block = np.asarray(frames[f0:f0 + step])
+        F[:, f0:f0 + block.shape[0]] = block[:, uv, uu].T
+    bad = ~np.isfinite(F)
+    if bad.any():
+        j, n = np.argwhere(bad)[0]
+        raise DataError(
+            f"{name}: {int(bad.sum())} non-finite value(s) at masked pixels, first in IR frame {n} "
+            f"(t = {ft[n]:g} s) at {_pixel_label(j, uu, uv, u, v)}; every masked pixel needs finite values "
+            "in every frame (NaN temperatures under the specimen cannot be interpolated)"
+        )
+    lookup = np.full((H, W), -1, np.int64)
+    lookup[uv, uu] = np.arange(uv.size)
+    return F, lookup
+
+
+def _warn_out_of_span(in_span, te, ft):
+    if in_span.all():
+        return
+    out = np.flatnonzero(~in_span)
+    shown = ", ".join(f"{te[i]:g}" for i in out[:5]) + (", ..." if out.size > 5 else "")
+    warnings.warn(
+        f"eval_times: {out.size} of {te.size} time(s) lie outside the frame span "
+        f"[{ft[0]:g}, {ft[-1]:g}] s ({shown}); their results are NaN",
+        IrdicWarning,
+        stacklevel=3,
+    )
+
+
+def _pieces(ks, mask_of, chunk):
+    """Runs of consecutive in-span times with the same mask, cut into chunks."""
+    pieces = []
+    if ks.size:
+        cut = np.flatnonzero((np.diff(ks) != 1) | (np.diff(mask_of[ks]) != 0)) + 1
+        for run in np.split(ks, cut):
+            pieces.extend(run[i:i + chunk] for i in range(0, run.size, chunk))
+    return pieces
+
+
+def _combined_frames(F, sel, Wv, Wd, n_mask):
+    """``G_k`` and ``G'_k`` of a chunk: (chunk, 2, n_mask)."""
+    vals = np.empty((Wv.shape[0], 2, n_mask))
+    for j, Wt in enumerate((Wv, Wd)):
+        # the temporal cardinal weights decay like the spatial ones: only
+        # frames where they exceed 1e-15 of the largest enter (error ~1e-13 K)
+        big = np.flatnonzero((np.abs(Wt) > 1e-15 * np.abs(Wt).max()).any(axis=0))
+        c0, c1 = big[0], big[-1] + 1
+        vals[:, j] = (F[:, c0:c1] @ Wt[:, c0:c1].T)[sel].T
+    return vals
+
+
+def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rbf", c=2.0, R0=1.0, c_time=1.0,
+                    R0_time=1.0, halo=12, tile=8, chunk=32, u=None, v=None, name="frames"):
+    """Temperatures, gradients and rates at moving points over a frame series.
+
+    Parameters
+    ----------
+    frames : array_like, shape (n_frames, H, W)
+        Pixel temperatures (°C); any array-like with numpy slicing (numpy,
+        zarr, memmap), read frame block by frame block.
+    frame_times : array_like, shape (n_frames,)
+        Frame times in s, strictly increasing.
+    eval_times : array_like, shape (n_times,)
+        Evaluation times in s, any order; outside the frame span NaN (with an
+        :class:`~irdic.errors.IrdicWarning`).
+    points : array_like, shape (n_times, M, 2) or (M, 2)
+        (u, v) in px of the frame array per evaluation time (or fixed); NaN
+        points give NaN.
+    mask : array_like of bool, shape (H, W) or (n_times, H, W)
+        Pixels on the specimen, fixed or per evaluation time. Consecutive
+        identical masks share all setup; a change refactorises the edge tiles
+        whose local pattern changed, so prefer masks fixed over runs of times.
+        Every masked pixel (of any time) needs finite values in every frame.
+    method : {"rbf", "bilinear", "cubic"}
+        Spatial method; in time always the IMQ interpolant.
+    c, R0 : float
+        Spatial IMQ shape parameter and normalisation (px): 2, 1 in the paper.
+    c_time, R0_time : float
+        Temporal IMQ shape parameter and normalisation (s): 1, 1 in the paper.
+    halo, tile : int
+        See :class:`MaskedGridInterpolant`.
+    chunk : int
+        Evaluation times processed together (memory ~ chunk x 2 x bounding box
+        of the mask x 12 B).
+    u, v : array_like of int, shape (W,), (H,), optional
+        Full-sensor pixel coordinates of the frame's columns and rows (a crop
+        window); given, error messages name sensor pixels, not array indices.
+    name : str
+        Name of the frames in error messages (e.g. ``"ir: frames"``).
+
+    Returns
+    -------
+    SeriesEvaluation
+
+    Raises
+    ------
+    DataError
+        A masked pixel with a non-finite value (naming the first: frame,
+        frame time, pixel), or a mask without 3 pixels off a line.
+
+    Notes
+    -----
+    With a moving mask the tensor product interpolates each pixel's series
+    over all frames, so pixels that changed between specimen and background
+    within a few frames of ``t_k`` carry mixed values in ``G_k``; an eroded
+    mask avoids that.
+    """
+    method = choice(method, "method", METHODS)
+    chunk = as_int(chunk, "chunk", 1)
+    frames, (n_frames, H, W) = _frame_shape(frames)
+    ft = float_array(frame_times, "frame_times")
+    if ft.shape != (n_frames,):
+        raise ConfigError(
+            f"frame_times must have shape (n_frames,) = ({n_frames},) like frames, got {ft.shape}"
+        )
+    temporal = TemporalInterpolant(ft, c=c_time, R0=R0_time)
+    te = float_array(eval_times, "eval_times")
+    if te.ndim != 1:
+        raise ConfigError(f"eval_times must be 1-D (n_times,), got shape {te.shape}")
+    pts = _points(points, te.size)
+    masks, mask_of = _masks(mask, te.size, H, W)
+    in_span = temporal.in_span(te)
+    _warn_out_of_span(in_span, te, ft)
+    union = np.logical_or.reduce(masks)
+    if not union.any():
+        raise DataError("mask: no pixel is masked; at least 3 pixels not on one line are needed")
+    labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
+    F, lookup = _pixel_series(frames, union, ft, *labels, name)
+    interp_args = dict(method=method, c=c, R0=R0, halo=halo, tile=tile)
+    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
+    return SeriesEvaluation(*out, in_span)
+
+
+def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args):
+    """theta, d/du, d/dv, d/dt, edge distance (n_times, M) for the in-span times, chunk by chunk."""
+    ks = np.flatnonzero(in_span)
+    Wv = temporal.weights(te[ks], 0) if ks.size else None
+    Wd = temporal.weights(te[ks], 1) if ks.size else None
+    row_of = np.full(te.size, -1, np.int64)
+    row_of[ks] = np.arange(ks.size)
+    out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(5)]
+    cache = TileCache()
+    interp, current = None, None
+    progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
+    done = 0
+    for ch in _pieces(ks, mask_of, chunk):
+        mi = int(mask_of[ch[0]])
+        if mi != current:  # masks come in runs: keep only the current one
+            interp, current = None, mi
+            interp = MaskedGridInterpolant(masks[mi], tile_cache=cache, **interp_args)
+        sel = lookup[interp.pixels[:, 1], interp.pixels[:, 0]]
+        if sel.size == F.shape[0]:
+            sel = slice(None)  # the mask is the union: no copy
+        r = row_of[ch]
+        interp.fit_values(_combined_frames(F, sel, Wv[r], Wd[r], interp.n_mask).reshape(2 * ch.size, -1))
+        val, du, dv, ed = interp.evaluate_grouped(pts[ch], 2, (True, False))
+        for o, res in zip(out, (val[:, 0], du[:, 0], dv[:, 0], val[:, 1], ed)):
+            o[ch] = res
+        done += ch.size
+        progress.update(done)
+    log.info(
+        "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised",
+        te.size, pts.shape[1], F.shape[0], len(masks), cache.built,
+    )
+    return out

@@ -1,0 +1,17 @@
+"""Shared numerics: the IMQ kernel, the saddle-point factorisation, the temporal operator, threads."""
+
+from .imq import imq, imq_dr, imq_matrix, imq_planar
+from .saddle import SaddleFactor
+from .temporal import SeriesFit, TemporalInterpolant, gcv_temporal, smooth_series
+
+__all__ = [
+    "imq",
+    "imq_dr",
+    "imq_matrix",
+    "imq_planar",
+    "SaddleFactor",
+    "TemporalInterpolant",
+    "gcv_temporal",
+    "smooth_series",
+    "SeriesFit",
+]

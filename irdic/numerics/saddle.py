@@ -1,0 +1,151 @@
+"""The factorised saddle-point system of a kernel interpolant with polynomial terms.
+
+``[[A, P], [P^T, 0]] [x; y] = [f; q]`` with ``A`` the (IMQ, positive definite)
+kernel matrix of the centres and ``P`` the monomials at the centres, full
+column rank. Used by the image interpolant (pixel tiles and stencils), the
+surface (global and local tiles) and the temporal interpolant.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import scipy.linalg
+
+__all__ = ["SaddleFactor", "solve_dense"]
+
+log = logging.getLogger(__name__)
+
+
+class SaddleFactor:
+    """Factorised ``[[A, P], [P^T, 0]]`` with ``A`` symmetric positive definite.
+
+    Parameters
+    ----------
+    A : ndarray, shape (K, K)
+        Kernel matrix.
+    P : ndarray, shape (K, m)
+        Monomials at the centres, full column rank.
+    rebuild : callable, optional
+        Returns ``A`` again. Given, the Cholesky factorisation may overwrite
+        ``A`` in place (large matrices), and the LU fallback rebuilds it.
+
+    Notes
+    -----
+    Cholesky ``A = L L^T`` and the small Schur complement
+    ``S = P^T A^-1 P`` (its inverse, m x m). When round-off makes ``A``
+    numerically indefinite (very flat kernels, ``c R0`` much larger than the
+    centre spacing) an LU factorisation of the whole saddle matrix is used
+    instead.
+    """
+
+    def __init__(self, A, P, rebuild=None):
+        self.K = A.shape[0]
+        self.P = P
+        self.lu = None
+        self.cho = None
+        try:
+            self.cho = scipy.linalg.cho_factor(A, lower=True, overwrite_a=rebuild is not None, check_finite=False)
+            self.Y = scipy.linalg.cho_solve(self.cho, P, check_finite=False)
+            self.S_inv = np.linalg.inv(P.T @ self.Y)
+            self.nbytes = A.nbytes + P.nbytes + self.Y.nbytes
+            return
+        except np.linalg.LinAlgError:
+            pass
+        log.debug("kernel matrix (%d) not numerically positive definite: LU of the saddle system", self.K)
+        self.cho = None
+        A = rebuild() if rebuild is not None else A
+        n, m = self.K, P.shape[1]
+        S = np.zeros((n + m, n + m))
+        S[:n, :n] = A
+        S[:n, n:] = P
+        S[n:, :n] = P.T
+        self.lu = scipy.linalg.lu_factor(S, overwrite_a=True, check_finite=False)
+        self.nbytes = S.nbytes + P.nbytes
+
+    def solve(self, F, Q=None):
+        """Solve ``A x + P y = F``, ``P^T x = Q`` (``Q = 0`` when None).
+
+        Parameters
+        ----------
+        F : ndarray, shape (K, k)
+        Q : ndarray, shape (m, k), optional
+
+        Returns
+        -------
+        x : ndarray, shape (K, k)
+        y : ndarray, shape (m, k)
+        """
+        if self.lu is not None:
+            rhs = np.concatenate([F, np.zeros((self.P.shape[1], F.shape[1])) if Q is None else Q])
+            sol = scipy.linalg.lu_solve(self.lu, rhs, check_finite=False)
+            return sol[: self.K], sol[self.K:]
+        X = scipy.linalg.cho_solve(self.cho, F, check_finite=False)
+        rhs = self.P.T @ X
+        if Q is not None:
+            rhs -= Q
+        y = self.S_inv @ rhs
+        X -= self.Y @ y
+        return X, y
+
+    def weights(self, B, Q):
+        """Weights ``w`` with ``w @ f`` = a linear functional of the interpolant of ``f``.
+
+        Parameters
+        ----------
+        B : ndarray, shape (n_f, K)
+            Kernel part of the functionals (the functional applied to each
+            centre's kernel).
+        Q : ndarray, shape (n_f, m)
+            Monomial part.
+
+        Returns
+        -------
+        ndarray, shape (n_f, K)
+        """
+        if self.lu is not None:
+            rhs = np.concatenate([B, Q], axis=1).T
+            return scipy.linalg.lu_solve(self.lu, rhs, trans=1, check_finite=False)[: self.K].T
+        return self.solve(B.T, Q.T)[0].T
+
+    def coefficients(self, F):
+        """Kernel and monomial coefficients of the interpolant of ``F`` (K, k).
+
+        Returns ``(alpha, beta)`` of shapes (K, k), (m, k). Unlike
+        :meth:`solve` the Schur step uses ``Y^T F`` (``= P^T A^-1 F``), which
+        saves one product with the large ``A^-1 F`` for many columns.
+        """
+        if self.lu is not None:
+            return self.solve(F)
+        Z = scipy.linalg.cho_solve(self.cho, F, check_finite=False)
+        beta = self.S_inv @ (self.Y.T @ F)
+        Z -= self.Y @ beta
+        return Z, beta
+
+
+def solve_dense(A, P, f, q):
+    """Solve one small saddle-point system ``[[A, P], [P^T, 0]] [x; y] = [f; q]`` by dense LU.
+
+    For systems solved once, where a factorisation is not reused (e.g. the
+    few-sample temporal fill of a gap).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+    P : ndarray, shape (n, m)
+    f : ndarray, shape (n,) or (n, k)
+    q : ndarray, shape (m,) or (m, k)
+
+    Returns
+    -------
+    x : ndarray, shape (n,) or (n, k)
+    y : ndarray, shape (m,) or (m, k)
+    """
+    n, m = P.shape
+    S = np.zeros((n + m, n + m))
+    S[:n, :n] = A
+    S[:n, n:] = P
+    S[n:, :n] = P.T
+    sol = np.linalg.solve(S, np.concatenate([f, q]))
+    return sol[:n], sol[n:]

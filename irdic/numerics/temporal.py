@@ -1,0 +1,321 @@
+"""The one temporal operator: IMQ interpolation or regression over sample times.
+
+Frame times of the IR series (:mod:`irdic.image_rbf`) and stage times of the
+DIC series (:mod:`irdic.surface`) are treated alike: an IMQ kernel
+``m(r) = c / sqrt(c^2 + r^2)``, ``r = (t - t_j) / R0``, on every time plus the
+monomials {1, t} (the paper's interpolant; c = 1, R0 = 1 s), or, for noisy
+series, a least-squares regression with fewer centres whose spacing
+generalised cross-validation can choose (:func:`gcv_temporal`).
+:func:`smooth_series` applies the operator to any per-point series.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import NamedTuple
+
+import numpy as np
+import scipy.linalg
+
+from ..errors import ConfigError, DataError, GeometryError
+from ..validation import float_array, increasing_times, positive, smoothing_factor
+from .imq import imq, imq_dr, regression_R0
+from .saddle import SaddleFactor
+
+__all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "SeriesFit", "smooth_series"]
+
+log = logging.getLogger(__name__)
+
+#: Sample times closer than this (in units of R0) to an evaluation time are
+#: taken as equal: the interpolation weights are then the identity row.
+TIME_SNAP = 1e-9
+
+
+class TemporalInterpolant:
+    """IMQ interpolation (or regression) in time over sample times, with {1, t}.
+
+    Parameters
+    ----------
+    times : array_like, shape (M,)
+        Frame or stage times in s, strictly increasing (irregular spacing is
+        fine); at least 2.
+    c : float
+        Shape factor (the paper: 1).
+    R0 : float
+        Time normalisation in s (the paper: 1 s).
+    smoothing : None or float >= 1
+        None / 1: interpolation (the paper). ``k > 1``: least squares with
+        centres on about every k-th time (first and last always) and a kernel
+        six centre spacings wide (``c R0_eff = 6 H``); see :func:`gcv_temporal`.
+
+    Notes
+    -----
+    Interpolation factorises the (M + 2) saddle-point system once
+    (:class:`~irdic.numerics.saddle.SaddleFactor`): fine up to a few thousand
+    times. Regression is a QR factorisation of the design matrix. Evaluation
+    times outside ``[times[0], times[-1]]`` give NaN weights: the operator is
+    not meant to extrapolate; :meth:`in_span` tells which.
+    """
+
+    def __init__(self, times, *, c=1.0, R0=1.0, smoothing=None):
+        t = increasing_times(times, "times", "n_times")
+        if t.size < 2:
+            raise DataError(
+                f"times: {t.size} time(s); the temporal interpolant with monomials {{1, t}} needs at least 2"
+            )
+        self.times = t
+        self.c = positive(c, "c")
+        self.R0 = positive(R0, "R0")
+        self.k = smoothing_factor(smoothing, "smoothing", allow_gcv=False)
+        self._mid = 0.5 * (t[0] + t[-1])
+        if self.k > 1.0:
+            self._init_regression()
+        else:
+            s = (t - self._mid) / self.R0
+            A = imq(s[:, None] - s[None, :], self.c)
+            self._fac = SaddleFactor(A, np.c_[np.ones(t.size), s])
+            self._s = s
+            self.n_parameters = t.size
+
+    def _init_regression(self):
+        t, M = self.times, self.times.size
+        nc = int(math.ceil((M - 1) / self.k)) + 1
+        if nc + 2 > M:
+            nc = M - 2
+        if nc < 2:
+            raise DataError(f"smoothing = {self.k:g} leaves fewer than 2 temporal centres for {M} times")
+        self.centre_index = np.unique(np.round(np.linspace(0, M - 1, nc)).astype(int))
+        H = (t[-1] - t[0]) / (self.centre_index.size - 1)
+        self.R0_eff = regression_R0(self.c, H)
+        cs = (t[self.centre_index] - self._mid) / self.R0_eff
+        s = (t - self._mid) / self.R0_eff
+        E = np.c_[imq(s[:, None] - cs[None, :], self.c), np.ones(M), (t - self._mid) / self.R0]
+        self._Q, self._R = scipy.linalg.qr(E, mode="economic", check_finite=False)
+        dg = np.abs(np.diag(self._R))
+        if dg.min() < 1e-12 * dg.max():
+            raise GeometryError(f"temporal regression with smoothing {self.k:g} is rank deficient")
+        self._cs = cs
+        self.n_parameters = E.shape[1]
+
+    @property
+    def n_times(self):
+        """Number of sample times."""
+        return self.times.size
+
+    @property
+    def span(self):
+        """``(first, last)`` sample time in s."""
+        return float(self.times[0]), float(self.times[-1])
+
+    def in_span(self, t_eval):
+        """Boolean array: which evaluation times lie within the span (False for NaN)."""
+        te = float_array(t_eval, "t_eval")
+        tol = TIME_SNAP * self.R0
+        with np.errstate(invalid="ignore"):
+            return (te >= self.times[0] - tol) & (te <= self.times[-1] + tol)
+
+    def weights(self, t_eval=None, derivative=0):
+        """Weights ``W`` with ``f(t_eval) = W @ f(times)`` (or ``df/dt``).
+
+        Parameters
+        ----------
+        t_eval : array_like, shape (T,) or scalar, optional
+            Evaluation times (s), any order; default the sample times.
+        derivative : {0, 1}
+            0: value; 1: time derivative (weights in 1/s).
+
+        Returns
+        -------
+        ndarray, shape (T, M)
+            NaN rows for times outside the span (or NaN). Interpolation at a
+            sample time gives exactly the identity row.
+        """
+        if derivative not in (0, 1) or isinstance(derivative, bool):
+            raise ConfigError(f"derivative must be 0 or 1, got {derivative!r}")
+        te = self.times if t_eval is None else np.atleast_1d(float_array(t_eval, "t_eval"))
+        if te.ndim != 1:
+            raise ConfigError(f"t_eval must be a scalar or 1-D, got shape {te.shape}")
+        ok = self.in_span(te)
+        W = np.full((te.size, self.n_times), np.nan)
+        if ok.any():
+            tt = te[ok] - self._mid
+            W[ok] = self._regression(tt, derivative) if self.k > 1.0 else self._interpolation(te[ok], tt, derivative)
+        return W
+
+    def _regression(self, tt, derivative):
+        n = tt.size
+        d = (tt / self.R0_eff)[:, None] - self._cs[None, :]
+        if derivative == 0:
+            E = np.c_[imq(d, self.c), np.ones(n), tt / self.R0]
+        else:
+            E = np.c_[imq_dr(d, self.c) / self.R0_eff, np.zeros(n), np.full(n, 1.0 / self.R0)]
+        return scipy.linalg.solve_triangular(self._R, E.T, trans=1, check_finite=False).T @ self._Q.T
+
+    def _interpolation(self, te, tt, derivative):
+        n = tt.size
+        s = tt / self.R0
+        d = s[:, None] - self._s[None, :]
+        if derivative == 0:
+            B, Q = imq(d, self.c), np.c_[np.ones(n), s]
+        else:
+            B, Q = imq_dr(d, self.c) / self.R0, np.c_[np.zeros(n), np.full(n, 1.0 / self.R0)]
+        W = self._fac.weights(B, Q)
+        if derivative == 0:
+            # exactly the sample at a sample time (the solve leaves ~1e-13)
+            j = np.clip(np.searchsorted(self.times, te), 0, self.n_times - 1)
+            for jj in (j, np.clip(j - 1, 0, self.n_times - 1)):
+                hit = np.abs(self.times[jj] - te) <= TIME_SNAP * self.R0
+                if hit.any():
+                    W[hit] = 0.0
+                    W[np.flatnonzero(hit), jj[hit]] = 1.0
+        return W
+
+    def __call__(self, values, t_eval=None, derivative=0):
+        """Interpolate ``values`` (M, ...) at ``t_eval``; returns (T, ...), NaN outside the span."""
+        f = float_array(values, "values")
+        if f.ndim < 1 or f.shape[0] != self.n_times:
+            raise ConfigError(f"values must have n_times = {self.n_times} rows, got shape {f.shape}")
+        return np.tensordot(self.weights(t_eval, derivative), f, axes=(1, 0))
+
+
+def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=4096):
+    """Choose the temporal regression's centre spacing by generalised cross-validation.
+
+    Parameters
+    ----------
+    times : array_like, shape (M,)
+        Sample times (s).
+    series : array_like, shape (M, ...)
+        Time series (finite) to judge by, pooled: every column counts.
+    c, R0 : float
+        Kernel (as :class:`TemporalInterpolant`).
+    candidates : sequence of float, optional
+        Centre spacing factors (> 1); default 1.5 ... 64, as many as ``M`` allows.
+    max_series : int
+        At most this many columns (evenly spaced) enter the pooled GCV.
+
+    Returns
+    -------
+    k : float
+        Factor with the least ``GCV = n RSS / (n - p)^2``; 1.0 (interpolation)
+        when no candidate fits (at most M / 2 parameters: fewer than ~10 times).
+    table : list of (k, n_parameters, gcv)
+
+    Notes
+    -----
+    The hat matrix of the regression is ``Q Q^T`` with trace ``p``, the number
+    of parameters, so GCV is exact and cheap.
+    """
+    t = increasing_times(times, "times", "n_times")
+    F = float_array(series, "series")
+    if F.shape[0] != t.size:
+        raise ConfigError(f"series must have M = {t.size} rows, got shape {F.shape}")
+    F = F.reshape(t.size, -1)
+    if not np.isfinite(F).all():
+        raise DataError("series contain NaN or inf; GCV needs complete series")
+    if F.shape[1] > max_series:
+        F = F[:, np.linspace(0, F.shape[1] - 1, max_series).astype(int)]
+    M = t.size
+    if candidates is None:
+        candidates = (1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
+    table = []
+    seen = set()
+    for k in sorted(float(x) for x in candidates):
+        if k <= 1:
+            raise ConfigError(f"candidates must be > 1 (1 is interpolation, GCV undefined), got {k}")
+        try:
+            ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k)
+        except (DataError, GeometryError):
+            continue
+        p = ts.n_parameters
+        if p in seen or p > M // 2 or ts.centre_index.size < 3:
+            continue
+        seen.add(p)
+        rss = float(np.sum((F - ts._Q @ (ts._Q.T @ F)) ** 2))
+        table.append((k, p, M * rss / F.shape[1] / (M - p) ** 2))
+    if not table:
+        log.warning("temporal GCV: %d times are too few for a regression; interpolating", M)
+        return 1.0, table
+    best = min(table, key=lambda r: r[2])
+    log.info("temporal GCV: centres every %.3g times (%d parameters of %d)", best[0], best[1], M)
+    return best[0], table
+
+
+class SeriesFit(NamedTuple):
+    """Result of :func:`smooth_series`."""
+
+    value: np.ndarray
+    """(T, ...) smoothed (or interpolated) values at the evaluation times."""
+    rate: np.ndarray
+    """(T, ...) time derivative (units per s)."""
+    smoothing: float
+    """Centre spacing factor used (1 = interpolation)."""
+    gcv: list
+    """GCV table ``(k, n_parameters, gcv)`` when chosen by GCV, else empty."""
+
+
+def _fill_series(F2, t, c, R0):
+    """Fill NaN entries of each column from its own valid times; returns the dead columns."""
+    bad = ~np.isfinite(F2)
+    dead = np.zeros(F2.shape[1], bool)
+    for j in np.flatnonzero(bad.any(axis=0)):
+        ok = ~bad[:, j]
+        if ok.sum() < 2:
+            dead[j] = True
+            F2[:, j] = 0.0
+            continue
+        fill = TemporalInterpolant(t[ok], c=c, R0=R0).weights(t[~ok]) @ F2[ok, j]
+        # outside the valid span: nearest valid value (flat)
+        nanf = ~np.isfinite(fill)
+        if nanf.any():
+            fill[nanf] = np.interp(t[~ok][nanf], t[ok], F2[ok, j])
+        F2[~ok, j] = fill
+    return dead
+
+
+def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0):
+    """Value and rate of time series by the temporal IMQ interpolant or regression.
+
+    For point temperatures ``Theta_k(t_n)`` at fixed material points this gives
+    the material temperature rate directly (the derivative at fixed ``Psi``).
+
+    Parameters
+    ----------
+    values : array_like, shape (M, ...)
+        Series at ``times``; NaN entries are filled by interpolating each
+        series over its own valid times (at least 2 needed, else NaN).
+    times : array_like, shape (M,)
+        Times (s), strictly increasing.
+    t_eval : array_like, shape (T,), optional
+        Evaluation times; default ``times``.
+    smoothing : None, float >= 1 or "gcv"
+        None/1: interpolation; k: regression; "gcv": k by :func:`gcv_temporal`.
+    c, R0 : float
+        Kernel shape factor and time normalisation (s).
+
+    Returns
+    -------
+    SeriesFit
+    """
+    t = increasing_times(times, "times", "n_times")
+    F = float_array(values, "values")
+    if F.ndim < 1 or F.shape[0] != t.size:
+        raise ConfigError(f"values must have M = {t.size} rows (one per time), got shape {F.shape}")
+    k = smoothing_factor(smoothing, "smoothing")
+    tail = F.shape[1:]
+    F2 = F.reshape(t.size, -1).copy()
+    dead = _fill_series(F2, t, c, R0)
+    table = []
+    if k == "gcv":
+        k, table = gcv_temporal(t, F2[:, ~dead] if (~dead).any() else F2, c=c, R0=R0)
+    ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k)
+    W0 = ts.weights(t_eval, 0)
+    W1 = ts.weights(t_eval, 1)
+    with np.errstate(invalid="ignore"):
+        val = W0 @ F2
+        rate = W1 @ F2
+    val[:, dead] = np.nan
+    rate[:, dead] = np.nan
+    T = W0.shape[0]
+    return SeriesFit(val.reshape((T,) + tail), rate.reshape((T,) + tail), float(k), table)

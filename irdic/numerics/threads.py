@@ -1,0 +1,32 @@
+"""Thread pool for the many small factorisations of the local surface tiles.
+
+The stage's thread budget (:func:`irdic.threads.thread_budget`) caps the
+workers; each worker runs single-threaded BLAS (see the callers), since
+LAPACK and BLAS release the GIL.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+from ..threads import blas_threads, thread_budget
+
+__all__ = ["workers", "parallel_map", "blas_threads"]
+
+
+def workers():
+    """Workers of :func:`parallel_map`: the stage's thread budget, at most 8.
+
+    Beyond 8 the tiles are too few to share.
+    """
+    return max(1, min(thread_budget(), 8))
+
+
+def parallel_map(fn, items):
+    """``list(map(fn, items))`` on a thread pool of :func:`workers` threads."""
+    items = list(items)
+    n = workers()
+    if n == 1 or len(items) < 2:
+        return [fn(i) for i in items]
+    with ThreadPoolExecutor(max_workers=n) as ex:
+        return list(ex.map(fn, items))

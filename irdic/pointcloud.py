@@ -1,0 +1,59 @@
+"""Normals of point clouds by principal component analysis (PCA).
+
+The one PCA-normal implementation: the surface parametrisation
+(:mod:`irdic.surface`), the visibility test of the IR footprint
+(:mod:`irdic.footprint`) and the calibration markers use it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = ["local_normals", "plane_normal"]
+
+
+def local_normals(x, k=12):
+    """Unit normals by PCA of each point's ``k`` nearest neighbours.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n, 3)
+        Finite point coordinates (mm).
+    k : int
+        Neighbours per local plane fit, including the point itself (capped at n).
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        Unit normals, orientation arbitrary.
+
+    Notes
+    -----
+    The normal is the eigenvector of the smallest eigenvalue of the
+    neighbourhood's covariance ``sum_j (x_j - xbar)(x_j - xbar)^T``.
+    """
+    k = min(k, x.shape[0])
+    _, idx = cKDTree(x).query(x, k=k)
+    nb = x[idx] - x[idx].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", nb, nb)
+    return np.linalg.eigh(cov)[1][:, :, 0]
+
+
+def plane_normal(points):
+    """Unit normal of the least-squares plane through ``points``.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Finite coordinates, n >= 3.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        The last right singular vector of the centred points; orientation
+        arbitrary.
+    """
+    p = np.asarray(points, dtype=float)
+    _, _, vt = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)
+    return vt[-1]

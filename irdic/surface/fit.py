@@ -1,0 +1,352 @@
+"""The surface stage: ``x(Psi, t)``, tangents, velocities and reference tangents at the DIC points."""
+
+from __future__ import annotations
+
+import logging
+import time as _time
+import warnings
+from typing import NamedTuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import ConfigError, DataError, IrdicWarning
+from ..numerics.imq import imq
+from ..numerics.saddle import solve_dense
+from ..numerics.temporal import TemporalInterpolant, gcv_temporal
+from ..validation import as_int, choice, float_array, increasing_times, psi_array, smoothing_factor
+from .geometry import edge_distance
+from .interpolation import SpatialInterpolant
+from .parametrisation import MIN_POINTS, surface_parameters
+from .regression import gcv_spatial
+
+__all__ = ["SurfaceFields", "fit_surface"]
+
+log = logging.getLogger(__name__)
+
+
+def _temporal_fill(X, valid, times, c, R0, max_gap, window=8):
+    """Fill short gaps from each point's own valid stages.
+
+    A missing stage is filled when it lies in a run of at most ``max_gap``
+    missing stages with valid stages on both sides; the temporal IMQ
+    interpolant (with {1, t}) of up to ``window`` valid stages on each side
+    gives the value.
+
+    Returns the filled array and the (M, N) mask of entries filled.
+    """
+    M = X.shape[0]
+    idx = np.arange(M)[:, None]
+    prev = np.maximum.accumulate(np.where(valid, idx, -1), axis=0)
+    nxt = np.minimum.accumulate(np.where(valid, idx, M)[::-1], axis=0)[::-1]
+    todo = ~valid & (prev >= 0) & (nxt < M) & (nxt - prev - 1 <= max_gap)
+    out = X.copy()
+    # the weights depend only on the valid times relative to t_k: with regular
+    # stages a handful of patterns serve all gaps
+    cache = {}
+    valid_of = {}
+    for k, i in zip(*np.nonzero(todo)):
+        ok = valid_of.get(i)
+        if ok is None:
+            ok = valid_of[i] = np.flatnonzero(valid[:, i])
+        j = np.searchsorted(ok, k)
+        sel = ok[max(0, j - window):j + window]
+        s = (times[sel] - times[k]) / R0
+        key = tuple(np.round(s, 9))
+        w = cache.get(key)
+        if w is None:
+            # the cardinal weights at t_k: the kernel and monomials {1, s} evaluated at s = 0
+            A = imq(s[:, None] - s[None, :], c)
+            w = cache[key] = solve_dense(A, np.c_[np.ones(s.size), s], imq(-s, c), np.array([1.0, 0.0]))[0]
+        out[k, i] = w @ X[sel, i]
+    return out, todo
+
+
+def _duplicates(psi):
+    """Indices of points closer than 1e-9 of the median spacing to an earlier point."""
+    if psi.shape[0] < 2:
+        return np.zeros(0, np.int64)
+    tree = cKDTree(psi)
+    d, _ = tree.query(psi, k=2)
+    tol = 1e-9 * max(float(np.median(d[:, 1])), 1e-300) + 1e-12
+    pairs = tree.query_pairs(tol, output_type="ndarray")
+    return np.unique(pairs.max(axis=1)) if pairs.size else np.zeros(0, np.int64)
+
+
+class SurfaceFields(NamedTuple):
+    """Result of :func:`fit_surface`; ``T`` evaluation times, ``N`` points.
+
+    Points without any valid stage (and duplicates left out) are NaN throughout.
+    """
+
+    psi: np.ndarray
+    """(N, 2) surface parameters (mm)."""
+    times: np.ndarray
+    """(T,) evaluation times (s)."""
+    x: np.ndarray
+    """(T, N, 3) position on the continuous surface (mm)."""
+    tangents: np.ndarray
+    """(T, N, 2, 3) ``a_alpha = dx/dPsi^alpha`` (dimensionless)."""
+    velocity: np.ndarray
+    """(T, N, 3) ``dx/dt`` at fixed Psi (mm/s)."""
+    ref_x: np.ndarray
+    """(N, 3) reference position ``x(Psi, t_0)`` (mm), t_0 the first stage."""
+    ref_tangents: np.ndarray
+    """(N, 2, 3) reference tangents ``A_alpha``."""
+    filled: np.ndarray
+    """(M, N) bool: the point was missing in the stage and filled (see ``fill``)."""
+    stage_used: np.ndarray
+    """(M,) bool: the stage entered the temporal fit."""
+    edge_distance: np.ndarray
+    """(N,) distance to the edge of the point cloud in Psi (mm)."""
+    info: dict
+    """Solver, smoothing, GCV tables, parametrisation, timings."""
+
+
+def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_t=1.0, smoothing=None,
+                smoothing_t=None, solver="auto", halo=None, parametrisation="auto", min_stage_fraction=0.5,
+                fill="both", max_gap=3):
+    """The continuous surface ``x(Psi, t)`` of DIC stages, evaluated at the points.
+
+    Parameters
+    ----------
+    x : array_like, shape (M, N, 3)
+        Point coordinates per stage (mm); NaN rows are missing points.
+    times : array_like, shape (M,)
+        Stage times (s), strictly increasing; stage 0 is the reference.
+    psi : array_like, shape (N, 2), optional
+        Surface parameters; default from :func:`surface_parameters` (``parametrisation``).
+    t_eval : array_like, shape (T,), optional
+        Evaluation times (s); default ``times``. Outside the stage span: NaN.
+    c, R0 : float
+        Spatial IMQ shape factor and distance normalisation (mm); the paper:
+        c = 0.969 half-shell, 0.9328 tube, R0 = 1 mm.
+    c_t, R0_t : float
+        Temporal shape factor and normalisation (s); the paper: 1, 1 s.
+    smoothing, smoothing_t : None, float >= 1 or "gcv"
+        Spatial / temporal regression (:mod:`irdic.surface` Notes); None = interpolation.
+    solver : {"auto", "global", "local"}
+        Spatial interpolation solver (:mod:`irdic.surface` Notes).
+    halo : float, optional
+        Halo of the local tiles (mm).
+    parametrisation : {"auto", "plane", "cylinder"}
+        Used when ``psi`` is None.
+    min_stage_fraction : float
+        Stages with fewer valid points than this fraction are left out of the
+        temporal fit (and warned about); the reference stage must pass.
+    fill : {"both", "space", "time"}
+        How a point missing in a stage is filled: from the stage's valid
+        points, from the point's own valid stages (gaps of at most
+        ``max_gap`` stages, else in space), or (default) positions and
+        tangents from the former, velocities from the latter
+        (:mod:`irdic.surface` Notes, Missing points).
+    max_gap : int
+        Longest run of missing stages filled in time.
+
+    Returns
+    -------
+    SurfaceFields
+        Points with the same surface parameters as an earlier point (duplicate
+        DIC points) are left out with a logged warning: NaN results, listed in
+        ``info["duplicates"]``.
+
+    Raises
+    ------
+    DataError
+        Fewer than 2 usable stages, too few points, non-increasing times,
+        reference stage unusable.
+    GeometryError
+        Folded parametrisation.
+    """
+    t0 = _time.perf_counter()
+    X, t, frac = _check_stages(x, times, fill, max_gap, min_stage_fraction)
+    M, N, _ = X.shape
+    ks = smoothing_factor(smoothing, "smoothing")
+    kt = smoothing_factor(smoothing_t, "smoothing_t")
+    info = {}
+    if psi is None:
+        psi, info["parametrisation"] = surface_parameters(X, parametrisation)
+    else:
+        psi = psi_array(psi, "psi")
+        if psi.shape[0] != N:
+            raise ConfigError(f"psi has {psi.shape[0]} rows but x has {N} points")
+    valid = np.isfinite(X).all(axis=2)
+    nodes = _nodes(psi, valid, info)
+    n = nodes.size
+    used = _used_stages(valid[:, nodes].sum(axis=1), frac, n)
+    sp = SpatialInterpolant(psi[nodes], c=c, R0=R0, solver=solver, halo=halo)
+    te = t if t_eval is None else np.atleast_1d(float_array(t_eval, "t_eval"))
+    tu = t[used]
+    ed_nodes = edge_distance(psi[nodes])
+    Xu, Vu = X[:, nodes][used], valid[:, nodes][used]
+    Xs, Xt = _fill_missing(sp, Xu, Vu, tu, te.size, ks, fill, c_t, R0_t, max_gap, info)
+    fields = _fit_stages(sp, psi[nodes], Xs, Xt, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info)
+    return _assemble(fields, psi, te, nodes, used, ~Vu, ed_nodes, (M, N), info, (c, R0, c_t, R0_t), t0)
+
+
+def _fit_stages(sp, psi_n, Xs, Xt, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info):
+    """Temporal then spatial operator on the filled stage data: value, d1, d2 (n, 3 T_ok + 3), velocity, ok times."""
+    n = psi_n.shape[0]
+    # --- temporal
+    if kt == "gcv":
+        kt, info["gcv_t"] = gcv_temporal(tu, Xt.reshape(tu.size, -1), c=c_t, R0=R0_t)
+    ts = TemporalInterpolant(tu, c=c_t, R0=R0_t, smoothing=kt)
+    Y0, Y1, Yr, ok_t = _temporal_columns(ts, te, t_ref, Xs, Xt)
+    # --- spatial
+    if ks == "gcv":
+        pick = np.linspace(0, tu.size - 1, min(tu.size, 8)).astype(int)
+        ks, info["gcv"] = gcv_spatial(psi_n, Xs[pick].transpose(1, 0, 2).reshape(n, -1), c=c, R0=R0)
+    if ks > 1.0:
+        sp = SpatialInterpolant(psi_n, c=c, R0=R0, smoothing=ks)
+    cols = np.flatnonzero(np.repeat(ok_t, 3))
+    Yall = np.concatenate([Y0[:, cols], Yr], axis=1)
+    del Y0  # the stage data of many times are large: free each as soon as it is used
+    val, d1, d2 = sp.evaluate(Yall)
+    del Yall
+    vel = sp.evaluate(Y1[:, cols], derivatives=False)[0]
+    del Y1
+    info.update(sp.info)
+    info.update(smoothing=float(ks), smoothing_t=float(kt))
+    return val, d1, d2, vel, np.flatnonzero(ok_t)
+
+
+def _assemble(fields, psi, te, nodes, used, was_filled, ed_nodes, shape, info, kernel, t0):
+    """The :class:`SurfaceFields` of all N points from the results at the nodes."""
+    M, N = shape
+    c, R0, c_t, R0_t = kernel
+    val, d1, d2, vel, tk = fields
+    x_out, tang, v_out, ref_x, ref_t = _place_fields(val, d1, d2, vel, tk, nodes, te.size, N)
+    filled = np.zeros((M, N), bool)
+    filled[np.ix_(np.flatnonzero(used), nodes)] = was_filled
+    ed = np.full(N, np.nan)
+    ed[nodes] = ed_nodes
+    info.update(
+        c=float(c), R0=float(R0), c_t=float(c_t), R0_t=float(R0_t),
+        n_nodes=int(nodes.size), n_filled=int(was_filled.sum()), stages_used=int(used.sum()),
+        seconds=_time.perf_counter() - t0,
+    )
+    log.info("surface: %d points x %d times in %.1f s", nodes.size, te.size, info["seconds"])
+    return SurfaceFields(psi, te, x_out, tang, v_out, ref_x, ref_t, filled, used, ed, info)
+
+
+def _check_stages(x, times, fill, max_gap, min_stage_fraction):
+    """Checked stage coordinates (M, N, 3), stage times (M,) and the stage fraction."""
+    X = float_array(x, "x")
+    if X.ndim != 3 or X.shape[2] != 3:
+        raise ConfigError(f"x must have shape (stages, points, 3), got {X.shape}")
+    M = X.shape[0]
+    t = increasing_times(times, "times", "stages")
+    if t.size != M:
+        raise ConfigError(f"times has {t.size} entries but x has {M} stages")
+    if M < 2:
+        raise DataError(f"x: {M} stage(s); the space-time surface needs at least 2 (monomials {{1, t}})")
+    if np.isinf(X).any():
+        m, n, _ = np.argwhere(np.isinf(X))[0]
+        raise DataError(f"x: infinite coordinate at stage {m}, point {n}; missing points must be NaN")
+    choice(fill, "fill", ("both", "space", "time"))
+    as_int(max_gap, "max_gap", 1)
+    frac = float(min_stage_fraction)
+    if not 0 <= frac <= 1:
+        raise ConfigError(f"min_stage_fraction must be in [0, 1], got {min_stage_fraction!r}")
+    return X, t, frac
+
+
+def _nodes(psi, valid, info):
+    """Points with parameters and data, duplicates left out (listed in ``info``)."""
+    nodes = np.flatnonzero(np.isfinite(psi).all(axis=1) & valid.any(axis=0))
+    dup = _duplicates(psi[nodes])
+    if dup.size:
+        log.warning(
+            "%d point(s) have the same surface parameters as an earlier point (duplicate DIC points?) "
+            "and are left out (NaN): %s%s", dup.size, nodes[dup][:10].tolist(), " ..." if dup.size > 10 else "",
+        )
+        info["duplicates"] = nodes[dup].tolist()
+        nodes = np.delete(nodes, dup)
+    if nodes.size < MIN_POINTS:
+        raise DataError(f"x: {nodes.size} point(s) with data and parameters; the surface needs {MIN_POINTS}")
+    return nodes
+
+
+def _used_stages(counts, frac, n):
+    """Stages with enough valid points for the temporal fit (warned about the others)."""
+    used = counts >= max(frac * n, MIN_POINTS)
+    if not used[0]:
+        raise DataError(
+            f"stage 0 (the reference) has only {counts[0]} of {n} valid points "
+            f"(min_stage_fraction = {frac:g})"
+        )
+    if not used.all():
+        bad = np.flatnonzero(~used)
+        warnings.warn(
+            f"{bad.size} stage(s) with fewer than {frac:.0%} valid points left out of the temporal fit: "
+            f"{bad[:10].tolist()}{' ...' if bad.size > 10 else ''}",
+            IrdicWarning,
+            stacklevel=3,
+        )
+    if used.sum() < 2:
+        raise DataError("fewer than 2 usable stages")
+    return used
+
+
+def _fill_missing(sp, Xu, Vu, tu, T, ks, fill, c_t, R0_t, max_gap, info):
+    """Space-filled and time-filled stage data: each derivative sees the fill that is smooth along it."""
+    if ks == 1.0:
+        # one pass over the tiles gives the fill rows of G and the derivative weights
+        chosen, tiles = sp.resolve(Xu.shape[1], 3 * T + 3, 2, sp.psi)
+        sp.info["solver"] = chosen
+        if chosen == "local":
+            sp.local_operator(kinds=(1, 2), g_rows=np.flatnonzero((~Vu).any(axis=0)), tiles=tiles)
+    Xs = sp.fill(Xu, Vu)[0] if fill != "time" else None
+    by_time = np.zeros_like(Vu)
+    Xt = Xs
+    if fill != "space":
+        Xt, by_time = _temporal_fill(Xu, Vu, tu, c_t, R0_t, max_gap)
+        if (~(Vu | by_time)).any():
+            Xt = sp.fill(Xt, Vu | by_time)[0]
+    if fill == "time":
+        Xs = Xt
+    info["filled_in_time"] = int(by_time.sum())
+    info["filled_in_space"] = int((~Vu).sum() - (by_time.sum() if fill == "time" else 0))
+    return Xs, Xt
+
+
+def _temporal_columns(ts, te, t_ref, Xs, Xt):
+    """Stage data combined in time, (points, 3 T) per functional: value, d/dt, reference; times in span."""
+    W0 = ts.weights(te, 0)
+    W1 = ts.weights(te, 1)
+    Wr = ts.weights(t_ref, 0)
+    M, n, _ = Xs.shape
+    T = te.size
+    # (stages, points, 3) -> (points, 3 * T): one spatial operator for all columns
+    flat = Xs.reshape(M, n * 3)
+    with np.errstate(invalid="ignore"):
+        Y0 = (W0 @ flat).reshape(T, n, 3).transpose(1, 0, 2).reshape(n, T * 3)
+        Y1 = (W1 @ Xt.reshape(M, n * 3)).reshape(T, n, 3).transpose(1, 0, 2).reshape(n, T * 3)
+    Yr = (Wr @ flat).reshape(n, 3)
+    return Y0, Y1, Yr, np.isfinite(W0).all(axis=1)
+
+
+def _place_fields(val, d1, d2, vel, tk, nodes, T, N):
+    """Spatial results (n, 3 T_ok [+ 3 reference]) into the (T, N, ...) output arrays."""
+    n = nodes.size
+
+    def place(arr, out=None, sub=None):
+        block = arr.reshape(n, tk.size, 3).transpose(1, 0, 2)
+        if out is None:
+            out = np.full((T, N, 3), np.nan)
+            out[np.ix_(tk, nodes)] = block
+        else:
+            out[np.ix_(tk, nodes, [sub])] = block[:, :, None, :]
+        return out
+
+    x_out = place(val[:, :-3])
+    v_out = place(vel)
+    tang = np.full((T, N, 2, 3), np.nan)
+    place(d1[:, :-3], tang, 0)
+    place(d2[:, :-3], tang, 1)
+    ref_x = np.full((N, 3), np.nan)
+    ref_x[nodes] = val[:, -3:]
+    ref_t = np.full((N, 2, 3), np.nan)
+    ref_t[nodes, 0] = d1[:, -3:]
+    ref_t[nodes, 1] = d2[:, -3:]
+    return x_out, tang, v_out, ref_x, ref_t

@@ -1,0 +1,530 @@
+"""The spatial operator over fixed surface parameters: global, local tiles or regression.
+
+See :mod:`irdic.surface` (Notes) for the solvers, their accuracy and the
+fill of missing points.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import time as _time
+
+import numpy as np
+import scipy.linalg
+from scipy import sparse
+from scipy.spatial import cKDTree
+
+from ..errors import ConfigError, DataError, GeometryError
+from ..numerics.imq import imq_planar
+from ..numerics.saddle import SaddleFactor
+from ..numerics.threads import blas_threads, parallel_map
+from ..validation import choice, float_array, positive, psi_array, smoothing_factor
+from .parametrisation import MIN_POINTS
+from .regression import ls_design, monomials
+
+__all__ = ["SOLVERS", "SpatialInterpolant", "LocalOperator"]
+
+log = logging.getLogger(__name__)
+
+SOLVERS = ("auto", "global", "local")
+# Cost of a flop in a matrix product relative to one in a factorisation or a
+# triangular solve (GEMM sustains about twice the rate): only the ratio
+# enters the choice between the two spatial solvers.
+_GEMM_COST = 0.48
+# Kernel rows built per block in the global evaluation (rows x N x 8 B ~ 64 MB).
+_BLOCK_BYTES = 64 * 2**20
+
+
+class _Tiles:
+    """Overlapping tiles: a square core of side ``core`` plus every point within ``halo``."""
+
+    def __init__(self, psi, c, R0, halo, core):
+        self.psi = psi
+        self.c, self.R0, self.halo, self.core = c, R0, halo, core
+        self.tree = cKDTree(psi)
+        self.lo = psi.min(axis=0)
+
+    def cells(self, pts):
+        return np.floor((pts - self.lo) / self.core).astype(np.int64)
+
+    def tile_nodes(self, cell):
+        lo = self.lo + cell * self.core
+        hi = lo + self.core
+        ctr = 0.5 * (lo + hi)
+        cand = np.asarray(self.tree.query_ball_point(ctr, self.core / math.sqrt(2) + self.halo), dtype=np.int64)
+        p = self.psi[cand]
+        d = np.hypot(np.maximum(0, np.maximum(lo[0] - p[:, 0], p[:, 0] - hi[0])),
+                     np.maximum(0, np.maximum(lo[1] - p[:, 1], p[:, 1] - hi[1])))
+        return np.sort(cand[d <= self.halo]), ctr
+
+    def factor(self, nodes, ctr):
+        p = self.psi[nodes]
+        A, _, _ = imq_planar(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1], self.c, self.R0, False)
+        P = monomials(p, ctr, self.R0, 0)
+        return SaddleFactor(A, P)
+
+    def functionals(self, nodes, ctr, pts, kinds):
+        """Kernel/monomial rows of the functionals ``kinds`` (0 value, 1 d/dPsi1, 2 d/dPsi2) at ``pts``."""
+        p = self.psi[nodes]
+        dx = pts[:, None, 0] - p[None, :, 0]
+        dy = pts[:, None, 1] - p[None, :, 1]
+        m, m1, m2 = imq_planar(dx, dy, self.c, self.R0, any(k > 0 for k in kinds))
+        rows = {0: m, 1: m1, 2: m2}
+        return [(rows[k], monomials(pts, ctr, self.R0, k)) for k in kinds]
+
+    def count(self, pts):
+        """Tile sizes for the cells of ``pts``: list of (n_points_in_cell, K)."""
+        cells, inv = np.unique(self.cells(pts), axis=0, return_inverse=True)
+        per = np.bincount(inv.ravel(), minlength=len(cells))
+        lo = self.lo + cells * self.core
+        ctr = lo + 0.5 * self.core
+        K = self.tree.query_ball_point(ctr, self.core / math.sqrt(2) + self.halo, return_length=True)
+        # the ball circumscribes the rounded box: correct by the area ratio
+        r = self.core / math.sqrt(2) + self.halo
+        ratio = (self.core**2 + 4 * self.core * self.halo + math.pi * self.halo**2) / (math.pi * r * r)
+        return per, np.maximum(np.asarray(K) * ratio, per)
+
+
+class LocalOperator:
+    """Per-tile weights of a set of functionals, and rows of ``G``."""
+
+    def __init__(self, n_eval, kinds, tiles, g_rows, G, at_nodes):
+        self.n_eval, self.kinds, self.tiles = n_eval, tuple(kinds), tiles
+        self.g_rows, self.G, self.at_nodes = g_rows, G, at_nodes
+
+    def apply(self, F, kinds):
+        """Functionals ``kinds`` (a subset of the built ones) of the interpolant of ``F`` (N, ncols)."""
+        pos = [self.kinds.index(k) for k in kinds]
+        out = [np.empty((self.n_eval, F.shape[1])) for _ in kinds]
+
+        def work(tile):
+            idx, nodes, Wk = tile
+            Fl = F[nodes]
+            for o, j in zip(out, pos):
+                o[idx] = Wk[j] @ Fl
+
+        with blas_threads(1):
+            parallel_map(work, self.tiles)
+        return out
+
+
+
+def _tile_weights(tiles, cell, pts, kinds, grow, n):
+    """Nodes of the tile of ``cell``, weights of the functionals ``kinds`` at ``pts`` and rows ``grow`` of G."""
+    nodes, ctr = tiles.tile_nodes(cell)
+    if nodes.size < MIN_POINTS:
+        # a cell far from every point (evaluation outside the cloud)
+        nodes = np.sort(tiles.tree.query(ctr, k=min(n, 4 * MIN_POINTS))[1])
+    fac = tiles.factor(nodes, ctr)
+    Bs, Qs = [], []
+    for B, Q in tiles.functionals(nodes, ctr, pts, kinds) if pts.shape[0] else []:
+        Bs.append(B)
+        Qs.append(Q)
+    if grow.size:
+        B = np.zeros((grow.size, nodes.size))
+        B[np.arange(grow.size), np.searchsorted(nodes, grow)] = 1.0
+        Bs.append(B)
+        Qs.append(np.zeros((grow.size, 3)))
+    W = fac.weights(np.concatenate(Bs), np.concatenate(Qs))
+    ne = pts.shape[0]
+    Wk = [W[i * ne:(i + 1) * ne] for i in range(len(kinds))] if ne else []
+    return nodes, Wk, W[len(kinds) * ne:]
+
+
+def _coefficient_matrix(results, rows, n):
+    """Sparse rows ``rows`` of the data-to-coefficient map G from the tiles' results."""
+    data, ri, ci = [], [], []
+    for _, nodes, _, Wg, grow in results:
+        if grow.size:
+            data.append(Wg.ravel())
+            ri.append(np.repeat(np.searchsorted(rows, grow), nodes.size))
+            ci.append(np.tile(nodes, grow.size))
+    return sparse.csr_matrix((np.concatenate(data), (np.concatenate(ri), np.concatenate(ci))), shape=(rows.size, n))
+
+
+class SpatialInterpolant:
+    """IMQ interpolant (or regression) over fixed surface parameters, for many fields.
+
+    Parameters
+    ----------
+    psi : array_like, shape (N, 2)
+        Surface parameters of the points (mm), all finite and distinct.
+    c : float
+        Shape factor of the IMQ (the paper: 0.969 half-shell, 0.9328 tube).
+    R0 : float
+        Distance normalisation (mm); the paper: 1 mm.
+    smoothing : None, float >= 1
+        None or 1: interpolation (the paper). ``k > 1``: least-squares
+        regression with centres spaced ``k`` times the median point spacing
+        (see the module Notes); use :func:`gcv_spatial` to choose ``k``.
+    solver : {"auto", "global", "local"}
+        Interpolation solver (module Notes); regression is always global.
+    halo : float, optional
+        Halo of the local tiles (mm); default ``max(9 c R0, 6 h)``.
+    core : float, optional
+        Core side of the local tiles (mm); default: chosen by a cost model.
+
+    Raises
+    ------
+    DataError
+        Fewer than 6 points, or all on a line.
+    GeometryError
+        Two points with the same ``Psi`` (duplicates: the interpolation is singular).
+    """
+
+    def __init__(self, psi, *, c=0.95, R0=1.0, smoothing=None, solver="auto", halo=None, core=None):
+        p = psi_array(psi, "psi")
+        if not np.isfinite(p).all():
+            i = int(np.flatnonzero(~np.isfinite(p).all(axis=1))[0])
+            raise ConfigError(f"psi must be finite (drop missing points first); row {i} is {p[i]}")
+        self.c = positive(c, "c")
+        self.R0 = positive(R0, "R0")
+        k = smoothing_factor(smoothing, "smoothing", allow_gcv=False)
+        self.k = k
+        self.solver = choice(solver, "solver", SOLVERS)
+        n = p.shape[0]
+        if n < MIN_POINTS:
+            raise DataError(f"psi: {n} point(s); the surface interpolant needs at least {MIN_POINTS}")
+        q = p - p.mean(axis=0)
+        sv = np.linalg.svd(q, compute_uv=False)
+        if not sv[1] > 1e-8 * max(sv[0], 1e-300):
+            raise DataError(
+                f"psi: the {n} points lie on one line; the monomials {{1, Psi1, Psi2}} need points off a line"
+            )
+        self.psi = p
+        self.n = n
+        d, j = cKDTree(p).query(p, k=2)
+        self.h = float(np.median(d[:, 1]))
+        dup = np.flatnonzero(d[:, 1] <= 1e-9 * max(self.h, 1e-300) + 1e-12)
+        if dup.size:
+            i = int(dup[0])
+            other = int(j[i, 1] if j[i, 1] != i else j[i, 0])
+            i, other = min(i, other), max(i, other)
+            raise GeometryError(
+                f"psi: points {i} and {other} have the same surface parameters "
+                f"({p[i, 0]:.6g}, {p[i, 1]:.6g}) mm ({max(dup.size // 2, 1)} such pair(s)); duplicate DIC "
+                "points make the interpolation singular: remove them"
+            )
+        ratio = self.c * self.R0 / self.h
+        if ratio > 6:
+            log.warning(
+                "c R0 = %.3g mm is %.1f times the point spacing %.3g mm: the kernel matrix is very "
+                "ill-conditioned (derivatives lose digits); consider a smaller R0",
+                self.c * self.R0, ratio, self.h,
+            )
+        self.halo = positive(halo, "halo") if halo is not None else max(9.0 * self.c * self.R0, 6.0 * self.h)
+        self.core = positive(core, "core") if core is not None else None
+        self._global = None
+        self._ls = None
+        self._local = None
+        self._chosen = None
+        self.info = {"spacing": self.h, "halo": self.halo, "smoothing": self.k}
+
+    # ---- cost model -------------------------------------------------------
+
+    def _tiles(self, core):
+        return _Tiles(self.psi, self.c, self.R0, self.halo, core)
+
+    def _choose_core(self, pts, n_func, ncols):
+        if self.core is not None:
+            t = self._tiles(self.core)
+            return t, self._tile_cost(t, pts, n_func, ncols)
+        best = None
+        for f in (0.25, 0.4, 0.6, 0.9, 1.3):
+            core = max(f * self.halo, 2 * self.h)
+            t = self._tiles(core)
+            cost = self._tile_cost(t, pts, n_func, ncols)
+            if best is None or cost < best[1]:
+                best = (t, cost)
+        return best
+
+    @staticmethod
+    def _tile_cost(tiles, pts, n_func, ncols):
+        per, K = tiles.count(pts)
+        return float(np.sum(K**3 / 3 + 2 * K * K * n_func * per) + np.sum(2 * per * K * ncols * n_func) * _GEMM_COST)
+
+    def _global_cost(self, n_eval, ncols, n_func):
+        N = self.n
+        return N**3 / 3 + (2 * N * N * ncols + 2 * n_eval * N * ncols * n_func) * _GEMM_COST
+
+    def resolve(self, n_eval, ncols, n_func, pts):
+        """The interpolation solver for this job (``"global"`` or ``"local"``) and, when just chosen, its tiles.
+
+        ``"auto"`` compares the estimated costs (module Notes of :mod:`irdic.surface`)
+        once and keeps the choice.
+        """
+        if self.solver != "auto":
+            return self.solver, None
+        if self._chosen is not None:
+            return self._chosen, None
+        tiles, t_cost = self._choose_core(pts, n_func, ncols)
+        g_cost = self._global_cost(n_eval, ncols, n_func)
+        chosen = "local" if 2 * t_cost < g_cost or self.n > 20000 else "global"
+        log.info("spatial solver: %s (estimated cost %.3g local, %.3g global, in factorisation flops)",
+                 chosen, t_cost, g_cost)
+        self._chosen = chosen
+        return chosen, tiles
+
+    # ---- global -------------------------------------------------------------
+
+    def _kernel_matrix(self):
+        p = self.psi
+        A = np.empty((self.n, self.n))
+        # row blocks keep the temporaries small
+        step = max(1, _BLOCK_BYTES // (8 * self.n))
+        for i in range(0, self.n, step):
+            A[i:i + step], _, _ = imq_planar(p[i:i + step, None, 0] - p[None, :, 0],
+                                           p[i:i + step, None, 1] - p[None, :, 1], self.c, self.R0, False)
+        return A
+
+    def _global_factor(self):
+        if self._global is None:
+            t0 = _time.perf_counter()
+            ctr = self.psi.mean(axis=0)
+            P = monomials(self.psi, ctr, self.R0, 0)
+            # threaded BLAS only pays for large matrices (and its first call can
+            # cost seconds on a loaded machine)
+            with blas_threads(1) if self.n < 4000 else contextlib.nullcontext():
+                self._global = (SaddleFactor(self._kernel_matrix(), P, rebuild=self._kernel_matrix), ctr)
+            log.info("global factorisation of %d points: %.1f s", self.n, _time.perf_counter() - t0)
+        return self._global
+
+    def _eval_global(self, F, pts, kinds):
+        fac, ctr = self._global_factor()
+        with blas_threads(1) if self.n < 4000 else contextlib.nullcontext():
+            alpha, beta = fac.coefficients(F)
+        p = self.psi
+        out = [np.empty((pts.shape[0], F.shape[1])) for _ in kinds]
+        step = max(1, _BLOCK_BYTES // (8 * self.n))
+        for i in range(0, pts.shape[0], step):
+            q = pts[i:i + step]
+            m, m1, m2 = imq_planar(q[:, None, 0] - p[None, :, 0], q[:, None, 1] - p[None, :, 1], self.c, self.R0,
+                                 any(k > 0 for k in kinds))
+            rows = {0: m, 1: m1, 2: m2}
+            for o, k in zip(out, kinds):
+                o[i:i + step] = rows[k] @ alpha + monomials(q, ctr, self.R0, k) @ beta
+        return out
+
+    # ---- local tiles --------------------------------------------------------
+
+    def local_operator(self, psi_eval=None, kinds=(1, 2), g_rows=None, tiles=None):
+        """Tile weights for the functionals ``kinds`` at ``psi_eval`` and the rows ``g_rows`` of ``G``.
+
+        Parameters
+        ----------
+        psi_eval : array_like, shape (n, 2), optional
+            Evaluation points; default the points themselves.
+        kinds : sequence of {0, 1, 2}
+            Value, d/dPsi1, d/dPsi2.
+        g_rows : array_like of int, optional
+            Points whose rows of the data-to-coefficient map ``G`` are wanted
+            (for :meth:`fill`).
+
+        Returns
+        -------
+        LocalOperator
+            Cached on the instance: :meth:`evaluate` and :meth:`fill` reuse it.
+        """
+        pts = self.psi if psi_eval is None else psi_array(psi_eval, "psi_eval")
+        kinds = tuple(int(k) for k in kinds)
+        rows = np.unique(np.asarray([] if g_rows is None else g_rows, dtype=np.int64))
+        if tiles is None:
+            if self.core is not None:
+                tiles = self._tiles(self.core)
+            else:
+                probe = pts if kinds else self.psi[rows]
+                tiles = self._choose_core(probe, len(kinds) + (rows.size > 0), 3)[0]
+        t0 = _time.perf_counter()
+        cells_e = tiles.cells(pts) if kinds else np.zeros((0, 2), np.int64)
+        cells_g = tiles.cells(self.psi[rows])
+        uc, inv = np.unique(np.concatenate([cells_e, cells_g]), axis=0, return_inverse=True)
+        inv = inv.ravel()
+        inv_e, inv_g = inv[: len(cells_e)], inv[len(cells_e):]
+        order_e = np.argsort(inv_e, kind="stable")
+        bounds_e = np.searchsorted(inv_e[order_e], np.arange(len(uc) + 1))
+        order_g = np.argsort(inv_g, kind="stable")
+        bounds_g = np.searchsorted(inv_g[order_g], np.arange(len(uc) + 1))
+
+        def work(t):
+            idx = order_e[bounds_e[t]:bounds_e[t + 1]]
+            grow = rows[order_g[bounds_g[t]:bounds_g[t + 1]]]
+            return (idx, *_tile_weights(tiles, uc[t], pts[idx], kinds, grow, self.n), grow)
+
+        with blas_threads(1):
+            results = parallel_map(work, range(len(uc)))
+        G = _coefficient_matrix(results, rows, self.n) if rows.size else None
+        tiles_e = [(idx, nodes, Wk) for idx, nodes, Wk, _, _ in results if idx.size]
+        ksum = sum(r[1].size for r in results)
+        log.info("local tiles: %d tiles, mean %d points, core %.2f mm, halo %.2f mm: %.1f s",
+                 len(uc), ksum // max(len(uc), 1), tiles.core, tiles.halo, _time.perf_counter() - t0)
+        op = LocalOperator(pts.shape[0], kinds, tiles_e, rows, G, psi_eval is None)
+        self._local = op
+        return op
+
+    def _eval_local(self, F, pts, kinds, tiles, at_nodes):
+        op = self._local
+        if not (op is not None and op.at_nodes and at_nodes and set(kinds) <= set(op.kinds)):
+            op = self.local_operator(None if at_nodes else pts, kinds, tiles=tiles)
+        return op.apply(F, kinds)
+
+    def coefficient_rows(self, rows):
+        """Rows of the data-to-RBF-coefficient map ``G`` for the points ``rows``.
+
+        Computed from local tiles (the rows decay like the cardinal functions).
+
+        Parameters
+        ----------
+        rows : array_like of int
+            Point indices.
+
+        Returns
+        -------
+        rows : ndarray of int
+            The sorted unique rows.
+        G : scipy.sparse.csr_matrix, shape (len(rows), N)
+        """
+        rows = np.unique(np.asarray(rows, dtype=np.int64))
+        op = self._local
+        if op is not None and op.G is not None and np.isin(rows, op.g_rows).all():
+            return op.g_rows, op.G
+        op = self.local_operator(kinds=(), g_rows=rows)
+        return op.g_rows, op.G
+
+    # ---- regression ------------------------------------------------------
+
+    def _ls_factor(self):
+        if self._ls is None:
+            self._ls = ls_design(self.psi, self.k, self.h, self.c, self.R0)
+        return self._ls
+
+    def _eval_ls(self, F, pts, kinds):
+        centres, R0k, ctr, Qm, Rm = self._ls_factor()
+        coef = scipy.linalg.solve_triangular(Rm, Qm.T @ F, check_finite=False)
+        out = []
+        step = max(1, _BLOCK_BYTES // (8 * max(len(centres), 1)))
+        for k in kinds:
+            o = np.empty((pts.shape[0], F.shape[1]))
+            for i in range(0, pts.shape[0], step):
+                q = pts[i:i + step]
+                m, m1, m2 = imq_planar(q[:, None, 0] - centres[None, :, 0], q[:, None, 1] - centres[None, :, 1],
+                                     self.c, R0k, k > 0)
+                E = np.concatenate([{0: m, 1: m1, 2: m2}[k], monomials(q, ctr, self.R0, k)], axis=1)
+                o[i:i + step] = E @ coef
+            out.append(o)
+        return out
+
+    # ---- public -----------------------------------------------------------
+
+    def evaluate(self, values, psi_eval=None, *, value=True, derivatives=True):
+        """Values and ``d/dPsi^alpha`` of the interpolant (regression) of ``values``.
+
+        Parameters
+        ----------
+        values : array_like, shape (N, ...)
+            Data at the points (finite; fill missing values first with :meth:`fill`).
+        psi_eval : array_like, shape (n, 2), optional
+            Evaluation points (mm); default the points themselves.
+        value, derivatives : bool
+            Which results to compute.
+
+        Returns
+        -------
+        val, d1, d2 : ndarray, shape (n, ...) or None
+            The interpolant and its derivatives with respect to ``Psi1``,
+            ``Psi2`` (units of ``values`` per mm); None where not asked. At the
+            points themselves the interpolant's value is the data.
+        """
+        F = float_array(values, "values")
+        if F.ndim < 1 or F.shape[0] != self.n:
+            raise ConfigError(f"values must have N = {self.n} rows (one per point), got shape {F.shape}")
+        if not np.isfinite(F).all():
+            raise DataError("values contain NaN or inf: fill the missing points first (SpatialInterpolant.fill)")
+        tail = F.shape[1:]
+        F2 = F.reshape(self.n, -1)
+        at_nodes = psi_eval is None
+        pts = self.psi if at_nodes else psi_array(psi_eval, "psi_eval")
+        if not np.isfinite(pts).all():
+            raise ConfigError("psi_eval must be finite")
+        kinds = []
+        exact_value = value and at_nodes and self.k == 1.0
+        if value and not exact_value:
+            kinds.append(0)
+        if derivatives:
+            kinds += [1, 2]
+        res = {0: None, 1: None, 2: None}
+        if kinds:
+            if self.k > 1.0:
+                solver = "regression"
+                outs = self._eval_ls(F2, pts, kinds)
+            else:
+                solver, tiles = self.resolve(pts.shape[0], F2.shape[1], len(kinds), pts)
+                if solver == "global":
+                    outs = self._eval_global(F2, pts, kinds)
+                else:
+                    outs = self._eval_local(F2, pts, kinds, tiles, at_nodes)
+            self.info["solver"] = solver
+            res.update(dict(zip(kinds, outs)))
+        if exact_value:
+            res[0] = F2.copy()
+        shape = (pts.shape[0],) + tail
+        return tuple(None if res[k] is None else res[k].reshape(shape) for k in (0, 1, 2))
+
+    def fill(self, values, valid):
+        """Fill missing points per stage from that stage's valid points.
+
+        Parameters
+        ----------
+        values : array_like, shape (M, N, ...)
+            Stage data (NaN where missing).
+        valid : array_like of bool, shape (M, N)
+            True where a point is valid in a stage.
+
+        Returns
+        -------
+        filled : ndarray, shape (M, N, ...)
+            ``values`` with the missing entries replaced by the value of the
+            interpolant of the stage's valid points (module Notes).
+        was_filled : ndarray of bool, shape (M, N)
+
+        Raises
+        ------
+        DataError
+            A stage whose valid points are fewer than 6 or on a line.
+        """
+        X = float_array(values, "values")
+        V = np.asarray(valid, dtype=bool)
+        if X.ndim < 2 or X.shape[1] != self.n or V.shape != X.shape[:2]:
+            raise ConfigError(f"values must be (M, N = {self.n}, ...) and valid (M, N); got {X.shape}, {V.shape}")
+        out = X.copy()
+        miss = ~V
+        rows = np.flatnonzero(miss.any(axis=0))
+        if rows.size == 0:
+            return out, miss
+        for m in np.flatnonzero(miss.any(axis=1)):
+            nv = int(V[m].sum())
+            if nv < MIN_POINTS:
+                raise DataError(f"stage {m}: {nv} valid point(s); filling the others needs at least {MIN_POINTS}")
+        t0 = _time.perf_counter()
+        rows, G = self.coefficient_rows(rows)
+        pos = np.full(self.n, -1)
+        pos[rows] = np.arange(rows.size)
+        tail = X.shape[2:]
+        for m in np.flatnonzero(miss.any(axis=1)):
+            Q = np.flatnonzero(miss[m])
+            GQ = G[pos[Q]]
+            f = np.where(V[m].reshape((-1,) + (1,) * len(tail)), X[m], 0.0).reshape(self.n, -1)
+            rhs = -(GQ @ f)
+            GQQ = GQ[:, Q].toarray()
+            try:
+                fq = scipy.linalg.solve(GQQ, rhs, check_finite=False)
+            except (np.linalg.LinAlgError, ValueError):
+                raise DataError(
+                    f"stage {m}: the {V[m].sum()} valid points do not determine the {Q.size} missing ones "
+                    "(valid points on a line?)"
+                ) from None
+            out[m, Q] = fq.reshape((Q.size,) + tail)
+        log.info("filled %d missing (stage, point) values in %d stage(s): %.1f s", int(miss.sum()),
+                 int(miss.any(axis=1).sum()), _time.perf_counter() - t0)
+        return out, miss

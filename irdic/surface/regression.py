@@ -1,0 +1,126 @@
+"""Spatial regression with fewer centres, and the choice of their spacing by GCV.
+
+Centres on a subset of the points spaced ``k`` times the median spacing, a
+kernel six centre spacings wide (``c R0_eff = 6 H``, see
+:data:`irdic.numerics.imq.REGRESSION_RATIO`), least squares over all data (QR).
+The hat matrix ``Q Q^T`` has trace ``p`` = number of parameters, so
+generalised cross-validation, ``GCV(k) = n RSS / (n - p)^2`` pooled over all
+series, is exact and cheap.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import scipy.linalg
+
+from ..errors import ConfigError, DataError, GeometryError
+from ..numerics.imq import imq_planar, regression_R0
+from ..validation import float_array, positive, psi_array
+from .parametrisation import MIN_POINTS, median_spacing
+
+__all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial"]
+
+log = logging.getLogger(__name__)
+
+
+def monomials(pts, centre, R0, kind):
+    """Rows of the monomials ``[1, (xi - centre) / R0]`` (kind 0) or of their d/dPsi^kind (1, 2).
+
+    Parameters
+    ----------
+    pts : ndarray, shape (n, 2)
+        Points (mm).
+    centre : ndarray, shape (2,)
+        Origin of the monomials (mm).
+    R0 : float
+        Normalisation (mm).
+    kind : {0, 1, 2}
+        Value, d/dPsi1, d/dPsi2.
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+    """
+    n = pts.shape[0]
+    if kind == 0:
+        return np.c_[np.ones(n), (pts - centre) / R0]
+    out = np.zeros((n, 3))
+    out[:, kind] = 1.0 / R0
+    return out
+
+
+def grid_subset(psi, H):
+    """Indices of a subset of points, about one per square cell of side H (nearest to the cell centre)."""
+    lo = psi.min(axis=0)
+    cell = np.floor((psi - lo) / H).astype(np.int64)
+    d = np.linalg.norm(psi - (lo + (cell + 0.5) * H), axis=1)
+    key = cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1]
+    order = np.lexsort((d, key))
+    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    return np.sort(order[first])
+
+
+def ls_design(psi, k, h, c, R0):
+    """QR of the regression design matrix: centres spaced k h, kernel width c R0_eff = 6 k h."""
+    idx = grid_subset(psi, k * h)
+    centres = psi[idx]
+    R0k = regression_R0(c, k * h)
+    ctr = psi.mean(axis=0)
+    m, _, _ = imq_planar(psi[:, None, 0] - centres[None, :, 0], psi[:, None, 1] - centres[None, :, 1], c, R0k, False)
+    E = np.concatenate([m, monomials(psi, ctr, R0, 0)], axis=1)
+    Qm, Rm = scipy.linalg.qr(E, mode="economic", overwrite_a=True, check_finite=False)
+    dg = np.abs(np.diag(Rm))
+    if dg.min() < 1e-12 * dg.max():
+        raise GeometryError(
+            f"the regression with centres every {k:g} spacings is rank deficient "
+            f"(condition > 1e12); use a larger smoothing factor"
+        )
+    return centres, R0k, ctr, Qm, Rm
+
+
+def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0)):
+    """Choose the spatial regression's centre spacing by generalised cross-validation.
+
+    Parameters
+    ----------
+    psi : array_like, shape (N, 2)
+        Surface parameters (mm).
+    samples : array_like, shape (N, n_series)
+        Data to judge by (e.g. the three coordinates of a few stages, filled).
+    c, R0 : float
+        Kernel (as :class:`SpatialInterpolant`).
+    candidates : sequence of float
+        Centre spacing factors to try (> 1).
+
+    Returns
+    -------
+    k : float
+        The factor with the least ``GCV = n RSS / (n - p)^2`` (pooled over the series).
+    table : list of (k, n_parameters, gcv)
+    """
+    p = psi_array(psi, "psi")
+    F = float_array(samples, "samples").reshape(p.shape[0], -1)
+    c, R0 = positive(c, "c"), positive(R0, "R0")
+    h = median_spacing(p)
+    n = p.shape[0]
+    table = []
+    for k in sorted(set(float(x) for x in candidates)):
+        if k <= 1:
+            raise ConfigError(f"candidates must be > 1 (1 is interpolation, GCV undefined), got {k}")
+        nc = grid_subset(p, k * h).size
+        if nc + 3 > n // 2 or nc < MIN_POINTS:
+            continue
+        try:
+            _, _, _, Qm, _ = ls_design(p, k, h, c, R0)
+        except GeometryError:
+            continue
+        rss = float(np.sum((F - Qm @ (Qm.T @ F)) ** 2))
+        pp = Qm.shape[1]
+        table.append((k, pp, n * rss / F.shape[1] / (n - pp) ** 2))
+    if not table:
+        raise DataError(f"gcv_spatial: no candidate spacing fits {n} points (too few points)")
+    best = min(table, key=lambda r: r[2])
+    log.info("spatial GCV: centre spacing %.3g x %.3g mm (%d parameters)", best[0], h, best[1])
+    return best[0], table
