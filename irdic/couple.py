@@ -42,7 +42,7 @@ import numpy as np
 import xarray as xr
 from scipy import ndimage
 
-from .calibrate import load_camera
+from .camera import load_camera
 from .errors import CalibrationError, ConfigError, DataError
 from .footprint import facing_camera, point_normals, specimen_mask
 from .rbf import evaluate_series
