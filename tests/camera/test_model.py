@@ -1,7 +1,11 @@
 """Exact-math tests of irdic.camera.model against the independent true camera of irdic.synthetic."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
+import xarray as xr
 
 from irdic.camera import CameraModel, fit_dlt, refine
 from irdic.camera.model import MATRIX_PARAMETERS, PHYSICAL_PARAMETERS
@@ -114,7 +118,17 @@ def test_dataset_round_trip(k1):
     back = CameraModel.from_dataset(ds)
     np.testing.assert_allclose(back.project(x), m.project(x), rtol=0, atol=1e-9)
     np.testing.assert_allclose(back.projection_uncertainty(x), m.projection_uncertainty(x), rtol=1e-6)
+    xr.testing.assert_allclose(back.to_dataset(), ds, rtol=1e-9)
     with pytest.raises(DataError, match="not a camera calibration"):
         CameraModel.from_dataset(ds.drop_vars("projection_matrix"))
 
 
+
+
+def test_camera_model_does_not_load_marker_detection():
+    # couple and fields rebuild the camera from a store: they must not pay for (or depend on) the
+    # calibration algorithm and scikit-image
+    code = ("import sys, irdic.camera; "
+            "print(sorted(m for m in ('irdic.calibration', 'skimage', 'irdic.plot') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
