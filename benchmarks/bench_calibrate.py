@@ -1,6 +1,6 @@
 """Time and accuracy of one full calibration, next to the obvious approach.
 
-irdic: :func:`irdic.calibrate.calibrate` (top-hat detection with windowed,
+irdic: :func:`irdic.calibration.calibrate` (top-hat detection with windowed,
 background-subtracted centroids; seeds -> Hungarian correspondence;
 Hartley-normalised DLT; Levenberg-Marquardt refinement; perspective bias
 correction; leave-one-out outlier check) on the synthetic open-book target
@@ -34,8 +34,10 @@ import numpy as np  # noqa: E402
 from skimage.filters import threshold_otsu  # noqa: E402
 from skimage.measure import label, regionprops  # noqa: E402
 
-from irdic.calibrate import calibrate, load_camera  # noqa: E402
-from irdic.markers import assign, detect_markers  # noqa: E402
+from irdic.calibration import calibrate  # noqa: E402
+from irdic.camera import load_camera  # noqa: E402
+from irdic.calibration import detect_markers  # noqa: E402
+from irdic.calibration.correspondence import assign  # noqa: E402
 from irdic.synthetic.camera import lab_camera  # noqa: E402
 from irdic.synthetic.target import open_book_target  # noqa: E402
 

@@ -4,7 +4,7 @@ Every case renders the synthetic open-book target (area-integrated marker
 edges, :func:`irdic.synthetic.target.open_book_target`) with 0.1 K pixel
 noise and a marker contrast of 5.5, 0.6 or 0.3 K (contrast/noise 55, 6, 3),
 without and with a 4 K temperature gradient across the plate, and
-calibrates it with :func:`irdic.calibrate.calibrate` from 8 clicked seeds
+calibrates it with :func:`irdic.calibration.calibrate` from 8 clicked seeds
 (true marker projections + N(0, 2 px), :func:`irdic.synthetic.target.clicked_seeds`).
 
 Reported per case: the projection error against the true camera (RMS
@@ -28,7 +28,8 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from irdic.calibrate import calibrate, load_camera  # noqa: E402
+from irdic.calibration import calibrate  # noqa: E402
+from irdic.camera import load_camera  # noqa: E402
 from irdic.errors import IrdicError  # noqa: E402
 from irdic.synthetic.camera import lab_camera  # noqa: E402
 from irdic.synthetic.target import clicked_seeds, open_book_target  # noqa: E402

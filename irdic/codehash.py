@@ -20,12 +20,12 @@ _ROOT = Path(__file__).resolve().parent
 STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "demo": ("synthetic", "io", "store.py"),
     "ingest": ("io", "ingest.py", "signals.py", "store.py"),
-    "calibrate": ("io", "camera.py", "markers.py", "calibrate.py", "plot.py", "store.py"),
-    "couple": ("camera.py", "calibrate.py", "footprint.py", "pointcloud.py", "image_rbf", "numerics", "validation.py",
+    "calibrate": ("io", "camera", "calibration", "plot.py", "store.py"),
+    "couple": ("camera", "footprint.py", "pointcloud.py", "image_rbf", "numerics", "validation.py",
                "couple.py", "store.py"),
     "figures": ("plot.py", "export.py", "pipeline.py", "store.py"),
     "export": ("export.py", "pipeline.py", "store.py"),
-    "fields": ("camera.py", "calibrate.py", "surface", "numerics", "gradient.py", "strain.py", "pointcloud.py",
+    "fields": ("camera", "surface", "numerics", "gradient.py", "strain.py", "pointcloud.py",
                "validation.py", "fields.py", "signals.py",
                "io/signals.py", "io/table.py", "store.py"),
 }

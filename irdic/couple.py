@@ -41,7 +41,7 @@ import numpy as np
 import xarray as xr
 from scipy import ndimage
 
-from .calibrate import load_camera
+from .camera import load_camera
 from .errors import CalibrationError, ConfigError, DataError
 from .footprint import facing_camera, point_normals, specimen_mask
 from .image_rbf import evaluate_series

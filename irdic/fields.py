@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .calibrate import load_camera
+from .camera import load_camera
 from .errors import ConfigError, DataError
 from .store import open_store, write_dataset
 from .strain import strain

@@ -215,7 +215,7 @@ def calibrate_setup(markers: str | os.PathLike, target: Mapping | str | os.PathL
     **settings
         The ``calibration`` section of the configuration.
     """
-    from .calibrate import calibrate_from_files
+    from .calibration import calibrate_from_files
 
     if isinstance(target, Mapping):
         tpath, tfmt = target["path"], target.get("format", "auto")

@@ -53,7 +53,7 @@ def _figure(image, title: str):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .markers import image_array
+    from .calibration.image import image_array
 
     img, u0, v0 = image_array(image)
     h, w = img.shape
@@ -116,7 +116,7 @@ def plot_detections(detections, target_image, path) -> Path:
     Parameters
     ----------
     detections : xarray.Dataset
-        :func:`irdic.markers.detect_markers` output.
+        :func:`irdic.calibration.detect_markers` output.
     target_image : xarray.DataArray
         The IR image (``("v", "u")``, °C).
     path : path-like
@@ -149,7 +149,7 @@ def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25
     Parameters
     ----------
     cal_ds : xarray.Dataset
-        :func:`irdic.calibrate.calibrate` output.
+        :func:`irdic.calibration.calibrate` output.
     target_image : xarray.DataArray
         The IR image of the target.
     path : path-like
@@ -163,7 +163,7 @@ def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25
     res = cal_ds["residual"].values
     ids = cal_ds["marker"].values
     rms, mx = float(cal_ds["rms_px"]), float(cal_ds["max_px"])
-    from .calibrate import load_camera
+    from .camera import load_camera
 
     g = load_camera(cal_ds).decompose()
     title = (f"IR camera calibration: {int((status == 'used').sum())} markers, RMS {rms:.3f} px, max {mx:.3f} px; "

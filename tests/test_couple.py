@@ -81,7 +81,7 @@ def test_projection_status_and_layout(demo, coupled, exp):
 
 def test_pixel_uncertainty_from_the_calibration(demo, coupled):
     """pixel_std is the calibration's projection uncertainty of each point, where the point has a pixel."""
-    from irdic.calibrate import load_camera
+    from irdic.camera import load_camera
 
     ds = coupled["halfshell"]
     has = np.isfinite(ds.pixel.values).all(axis=2)

@@ -5,14 +5,15 @@ import json
 import numpy as np
 import pytest
 
-from irdic.calibrate import calibrate, calibrate_from_files, load_camera, summarize
+from irdic.calibration import calibrate, calibrate_from_files, summarize
+from irdic.camera import load_camera
 from irdic.errors import CalibrationError, ConfigError, DataError, IrdicWarning
 from irdic.plot import plot_calibration
 from irdic.store import open_store, write_dataset
 from irdic.synthetic.camera import lab_camera
 from irdic.synthetic.target import clicked_seeds, open_book_target
 
-from .test_markers import book_order, erase
+from ._targets import book_order, erase
 
 POSES = {
     "lab": dict(),
@@ -257,7 +258,8 @@ def oblique():
 
 def test_faint_markers_on_a_heated_plate_are_found():
     """Contrast/noise 3 (0.3 K on 0.1 K) and a 4 K gradient across the plate: the matched filter finds them."""
-    from irdic.markers import assign, detect_markers
+    from irdic.calibration import detect_markers
+    from irdic.calibration.correspondence import assign
 
     tg = open_book_target(lab_camera(), noise=0.1, contrast=0.3, gradient_k=4.0, seed=2)
     body = tg.image.values[384, 300:700]
@@ -307,7 +309,9 @@ def test_seed_on_the_wrong_marker_is_named(oblique):
 def test_foreshortened_markers_are_centred(oblique):
     """Markers seen 74 deg from the wing normal: accepted as blobs and centred like the others."""
     from irdic.camera import CameraModel
-    from irdic.markers import assign, detect_markers, perspective_bias, plane_normals
+    from irdic.calibration import detect_markers, perspective_bias
+    from irdic.calibration.bias import plane_normals
+    from irdic.calibration.correspondence import assign
 
     det = detect_markers(oblique.image)
     D = np.column_stack([det.u.values, det.v.values])

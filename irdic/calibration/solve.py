@@ -1,4 +1,4 @@
-"""Calibration stage: the IR camera in the DIC frame from one IR image of a 3-D target.
+"""Calibration of the IR camera in the DIC frame from one IR image of a 3-D target.
 
 :func:`calibrate` detects the markers, pairs them with the marker IDs of the
 DIC export (from seeds or automatically), fits the projection matrix (DLT,
@@ -6,11 +6,15 @@ then optionally a Levenberg-Marquardt refinement with radial distortion),
 corrects the perspective bias of the imaged circle centres, flags outliers
 by leave-one-out residuals and returns everything as one Dataset: the
 content of ``results/setups/{setup}/calibration.zarr``. Later stages rebuild
-the camera with :func:`load_camera`.
+the camera with :func:`irdic.camera.load_camera`.
+
+The algorithm returns data only; :func:`calibrate_from_files` (the stage's
+entry) also writes the store and the figure.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -21,13 +25,18 @@ from typing import Mapping
 import numpy as np
 import xarray as xr
 
-from . import camera as _camera
-from .camera import CameraModel, degeneracy, fit_dlt, leave_one_out, planarity
-from .errors import CalibrationError, ConfigError, IrdicWarning
-from .markers import (check_ids, detect_markers, image_array, match_lattice, match_seeds, perspective_bias,
-                      plane_normals)
+from ..camera import CameraModel, fit_dlt, leave_one_out, load_camera, planarity
+from ..camera import refine as refine_camera
+from ..camera.dlt import degeneracy
+from ..errors import CalibrationError, ConfigError, IrdicWarning
+from .bias import perspective_bias, plane_normals
+from .correspondence import check_ids, match_seeds
+from .detection import detect_markers
+from .image import image_array
+from .lattice import match_lattice
 
-__all__ = ["calibrate", "load_camera", "summarize", "calibrate_from_files", "STATUSES"]
+__all__ = ["calibrate", "summarize", "calibrate_from_files", "STATUSES", "MarkerTable", "FitOptions", "Solution",
+           "calibration_dataset"]
 
 log = logging.getLogger(__name__)
 
@@ -35,8 +44,77 @@ log = logging.getLogger(__name__)
 STATUSES = ("used", "not_detected", "outlier", "outside_image", "not_measured")
 
 
-def _marker_table(markers) -> tuple[np.ndarray, np.ndarray]:
-    """(ids (M,), x (M, 3) mm) from a marker Dataset or an ``(ids, x)`` pair."""
+@dataclasses.dataclass(frozen=True)
+class MarkerTable:
+    """The markers of the DIC export.
+
+    Attributes
+    ----------
+    ids : ndarray, shape (M,)
+        Marker IDs (unique).
+    x : ndarray, shape (M, 3)
+        Marker centres in the DIC frame, mm; NaN rows have no coordinates.
+    measured : ndarray of int
+        Indices of the markers with finite coordinates (the ones calibrated).
+    """
+
+    ids: np.ndarray
+    x: np.ndarray
+    measured: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class FitOptions:
+    """Settings of the camera fit and the outlier loop (see :func:`calibrate`)."""
+
+    refine: bool
+    distortion: str
+    correct_bias: bool
+    marker_radius_mm: float | None
+    outlier_factor: float
+    outlier_min_px: float
+    max_outliers: int | None
+
+
+@dataclasses.dataclass
+class Solution:
+    """The fitted camera and the per-marker quantities of the final fit.
+
+    Marker indices are into the measured markers (:attr:`MarkerTable.measured`).
+
+    Attributes
+    ----------
+    model : CameraModel
+        Final camera.
+    info : dict
+        Fit summary (``rms_px``, ``sigma_px``, ``dlt_rms_px``, ...).
+    marker_index, detection_index : ndarray of int
+        Matched (marker, detection) pairs.
+    how : str
+        ``"seeds"`` or ``"automatic"`` correspondence.
+    outliers : list of int
+        Matched markers left out of the fit.
+    bias : ndarray, shape (n_measured, 2)
+        Perspective bias subtracted from the detections, px.
+    loo : ndarray, shape (n_measured,)
+        Leave-one-out residual, px (NaN where not matched).
+    radius_mm : float or None
+        Marker radius used for the bias correction, mm.
+    """
+
+    model: CameraModel
+    info: dict
+    marker_index: np.ndarray
+    detection_index: np.ndarray
+    how: str
+    outliers: list
+    bias: np.ndarray
+    loo: np.ndarray
+    radius_mm: float | None
+
+
+def _marker_table(markers) -> MarkerTable:
+    """The markers from a marker Dataset or an ``(ids, x)`` pair, refused when they cannot calibrate a camera."""
     if isinstance(markers, xr.Dataset):
         if "x" not in markers or "marker" not in markers["x"].dims:
             raise ConfigError("`markers` must be a Dataset with x(marker, component) in mm (see irdic.io.read_markers)")
@@ -58,10 +136,44 @@ def _marker_table(markers) -> tuple[np.ndarray, np.ndarray]:
     if len(ids) != len(x):
         raise ConfigError(f"{len(ids)} marker IDs but {len(x)} coordinate rows")
     check_ids(ids)
-    return ids, x
+    table = MarkerTable(ids=ids, x=x, measured=np.flatnonzero(np.isfinite(x).all(axis=1)))
+    _check_layout(table.x[table.measured])
+    return table
 
 
-def _sensor_size(target_image, img_shape, u0, v0) -> tuple[int, int]:
+def _check_layout(x: np.ndarray) -> None:
+    """CalibrationError when the measured markers ``x`` (n, 3) mm are too few, collinear or coplanar."""
+    if len(x) < 6:
+        raise CalibrationError(f"only {len(x)} markers have finite coordinates; the calibration needs 6")
+    thick = planarity(x)
+    line = degeneracy(x, "markers")
+    if line is not None and "coplanar" not in line:
+        raise CalibrationError(f"{line}: markers on a line do not determine a camera. Use a 3-D target (open "
+                               "book) and export the markers of both wings")
+    if thick < 1e-3:
+        raise CalibrationError(
+            f"the {len(x)} markers are coplanar (thickness ratio s3/s1 = {thick:.1e} of the centred marker "
+            "cloud): one image of a planar target cannot calibrate a projection matrix. Use a 3-D target (open "
+            "book) and export the markers of both wings"
+        )
+
+
+def _check_options(opts: FitOptions) -> None:
+    if opts.distortion not in ("none", "k1", "k1k2"):
+        raise ConfigError(f"`distortion` must be 'none', 'k1' or 'k1k2', got {opts.distortion!r}")
+    if opts.distortion != "none" and not opts.refine:
+        raise ConfigError("`distortion` needs `refine=True` (the DLT is a pinhole model)")
+    r = opts.marker_radius_mm
+    if r is not None and not (np.isfinite(r) and r > 0):
+        raise ConfigError(f"`marker_radius_mm` must be a positive number (mm), got {r!r}")
+    if not opts.outlier_factor > 1:
+        raise ConfigError(f"`outlier_factor` must be > 1, got {opts.outlier_factor!r}")
+
+
+def _sensor_size(target_image) -> tuple[int, int]:
+    """Sensor width and height (px): the image's attrs, else the extent of its pixel coordinates."""
+    img, u0, v0 = image_array(target_image)
+    img_shape = img.shape
     attrs = getattr(target_image, "attrs", {}) or {}
     w = attrs.get("sensor_width")
     h = attrs.get("sensor_height")
@@ -70,11 +182,11 @@ def _sensor_size(target_image, img_shape, u0, v0) -> tuple[int, int]:
     return int(w), int(h)
 
 
-def _fit(x, uv, *, refine: bool, distortion: str, start: CameraModel | None = None):
+def _fit(x, uv, opts: FitOptions, start: CameraModel | None = None):
     model, info = fit_dlt(x, uv)
     dlt_rms = info["rms_px"]
-    if refine:
-        model, info = _camera.refine(start if start is not None else model, x, uv, distortion=distortion)
+    if opts.refine:
+        model, info = refine_camera(start if start is not None else model, x, uv, distortion=opts.distortion)
     info["dlt_rms_px"] = dlt_rms
     return model, info
 
@@ -109,7 +221,7 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
         targets) or a CalibrationError says which seeds to add.
     polarity : {"auto", "dark", "bright"}
         Markers colder or warmer than the target body (see
-        :func:`irdic.markers.detect_markers`).
+        :func:`irdic.calibration.detect_markers`).
     distortion : {"none", "k1", "k1k2"}
         Radial distortion coefficients to refine (needs ``refine``).
     refine : bool
@@ -129,27 +241,12 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     max_outliers : int, optional
         At most this many markers are removed (default: a quarter of them).
     detections : xarray.Dataset, optional
-        Result of :func:`~irdic.markers.detect_markers` (skips detection).
+        Result of :func:`~irdic.calibration.detect_markers` (skips detection).
 
     Returns
     -------
     xarray.Dataset
-        Camera: ``projection_matrix(row, col)``, ``K``, ``R`` (``row3, col3``),
-        ``camera_centre(component)``, ``viewing_direction``,
-        ``principal_point(axis)``, ``focal_length_px``, ``ifov_mrad``,
-        ``distortion(coefficient)``, ``covariance(parameter, parameter_2)``.
-        Markers (dim ``marker``): ``marker_x(marker, component)``,
-        ``detected(marker, axis)`` (raw detection, NaN if none),
-        ``bias_correction(marker, axis)`` (subtracted from ``detected``),
-        ``reprojected``, ``residual`` (= detected - bias_correction -
-        reprojected), ``residual_norm``, ``loo_residual``,
-        ``projection_uncertainty``, ``status``, ``detection_index``,
-        ``marker_radius_px``, ``marker_contrast_k``, ``marker_snr`` (contrast /
-        pixel noise). Detections without a
-        marker: ``unassigned_uv(unassigned, axis)``. Scalars ``rms_px``,
-        ``max_px`` over the used markers. Attributes: ``method``,
-        ``settings`` (JSON), ``sensor_width``, ``sensor_height``, counts and
-        the IDs of flagged markers.
+        See :func:`calibration_dataset`.
 
     Raises
     ------
@@ -161,135 +258,161 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     DataError
         Duplicate marker IDs.
     """
-    if distortion not in ("none", "k1", "k1k2"):
-        raise ConfigError(f"`distortion` must be 'none', 'k1' or 'k1k2', got {distortion!r}")
-    if distortion != "none" and not refine:
-        raise ConfigError("`distortion` needs `refine=True` (the DLT is a pinhole model)")
-    if marker_radius_mm is not None and not (np.isfinite(marker_radius_mm) and marker_radius_mm > 0):
-        raise ConfigError(f"`marker_radius_mm` must be a positive number (mm), got {marker_radius_mm!r}")
-    if not outlier_factor > 1:
-        raise ConfigError(f"`outlier_factor` must be > 1, got {outlier_factor!r}")
-    ids, X_all = _marker_table(markers)
-    measured = np.isfinite(X_all).all(axis=1)
-    if measured.sum() < 6:
-        raise CalibrationError(f"only {measured.sum()} markers have finite coordinates; the calibration needs 6")
-    thick = planarity(X_all[measured])
-    line = degeneracy(X_all[measured], "markers")
-    if line is not None and "coplanar" not in line:
-        raise CalibrationError(f"{line}: markers on a line do not determine a camera. Use a 3-D target (open "
-                               "book) and export the markers of both wings")
-    if thick < 1e-3:
-        raise CalibrationError(
-            f"the {measured.sum()} markers are coplanar (thickness ratio s3/s1 = {thick:.1e} of the centred marker "
-            "cloud): one image of a planar target cannot calibrate a projection matrix. Use a 3-D target (open "
-            "book) and export the markers of both wings"
-        )
-    img, u0, v0 = image_array(target_image)
-    width, height = _sensor_size(target_image, img.shape, u0, v0)
+    opts = FitOptions(refine, distortion, correct_bias, marker_radius_mm, outlier_factor, outlier_min_px,
+                      max_outliers)
+    _check_options(opts)
+    table = _marker_table(markers)
+    sensor = _sensor_size(target_image)
     det = detections if detections is not None else detect_markers(
         target_image, polarity=polarity, min_radius_px=min_radius_px, max_radius_px=max_radius_px,
         min_contrast_k=min_contrast_k)
     D = np.column_stack([det["u"].values, det["v"].values])
     if len(D) < 6:
         raise CalibrationError(f"only {len(D)} markers were detected in the target image; the calibration needs 6")
+    mi, di, how = _match(D, table, seeds)
+    sol = _solve(table.x[table.measured], D, det, mi, di, how, opts, table.ids[table.measured])
+    settings = dict(polarity=det.attrs.get("polarity", polarity), distortion=distortion, refine=refine,
+                    correct_bias=correct_bias, marker_radius_mm=marker_radius_mm, min_radius_px=min_radius_px,
+                    max_radius_px=max_radius_px, min_contrast_k=min_contrast_k, outlier_factor=outlier_factor,
+                    outlier_min_px=outlier_min_px,
+                    seeds={str(k): list(map(float, v)) for k, v in (seeds or {}).items()})
+    ds = calibration_dataset(table, det, sol, sensor, settings)
+    _report(ds)
+    return ds
 
-    # correspondence on the measured markers
-    vidx = np.flatnonzero(measured)
-    X = X_all[vidx]
+
+def _match(D: np.ndarray, table: MarkerTable, seeds: Mapping | None) -> tuple[np.ndarray, np.ndarray, str]:
+    """Matched (measured marker, detection) index pairs, from seeds or automatically, and which way."""
+    X = table.x[table.measured]
     if seeds:
-        mi, di, model = match_seeds(D, X, ids[vidx], seeds)
+        mi, di, _ = match_seeds(D, X, table.ids[table.measured], seeds)
         how = "seeds"
     else:
-        mi, di, model = match_lattice(D, X)
+        mi, di, _ = match_lattice(D, X)
         how = "automatic"
     log.info("correspondence (%s): %d of %d markers matched to %d detections", how, len(mi), len(X), len(D))
+    return mi, di, how
 
-    normals = plane_normals(X) if correct_bias else None
-    radius = marker_radius_mm
+
+def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np.ndarray, how: str,
+           opts: FitOptions, ids: np.ndarray) -> Solution:
+    """Fit the camera to the matched pairs, correct the bias and remove outliers one at a time.
+
+    ``X`` (n, 3) mm are the measured markers with IDs ``ids``, ``D`` (d, 2)
+    px the detections, ``mi``/``di`` the matched pairs.
+    """
+    normals = plane_normals(X) if opts.correct_bias else None
+    radius = opts.marker_radius_mm
     bias = np.zeros((len(X), 2))
     outliers: list[int] = []  # indices into X
-    limit = max_outliers if max_outliers is not None else max(1, len(mi) // 4)
+    limit = opts.max_outliers if opts.max_outliers is not None else max(1, len(mi) // 4)
     loo = np.full(len(X), np.nan)
-    start = None
     for _ in range(limit + 1):
         use = np.array([m for m in mi if m not in outliers])
         duse = np.array([d for m, d in zip(mi, di) if m not in outliers])
         if len(use) < 6:
             raise CalibrationError(f"only {len(use)} markers are left after removing outliers; the calibration needs 6")
-        model, info = _fit(X[use], D[duse] - bias[use], refine=refine, distortion=distortion)
-        if correct_bias:
+        model, info = _fit(X[use], D[duse] - bias[use], opts)
+        if opts.correct_bias:
             if radius is None:
                 radius = _estimate_radius(model, X[use], det, duse)
                 log.info("marker radius estimated from the image: %.3f mm", radius)
             # the bias depends on the camera only weakly: two rounds converge
             for _ in range(2):
                 bias = perspective_bias(model, X, normals, radius)
-                model, info = _fit(X[use], D[duse] - bias[use], refine=refine, distortion=distortion, start=model)
-        method = "refine" if refine else "dlt"
+                model, info = _fit(X[use], D[duse] - bias[use], opts, start=model)
         loo[:] = np.nan
-        loo[use] = leave_one_out(X[use], D[duse] - bias[use], method=method, distortion=distortion,
-                                 start=model if refine else None)
-        med = float(np.nanmedian(loo[use]))
-        thr = max(outlier_factor * med, outlier_min_px)
+        loo[use] = leave_one_out(X[use], D[duse] - bias[use], method="refine" if opts.refine else "dlt",
+                                 distortion=opts.distortion, start=model if opts.refine else None)
+        thr = max(opts.outlier_factor * float(np.nanmedian(loo[use])), opts.outlier_min_px)
         worst = use[int(np.nanargmax(loo[use]))]
         if not loo[worst] > thr or len(outliers) >= limit or len(use) <= 7:
             break
         outliers.append(int(worst))
         log.info("marker %s is an outlier (leave-one-out %.3f px > %.3f px); refitting without it",
-                 ids[vidx][worst], loo[worst], thr)
+                 ids[worst], loo[worst], thr)
     # an outlier is not in the final fit: its residual there is its leave-one-out residual
     for m, d in zip(mi, di):
         if m in outliers:
             loo[m] = float(np.hypot(*(D[d] - bias[m] - model.project(X[m]))))
-    return _result(target_image, ids, X_all, vidx, D, det, mi, di, outliers, model, info, bias, loo,
-                   width=width, height=height, how=how, radius=radius,
-                   settings=dict(polarity=det.attrs.get("polarity", polarity), distortion=distortion, refine=refine,
-                                 correct_bias=correct_bias, marker_radius_mm=marker_radius_mm,
-                                 min_radius_px=min_radius_px, max_radius_px=max_radius_px,
-                                 min_contrast_k=min_contrast_k, outlier_factor=outlier_factor,
-                                 outlier_min_px=outlier_min_px,
-                                 seeds={str(k): list(map(float, v)) for k, v in (seeds or {}).items()}))
+    return Solution(model=model, info=info, marker_index=mi, detection_index=di, how=how, outliers=outliers,
+                    bias=bias, loo=loo, radius_mm=radius)
 
 
-def _result(target_image, ids, X_all, vidx, D, det, mi, di, outliers, model, info, bias, loo, *,
-            width, height, how, radius, settings) -> xr.Dataset:
-    n = len(ids)
+def _marker_status(table: MarkerTable, sol: Solution, reproj: np.ndarray, sensor: tuple[int, int]):
+    """``(status (M,) of :data:`STATUSES`, detected (M, 2) px, detection index (M,), -1 if none)``."""
+    n, vidx = len(table.ids), table.measured
     status = np.array(["not_measured"] * n, dtype=object)
     status[vidx] = "not_detected"
     detected = np.full((n, 2), np.nan)
     det_index = np.full(n, -1, dtype=np.int64)
-    bias_all = np.zeros((n, 2))
-    bias_all[vidx] = bias
-    loo_all = np.full(n, np.nan)
-    loo_all[vidx] = loo
-    for m, d in zip(mi, di):
+    for m, d in zip(sol.marker_index, sol.detection_index):
         g = vidx[m]
-        detected[g] = D[d]
         det_index[g] = d
-        status[g] = "outlier" if m in outliers else "used"
-    reproj = np.full((n, 2), np.nan)
-    reproj[vidx] = model.project(X_all[vidx])
+        status[g] = "outlier" if m in sol.outliers else "used"
+    width, height = sensor
     inside = np.isfinite(reproj).all(axis=1)
     inside[inside] = ((reproj[inside] >= -0.5) & (reproj[inside] <= [width - 0.5, height - 0.5])).all(axis=1)
     status[(status == "not_detected") & ~inside] = "outside_image"
+    return status, det_index
+
+
+def _per_marker(values: np.ndarray, index: np.ndarray, fill=np.nan) -> np.ndarray:
+    """``values`` of the measured or detected markers spread onto all markers (``fill`` elsewhere)."""
+    out = np.full((len(index),) + values.shape[1:], fill, dtype=np.float64)
+    has = index >= 0
+    out[has] = values[index[has]]
+    return out
+
+
+def calibration_dataset(table: MarkerTable, det: xr.Dataset, sol: Solution, sensor: tuple[int, int],
+                        settings: dict) -> xr.Dataset:
+    """The content of ``calibration.zarr`` from a solved calibration.
+
+    Parameters
+    ----------
+    table : MarkerTable
+    det : xarray.Dataset
+        :func:`~irdic.calibration.detect_markers` output.
+    sol : Solution
+    sensor : (int, int)
+        Sensor width and height, px.
+    settings : dict
+        Settings of :func:`calibrate` (stored as JSON).
+
+    Returns
+    -------
+    xarray.Dataset
+        Camera (see :meth:`irdic.camera.CameraModel.to_dataset`). Markers
+        (dim ``marker``): ``marker_x(marker, component)``,
+        ``detected(marker, axis)`` (raw detection, NaN if none),
+        ``bias_correction(marker, axis)`` (subtracted from ``detected``),
+        ``reprojected``, ``residual`` (= detected - bias_correction -
+        reprojected), ``residual_norm``, ``loo_residual``,
+        ``projection_uncertainty``, ``status``, ``detection_index``,
+        ``marker_radius_px``, ``marker_contrast_k``, ``marker_snr`` (contrast /
+        pixel noise). Detections without a marker: ``unassigned_uv(unassigned,
+        axis)``. Scalars ``rms_px``, ``max_px`` over the used markers.
+        Attributes: ``method``, ``settings`` (JSON), ``sensor_width``,
+        ``sensor_height``, counts and the IDs of flagged markers.
+    """
+    n, vidx, model = len(table.ids), table.measured, sol.model
+    D = np.column_stack([det["u"].values, det["v"].values])
+    measured_index = np.full(n, -1, dtype=np.int64)
+    measured_index[vidx] = np.arange(len(vidx))
+    reproj = _per_marker(model.project(table.x[vidx]), measured_index)
+    status, det_index = _marker_status(table, sol, reproj, sensor)
+    detected = _per_marker(D, det_index)
+    bias_all = _per_marker(sol.bias, measured_index, fill=0.0)
     residual = detected - bias_all - reproj
     rnorm = np.hypot(residual[:, 0], residual[:, 1])
     used = status == "used"
-    unc = np.full(n, np.nan)
-    unc[vidx] = model.projection_uncertainty(X_all[vidx])
-    radius_px = np.full(n, np.nan)
-    contrast = np.full(n, np.nan)
-    has = det_index >= 0
-    radius_px[has] = det["radius_px"].values[det_index[has]]
-    contrast[has] = det["contrast_k"].values[det_index[has]]
-    snr = np.full(n, np.nan)
-    if "snr" in det:
-        snr[has] = det["snr"].values[det_index[has]]
-    unassigned = np.setdiff1d(np.arange(len(D)), di)
-    ds = model.to_dataset()
+    snr = _per_marker(det["snr"].values, det_index) if "snr" in det else np.full(n, np.nan)
+    unassigned = np.setdiff1d(np.arange(len(D)), sol.detection_index)
     px = {"units": "px"}
-    ds = ds.assign_coords(marker=np.asarray(ids), detection_unassigned=("unassigned", unassigned))
-    ds["marker_x"] = (("marker", "component"), X_all, {"units": "mm", "long_name": "marker centre (DIC frame)"})
+    ds = model.to_dataset().assign_coords(marker=np.asarray(table.ids),
+                                          detection_unassigned=("unassigned", unassigned))
+    ds["marker_x"] = (("marker", "component"), table.x, {"units": "mm", "long_name": "marker centre (DIC frame)"})
     ds["detected"] = (("marker", "axis"), detected, {**px, "long_name": "detected marker centre (raw)"})
     ds["bias_correction"] = (("marker", "axis"), bias_all,
                              {**px, "long_name": "perspective bias subtracted from the detected centre"})
@@ -297,71 +420,78 @@ def _result(target_image, ids, X_all, vidx, D, det, mi, di, outliers, model, inf
     ds["residual"] = (("marker", "axis"), residual,
                       {**px, "long_name": "detected - bias_correction - reprojected"})
     ds["residual_norm"] = (("marker",), rnorm, {**px, "long_name": "length of the residual"})
-    ds["loo_residual"] = (("marker",), loo_all, {**px, "long_name": "residual when left out of the fit"})
-    ds["projection_uncertainty"] = (("marker",), unc,
+    ds["loo_residual"] = (("marker",), _per_marker(sol.loo, measured_index),
+                          {**px, "long_name": "residual when left out of the fit"})
+    ds["projection_uncertainty"] = (("marker",), _per_marker(model.projection_uncertainty(table.x[vidx]),
+                                                             measured_index),
                                     {**px, "long_name": "standard uncertainty of the projection (from covariance)"})
     ds["status"] = (("marker",), status.astype(str), {"long_name": "used / not_detected / outlier / "
                                                                     "outside_image / not_measured"})
     ds["detection_index"] = (("marker",), det_index, {"long_name": "index into the detections (-1: none)"})
-    ds["marker_radius_px"] = (("marker",), radius_px, {**px, "long_name": "detected radius"})
-    ds["marker_contrast_k"] = (("marker",), contrast, {"units": "K", "long_name": "detected contrast"})
+    ds["marker_radius_px"] = (("marker",), _per_marker(det["radius_px"].values, det_index),
+                              {**px, "long_name": "detected radius"})
+    ds["marker_contrast_k"] = (("marker",), _per_marker(det["contrast_k"].values, det_index),
+                               {"units": "K", "long_name": "detected contrast"})
     ds["marker_snr"] = (("marker",), snr, {"units": "1", "long_name": "detected contrast / pixel noise"})
     ds["unassigned_uv"] = (("unassigned", "axis"), D[unassigned].reshape(-1, 2),
                            {**px, "long_name": "detections not assigned to any marker"})
-    rms = float(np.sqrt(np.mean(rnorm[used] ** 2)))
-    ds["rms_px"] = ((), rms, {**px, "long_name": "RMS reprojection residual of the used markers"})
+    ds["rms_px"] = ((), float(np.sqrt(np.mean(rnorm[used] ** 2))),
+                    {**px, "long_name": "RMS reprojection residual of the used markers"})
     ds["max_px"] = ((), float(rnorm[used].max()), {**px, "long_name": "largest reprojection residual (used)"})
+    ds.attrs.update(_attributes(table, det, sol, sensor, settings, status, len(unassigned)))
+    return ds
+
+
+def _attributes(table: MarkerTable, det: xr.Dataset, sol: Solution, sensor: tuple[int, int], settings: dict,
+                status: np.ndarray, n_unassigned: int) -> dict:
+    """Method, settings, counts and flagged marker IDs of a calibration dataset."""
 
     def id_list(mask):
-        return json.dumps([str(i) for i in np.asarray(ids)[mask]])
+        return json.dumps([str(i) for i in np.asarray(table.ids)[mask]])
 
-    refine, distortion = settings["refine"], settings["distortion"]
     method = "Hartley-normalised DLT (SVD)"
-    if refine:
-        method += f" + Levenberg-Marquardt refinement of the reprojection error (distortion: {distortion})"
+    if settings["refine"]:
+        method += (" + Levenberg-Marquardt refinement of the reprojection error "
+                   f"(distortion: {settings['distortion']})")
     if settings["correct_bias"]:
         method += " + perspective bias correction of the circle centres"
-    ds.attrs.update(
+    counts = {f"n_{s}": int((status == s).sum()) for s in ("used", "not_detected", "outside_image", "not_measured")}
+    return dict(
         method=method,
-        correspondence=how,
+        correspondence=sol.how,
         settings=json.dumps(settings, sort_keys=True),
-        sensor_width=int(width),
-        sensor_height=int(height),
-        n_markers=int(n),
-        n_detections=int(len(D)),
-        n_used=int(used.sum()),
-        n_not_detected=int((status == "not_detected").sum()),
-        n_outside_image=int((status == "outside_image").sum()),
-        n_not_measured=int((status == "not_measured").sum()),
+        sensor_width=int(sensor[0]),
+        sensor_height=int(sensor[1]),
+        n_markers=int(len(table.ids)),
+        n_detections=int(det.sizes["detection"]),
+        **counts,
         n_outliers=int((status == "outlier").sum()),
-        n_unassigned=int(len(unassigned)),
+        n_unassigned=int(n_unassigned),
         not_detected_ids=id_list(status == "not_detected"),
         outlier_ids=id_list(status == "outlier"),
         outside_image_ids=id_list(status == "outside_image"),
         not_measured_ids=id_list(status == "not_measured"),
         polarity=str(det.attrs.get("polarity", settings["polarity"])),
         noise_k=float(det.attrs.get("noise_k", np.nan)),
-        marker_radius_mm=float(radius) if radius is not None else float("nan"),
-        dlt_rms_px=float(info.get("dlt_rms_px", np.nan)),
-        sigma_px=float(info.get("sigma_px", np.nan)),
+        marker_radius_mm=float(sol.radius_mm) if sol.radius_mm is not None else float("nan"),
+        dlt_rms_px=float(sol.info.get("dlt_rms_px", np.nan)),
+        sigma_px=float(sol.info.get("sigma_px", np.nan)),
     )
-    if (status == "outlier").any():
+
+
+def _report(ds: xr.Dataset) -> None:
+    """Warn about outliers and log undetected markers, unassigned detections and the summary."""
+    if ds.attrs["n_outliers"]:
         flagged = ", ".join(json.loads(ds.attrs["outlier_ids"]))
         warnings.warn(f"calibration: markers {flagged} are outliers (large leave-one-out residual) "
                       "and were left out of the fit; check them in the calibration figure", IrdicWarning,
-                      stacklevel=3)
-    if (status == "not_detected").any():
+                      stacklevel=3)  # the caller of calibrate
+    if ds.attrs["n_not_detected"]:
         log.warning("calibration: markers %s are in the image but were not detected",
                     ", ".join(json.loads(ds.attrs["not_detected_ids"])))
-    if len(unassigned):
-        log.info("calibration: %d detections have no marker", len(unassigned))
+    if ds.attrs["n_unassigned"]:
+        log.info("calibration: %d detections have no marker", ds.attrs["n_unassigned"])
     log.info("%s", summarize(ds))
-    return ds
-
-
-def load_camera(cal_ds: xr.Dataset) -> CameraModel:
-    """The calibrated :class:`~irdic.camera.CameraModel` from a calibration dataset/store."""
-    return CameraModel.from_dataset(cal_ds)
 
 
 def summarize(cal_ds: xr.Dataset) -> str:
@@ -416,8 +546,8 @@ def calibrate_from_files(markers_path: str | os.PathLike, target_path: str | os.
     pathlib.Path
         ``store``.
     """
-    from .io import read_ir, read_markers
-    from .store import write_dataset
+    from ..io import read_ir, read_markers
+    from ..store import write_dataset
 
     mk = read_markers(markers_path)
     image = read_ir(target_path, format=target_format)
@@ -431,7 +561,8 @@ def calibrate_from_files(markers_path: str | os.PathLike, target_path: str | os.
         cal = calibrate(image, mk, seeds=seeds or None, detections=det, **settings)
     except (CalibrationError, ConfigError):
         if figure is not None:
-            from .plot import plot_detections
+            # plot draws calibrations, so it is imported here, not at module level (no import cycle)
+            from ..plot import plot_detections
 
             plot_detections(det, image, figure)
             log.error("calibration failed; the detections are drawn in %s (read seed positions off it)", figure)
@@ -439,7 +570,7 @@ def calibrate_from_files(markers_path: str | os.PathLike, target_path: str | os.
     params = dict(settings, seeds={str(k): v for k, v in (seeds or {}).items()}, target_format=target_format)
     write_dataset(cal, store, stage="calibrate", params=params, inputs=[markers_path, target_path])
     if figure is not None:
-        from .plot import plot_calibration
+        from ..plot import plot_calibration
 
         plot_calibration(cal, image, figure)
     return Path(store)

@@ -1,4 +1,4 @@
-"""The IR camera as a projection of DIC points (mm) into IR pixels.
+"""The IR camera model: a projection of DIC points (mm) into IR pixels.
 
 Convention (shared with :mod:`irdic.synthetic`):
 
@@ -19,36 +19,36 @@ Convention (shared with :mod:`irdic.synthetic`):
 Pixel convention: ``u`` = column, ``v`` = row, 0-based, pixel centres on
 integer coordinates, ``v`` downwards.
 
-This module knows projections and nothing about images, files or RBFs.
+This module knows projections and nothing about images, files or RBFs; the
+fits that produce a model are in :mod:`irdic.camera.dlt` and
+:mod:`irdic.camera.refine`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import logging
 
 import numpy as np
 import scipy.linalg
 import xarray as xr
-from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from .errors import CalibrationError, ConfigError, DataError
+from ..errors import CalibrationError, ConfigError, DataError
 
 __all__ = [
-    "dlt",
-    "fit_dlt",
     "CameraModel",
     "CameraGeometry",
-    "refine",
-    "leave_one_out",
-    "planarity",
-    "degeneracy",
+    "load_camera",
     "PHYSICAL_PARAMETERS",
     "MATRIX_PARAMETERS",
+    "point_array",
+    "point_pairs",
+    "pair_weights",
+    "normalise_matrix",
+    "project_matrix",
+    "project_physical",
+    "rotation_from_vector",
 ]
-
-log = logging.getLogger(__name__)
 
 #: Names of the physical parameters (``r*`` = small rotation vector, rad,
 #: applied on the left of the model's ``R``; ``C*`` = camera centre, mm).
@@ -56,14 +56,34 @@ PHYSICAL_PARAMETERS = ("f", "cx", "cy", "rx", "ry", "rz", "Cx", "Cy", "Cz", "k1"
 #: Names of the entries of ``M`` (row-major) for a DLT-only model.
 MATRIX_PARAMETERS = tuple(f"m{r}{c}" for r in (1, 2, 3) for c in (1, 2, 3, 4))
 
-_DISTORTIONS = {"none": (), "k1": ("k1",), "k1k2": ("k1", "k2")}
-
 
 # ----------------------------------------------------------------------------- checks
+# TODO(redesign): move point_array / point_pairs / pair_weights into irdic.validation
 
 
-def _points(a, name: str, dim: int) -> np.ndarray:
-    """``a`` as a float64 (N, dim) array of finite values, or an irdic error."""
+def point_array(a, name: str, dim: int) -> np.ndarray:
+    """``a`` as a float64 (N, dim) array of finite values, or an irdic error.
+
+    Parameters
+    ----------
+    a : array_like, shape (N, dim)
+        Points (mm or px).
+    name : str
+        Argument name for the message.
+    dim : int
+        Number of coordinates per point.
+
+    Returns
+    -------
+    ndarray, shape (N, dim)
+
+    Raises
+    ------
+    ConfigError
+        Not numeric or of the wrong shape.
+    DataError
+        NaN or infinite rows (named).
+    """
     try:
         arr = np.asarray(a, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -79,15 +99,17 @@ def _points(a, name: str, dim: int) -> np.ndarray:
     return arr
 
 
-def _pairs(x, uv) -> tuple[np.ndarray, np.ndarray]:
-    x = _points(x, "x", 3)
-    uv = _points(uv, "uv", 2)
+def point_pairs(x, uv) -> tuple[np.ndarray, np.ndarray]:
+    """Checked marker/pixel pairs: ``x`` (N, 3) mm and ``uv`` (N, 2) px of equal length."""
+    x = point_array(x, "x", 3)
+    uv = point_array(uv, "uv", 2)
     if len(x) != len(uv):
         raise ConfigError(f"`x` has {len(x)} points but `uv` has {len(uv)}; expected one pixel position per point")
     return x, uv
 
 
-def _weights(weights, n: int) -> np.ndarray | None:
+def pair_weights(weights, n: int) -> np.ndarray | None:
+    """Checked per-pair weights (N,), finite, >= 0, at least 6 positive; None stays None."""
     if weights is None:
         return None
     w = np.asarray(weights, dtype=np.float64)
@@ -110,68 +132,14 @@ def _model_points(x) -> tuple[np.ndarray, bool]:
     return arr, single
 
 
-# ----------------------------------------------------------------------------- DLT
+def normalise_matrix(M: np.ndarray) -> np.ndarray:
+    """Projection matrix (3, 4) scaled to ``||M[2, :3]|| = 1`` with ``det(M[:, :3]) > 0``.
 
-
-def _hartley(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Similarity T moving the centroid to 0 and the mean distance to sqrt(dim)."""
-    dim = p.shape[1]
-    c = p.mean(axis=0)
-    d = np.sqrt(((p - c) ** 2).sum(axis=1)).mean()
-    s = np.sqrt(dim) / d if d > 0 else 1.0
-    T = np.eye(dim + 1)
-    T[:dim, :dim] *= s
-    T[:dim, dim] = -s * c
-    return T, (p - c) * s
-
-
-def planarity(x) -> float:
-    """Thickness of a point cloud: smallest / largest singular value of the centred points.
-
-    0 for coplanar points; about 0.3 to 0.6 for an open-book target.
+    Raises
+    ------
+    CalibrationError
+        The third row is zero (no camera).
     """
-    x = _points(x, "x", 3)
-    s = np.linalg.svd(x - x.mean(axis=0), compute_uv=False)
-    return float(s[2] / s[0]) if s[0] > 0 else 0.0
-
-
-def degeneracy(x, what: str = "markers", tol: float = 1e-3) -> str | None:
-    """Say how a point cloud falls short of spanning 3-D (or 2-D) space; None if it does not.
-
-    Parameters
-    ----------
-    x : array_like, shape (N, d), d = 2 or 3
-        Points (mm or px).
-    what : str
-        Plural noun for the message (``"markers"``, ``"seed markers"``, ...).
-    tol : float
-        Smallest accepted ratio of a singular value to the largest one.
-
-    Returns
-    -------
-    str or None
-        ``"the N markers are (nearly) collinear (...)"``, ``"... coplanar ..."``
-        or ``"all N markers are at one position"``.
-
-    Notes
-    -----
-    With singular values :math:`s_1 \\ge s_2 \\ge s_3` of the centred points,
-    :math:`s_1 = 0` means one position, :math:`s_2 / s_1 <` ``tol`` a line and
-    (in 3-D) :math:`s_3 / s_1 <` ``tol`` a plane.
-    """
-    x = np.asarray(x, dtype=np.float64)
-    n = len(x)
-    s = np.linalg.svd(x - x.mean(axis=0), compute_uv=False) if n else np.zeros(1)
-    if n == 0 or s[0] == 0 or not np.isfinite(s[0]):
-        return f"all {n} {what} are at one position"
-    if len(s) > 1 and s[1] / s[0] < tol:
-        return f"the {n} {what} are (nearly) collinear (singular value ratio s2/s1 = {s[1] / s[0]:.2e})"
-    if x.shape[1] == 3 and len(s) > 2 and s[2] / s[0] < tol:
-        return f"the {n} {what} are coplanar or nearly so (thickness ratio s3/s1 = {s[2] / s[0]:.2e})"
-    return None
-
-
-def _normalise_M(M: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(M[2, :3])
     if not np.isfinite(n) or n == 0:
         raise CalibrationError("projection matrix has a zero third row; it is not a camera")
@@ -182,170 +150,15 @@ def _normalise_M(M: np.ndarray) -> np.ndarray:
     return M
 
 
-def _check_in_front(M: np.ndarray, x: np.ndarray, what: str = "markers") -> None:
-    depth = x @ M[2, :3] + M[2, 3]
-    if (depth > 0).all():
-        return
-    if (depth < 0).all():
-        err = CalibrationError(
-            f"the fitted camera sees all {what} from behind (depth < 0): the pixel positions are mirrored "
-            "with respect to the DIC frame. Check that the IR image is not flipped (u = column from the "
-            "left, v = row from the top), that u and v are not swapped, and that the DIC frame is right-handed"
-        )
-        err.reason = "mirrored"
-        raise err
-    err = CalibrationError(
-        f"the fitted camera plane passes through the {what}: {(depth <= 0).sum()} of {len(depth)} lie behind "
-        "the camera. The marker/pixel pairs are inconsistent (wrong correspondence?)"
-    )
-    err.reason = "inconsistent"
-    raise err
+def project_matrix(M: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole projection of points ``x`` (N, 3) mm: ``(uv (N, 2) px, depth (N,) mm)``.
 
-
-def dlt(x, uv, weights=None, *, min_planarity: float = 1e-3) -> np.ndarray:
-    """Projection matrix from point pairs by the normalised direct linear transformation.
-
-    Both point sets are normalised (Hartley: centroid to the origin, mean
-    distance sqrt(3) in 3-D and sqrt(2) in 2-D), the homogeneous system of
-    eq. (DLT) is solved by SVD (last right singular vector) and the
-    normalisation is undone.
-
-    Parameters
-    ----------
-    x : array_like, shape (N, 3)
-        Marker centres in the DIC frame, mm.
-    uv : array_like, shape (N, 2)
-        Their pixel positions ``(u, v)``, px.
-    weights : array_like, shape (N,), optional
-        Non-negative weight of each pair (multiplies both of its equations;
-        ``1 / sigma`` of the pixel position is the usual choice).
-    min_planarity : float
-        Smallest accepted ratio of the smallest to the largest singular value
-        of the centred marker cloud (see :func:`planarity`).
-
-    Returns
-    -------
-    M : ndarray, shape (3, 4)
-        ``||M[2, :3]|| = 1``, ``det(M[:, :3]) > 0`` and ``M[2] @ [x, 1] > 0``
-        (depth in mm) for every marker.
-
-    Raises
-    ------
-    CalibrationError
-        Fewer than 6 pairs, coplanar or degenerate markers, or a solution
-        that puts the markers behind the camera.
+    Points at depth 0 give inf/NaN pixel positions (no warning).
     """
-    x, uv = _pairs(x, uv)
-    n = len(x)
-    if n < 6:
-        raise CalibrationError(f"the DLT needs at least 6 marker/pixel pairs (11 unknowns), got {n}")
-    w = _weights(weights, n)
-    ratio = planarity(x)
-    if ratio < min_planarity:
-        line = degeneracy(x, "markers", min_planarity)
-        if line is not None and "coplanar" not in line:
-            raise CalibrationError(
-                f"{line}: a line of markers does not determine a camera. Use a 3-D target (open book) with "
-                "markers spread over both wings"
-            )
-        raise CalibrationError(
-            f"the {n} markers are coplanar or nearly so (thickness ratio s3/s1 = {ratio:.2e} of the centred "
-            f"marker cloud, below {min_planarity:g}): the DLT is degenerate for a planar target. Use a 3-D "
-            "target (open book) with markers on both wings visible"
-        )
-    flat = degeneracy(uv, "pixel positions")
-    if flat is not None:
-        raise CalibrationError(
-            f"{flat}: the image of markers spread in 3-D cannot be a line or a point; check the pixel positions "
-            "(u = column, v = row) and the correspondence"
-        )
-    T3, xn = _hartley(x)
-    T2, uvn = _hartley(uv)
-    Xh = np.hstack([xn, np.ones((n, 1))])
-    A = np.zeros((2 * n, 12))
-    A[0::2, 0:4] = Xh
-    A[0::2, 8:12] = -uvn[:, :1] * Xh
-    A[1::2, 4:8] = Xh
-    A[1::2, 8:12] = -uvn[:, 1:] * Xh
-    if w is not None:
-        A *= np.repeat(w, 2)[:, None]
-    _, s, vt = np.linalg.svd(A, full_matrices=False)
-    rel = s / s[0]
-    deficit = int((rel[:-1] < 1e-9).sum())
-    if deficit:
-        raise CalibrationError(
-            f"the DLT system is rank-deficient: the 12x12 normal matrix has {deficit + 1} near-zero eigenvalues "
-            f"(singular values / largest: {', '.join(f'{r:.1e}' for r in rel[-3:])}); the markers are coplanar, "
-            "collinear or repeated"
-        )
-    M = np.linalg.solve(T2, vt[-1].reshape(3, 4)) @ T3
-    M = _normalise_M(M)
-    _check_in_front(M, x)
-    return M
-
-
-def _project_M(M: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     h = x @ M[:, :3].T + M[:, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = h[:, :2] / h[:, 2:3]
     return uv, h[:, 2]
-
-
-def _dlt_covariance(M: np.ndarray, x: np.ndarray, uv: np.ndarray, w: np.ndarray | None):
-    """Covariance (12, 12) of the entries of M from the reprojection residuals.
-
-    Gauss-Newton linearisation; the scale of M is a gauge direction (the
-    projection does not change with it) and is removed by a rank-11
-    pseudo-inverse.
-    """
-    proj, depth = _project_M(M, x)
-    Xh = np.hstack([x, np.ones((len(x), 1))]) / depth[:, None]
-    n = len(x)
-    J = np.zeros((2 * n, 12))
-    J[0::2, 0:4] = Xh
-    J[0::2, 8:12] = -proj[:, :1] * Xh
-    J[1::2, 4:8] = Xh
-    J[1::2, 8:12] = -proj[:, 1:] * Xh
-    r = (proj - uv).ravel()
-    if w is not None:
-        J *= np.repeat(w, 2)[:, None]
-        r = r * np.repeat(w, 2)
-    dof = max(2 * n - 11, 1)
-    s2 = float(r @ r) / dof
-    U, s, vt = np.linalg.svd(J, full_matrices=False)
-    inv = np.zeros_like(s)
-    inv[:11] = 1.0 / s[:11] ** 2
-    return s2 * (vt.T * inv) @ vt, np.sqrt(s2)
-
-
-def fit_dlt(x, uv, weights=None, *, min_planarity: float = 1e-3) -> tuple["CameraModel", dict]:
-    """The DLT of :func:`dlt` as a :class:`CameraModel` with the covariance of ``M``.
-
-    Returns
-    -------
-    model : CameraModel
-        Pinhole model with ``covariance`` (12, 12) over :data:`MATRIX_PARAMETERS`.
-    info : dict
-        ``residuals`` (N, 2) px (projected - measured), ``rms_px``, ``max_px``,
-        ``sigma_px`` (residual standard deviation per coordinate, px).
-    """
-    x, uv = _pairs(x, uv)
-    w = _weights(weights, len(x))
-    M = dlt(x, uv, w, min_planarity=min_planarity)
-    cov, sigma = _dlt_covariance(M, x, uv, w)
-    model = CameraModel(M, covariance=cov, parameters=MATRIX_PARAMETERS)
-    res = model.project(x) - uv
-    return model, _residual_info(res, sigma)
-
-
-def _residual_info(res: np.ndarray, sigma: float) -> dict:
-    norm = np.hypot(res[:, 0], res[:, 1])
-    return {
-        "residuals": res,
-        "rms_px": float(np.sqrt(np.mean(norm**2))),
-        "max_px": float(norm.max()),
-        "sigma_px": float(sigma),
-    }
 
 
 # ----------------------------------------------------------------------------- model
@@ -393,21 +206,38 @@ def _decompose(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     D = np.diag(np.where(sgn == 0, 1.0, sgn))
     K = Kr @ D
     R = D @ Q
-    if np.linalg.det(R) < 0:  # only for a mirrored M, which _normalise_M excludes
+    if np.linalg.det(R) < 0:  # only for a mirrored M, which normalise_matrix excludes
         raise CalibrationError("projection matrix has det(M[:, :3]) < 0: it describes a mirrored camera")
     K = K / K[2, 2]
     C = -np.linalg.solve(M[:, :3], M[:, 3])
     return K, R, C
 
 
-def _rotation(rvec: np.ndarray) -> np.ndarray:
+def rotation_from_vector(rvec: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) of a rotation vector (3,), rad."""
     return Rotation.from_rotvec(rvec).as_matrix()
 
 
-def _project_physical(p: np.ndarray, x: np.ndarray, R0: np.ndarray) -> np.ndarray:
-    """Projection with physical parameters ``p`` (see PHYSICAL_PARAMETERS) around rotation R0."""
+def project_physical(p: np.ndarray, x: np.ndarray, R0: np.ndarray) -> np.ndarray:
+    """Projection with physical parameters ``p`` around rotation ``R0``.
+
+    Parameters
+    ----------
+    p : ndarray, shape (11,)
+        Values of :data:`PHYSICAL_PARAMETERS` (the rotation vector is applied
+        on the left of ``R0``).
+    x : ndarray, shape (N, 3)
+        Points, mm.
+    R0 : ndarray, shape (3, 3)
+        Base rotation.
+
+    Returns
+    -------
+    ndarray, shape (N, 2)
+        Pixel positions, px.
+    """
     f, cx, cy = p[0], p[1], p[2]
-    R = _rotation(p[3:6]) @ R0
+    R = rotation_from_vector(p[3:6]) @ R0
     Xc = (x - p[6:9]) @ R.T
     with np.errstate(divide="ignore", invalid="ignore"):
         xn = Xc[:, :2] / Xc[:, 2:3]
@@ -451,7 +281,7 @@ class CameraModel:
             M = np.asarray(M, dtype=np.float64)
             if M.shape != (3, 4) or not np.isfinite(M).all():
                 raise ConfigError(f"`M` must be a finite (3, 4) array, got shape {M.shape}")
-            self._M = _normalise_M(M)
+            self._M = normalise_matrix(M)
             self._K, self._R, self._C = _decompose(self._M)
         else:
             if K is None or R is None or C is None:
@@ -470,7 +300,7 @@ class CameraModel:
             self._K = K / K[2, 2]
             self._R = R
             self._C = C
-            self._M = _normalise_M(self._K @ np.hstack([R, -(R @ C)[:, None]]))
+            self._M = normalise_matrix(self._K @ np.hstack([R, -(R @ C)[:, None]]))
         self.k1 = float(k1)
         self.k2 = float(k2)
         if not (np.isfinite(self.k1) and np.isfinite(self.k2)):
@@ -536,7 +366,7 @@ class CameraModel:
             xd = xn * (1.0 + self.k1 * r2 + self.k2 * r2**2)
             uv = xd @ self._K[:2, :2].T + self._K[:2, 2]
         else:
-            uv, depth = _project_M(self._M, pts)
+            uv, depth = project_matrix(self._M, pts)
         uv[~(depth > 0)] = np.nan
         return uv[0] if single else uv
 
@@ -559,7 +389,7 @@ class CameraModel:
         """
         pts, single = _model_points(x)
         if not self.has_distortion:
-            uv, depth = _project_M(self._M, pts)
+            uv, depth = project_matrix(self._M, pts)
             with np.errstate(divide="ignore", invalid="ignore"):
                 J = (self._M[None, :2, :3] - uv[:, :, None] * self._M[None, 2, None, :3]) / depth[:, None, None]
         else:
@@ -599,9 +429,9 @@ class CameraModel:
             K = self._K
             p = np.array([0.5 * (K[0, 0] + K[1, 1]), K[0, 2], K[1, 2], 0, 0, 0, *self._C, self.k1, self.k2])
             R0 = self._R
-            return p, lambda q, x: _project_physical(q, x, R0)
+            return p, lambda q, x: project_physical(q, x, R0)
         if self.parameters == MATRIX_PARAMETERS:
-            return self._M.ravel().copy(), lambda q, x: _project_M(q.reshape(3, 4), x)[0]
+            return self._M.ravel().copy(), lambda q, x: project_matrix(q.reshape(3, 4), x)[0]
         raise CalibrationError(f"unknown parametrisation {self.parameters!r} of the covariance")
 
     def projection_uncertainty(self, x) -> np.ndarray:
@@ -707,163 +537,18 @@ class CameraModel:
                 f"viewing direction=({vd}), k1={self.k1:.3g}, k2={self.k2:.3g})")
 
 
-# ----------------------------------------------------------------------------- refinement
 
-
-def refine(model: CameraModel, x, uv, *, distortion: str = "none", weights=None,
-           max_nfev: int = 200) -> tuple[CameraModel, dict]:
-    """Minimise the reprojection error by Levenberg-Marquardt from a start model.
-
-    Parameters: ``f, cx, cy`` (square pixels, no skew), a rotation vector
-    (applied to the start rotation), the camera centre ``C`` and, with
-    ``distortion``, ``k1`` (and ``k2``). The parameter covariance is
-    ``s^2 (J^T J)^-1`` with ``J`` the Jacobian at the solution and ``s^2``
-    the residual variance ``SSR / (2N - P)``.
+def load_camera(cal_ds: xr.Dataset) -> CameraModel:
+    """The calibrated :class:`CameraModel` from a calibration dataset/store.
 
     Parameters
     ----------
-    model : CameraModel
-        Start (usually the DLT); its skew and aspect ratio are dropped.
-    x : array_like, shape (N, 3)
-        Points, mm.
-    uv : array_like, shape (N, 2)
-        Measured pixel positions, px.
-    distortion : {"none", "k1", "k1k2"}
-        Which radial distortion coefficients are free ("none": pinhole, k = 0).
-    weights : array_like, shape (N,), optional
-        Weight of each point's residual (``1 / sigma``).
-    max_nfev : int
-        Limit of function evaluations (per free parameter scale, see
-        :func:`scipy.optimize.least_squares`).
+    cal_ds : xarray.Dataset
+        ``calibration.zarr`` content (see :func:`irdic.calibration.calibrate`)
+        or :meth:`CameraModel.to_dataset` output.
 
     Returns
     -------
-    model : CameraModel
-        With ``covariance`` over :data:`PHYSICAL_PARAMETERS` (rows and columns
-        of parameters held fixed are 0).
-    info : dict
-        ``residuals`` (N, 2) px, ``rms_px``, ``max_px``, ``sigma_px``,
-        ``nfev``, ``message``, ``free`` (names of the free parameters).
-
-    Raises
-    ------
-    CalibrationError
-        Too few points, or the refinement failed or ended behind the camera.
+    CameraModel
     """
-    if not isinstance(model, CameraModel):
-        raise ConfigError(f"`model` must be a CameraModel, got {type(model).__name__}")
-    if distortion not in _DISTORTIONS:
-        raise ConfigError(f"`distortion` must be one of {sorted(_DISTORTIONS)}, got {distortion!r}")
-    x, uv = _pairs(x, uv)
-    n = len(x)
-    free_names = ("f", "cx", "cy", "rx", "ry", "rz", "Cx", "Cy", "Cz") + _DISTORTIONS[distortion]
-    if 2 * n <= len(free_names):
-        raise CalibrationError(f"refinement of {len(free_names)} parameters needs more than {len(free_names) // 2} "
-                               f"points, got {n}")
-    w = _weights(weights, n)
-    wr = None if w is None else np.repeat(w, 2)
-    free = np.array([PHYSICAL_PARAMETERS.index(k) for k in free_names])
-    g = model.decompose()
-    p0 = np.array([g.focal_length_px, g.K[0, 2], g.K[1, 2], 0, 0, 0, *g.C,
-                   model.k1 if "k1" in free_names else 0.0, model.k2 if "k2" in free_names else 0.0])
-    R0 = g.R
-
-    def fun(q, R_base=R0, base=p0):
-        p = base.copy()
-        p[free] = q
-        r = (_project_physical(p, x, R_base) - uv).ravel()
-        return r if wr is None else r * wr
-
-    try:
-        res = least_squares(fun, p0[free], method="lm", x_scale="jac", max_nfev=max_nfev * len(free))
-    except (ValueError, np.linalg.LinAlgError) as exc:  # pragma: no cover - defensive
-        raise CalibrationError(f"refinement of the camera failed: {exc}") from exc
-    if not np.isfinite(res.x).all() or res.status <= 0:
-        raise CalibrationError(f"refinement of the camera did not converge: {res.message}")
-    p = p0.copy()
-    p[free] = res.x
-    R = _rotation(p[3:6]) @ R0
-    if p[0] <= 0:
-        raise CalibrationError(f"refinement ended with a negative focal length ({p[0]:.1f} px)")
-    # Jacobian at the solution with the rotation re-based there, so that the
-    # covariance of (rx, ry, rz) is that of a small rotation about the final R.
-    pb = p.copy()
-    pb[3:6] = 0.0
-    J = np.empty((2 * n, len(free)))
-    for j, k in enumerate(free):
-        h = 1e-6 * max(1.0, abs(pb[k]))
-        qp, qm = pb[free].copy(), pb[free].copy()
-        qp[j] += h
-        qm[j] -= h
-        J[:, j] = (fun(qp, R, pb) - fun(qm, R, pb)) / (2 * h)
-    r = fun(pb[free], R, pb)
-    dof = max(2 * n - len(free), 1)
-    s2 = float(r @ r) / dof
-    try:
-        cov_free = s2 * np.linalg.inv(J.T @ J)
-    except np.linalg.LinAlgError:
-        cov_free = np.full((len(free), len(free)), np.nan)
-    cov = np.zeros((len(PHYSICAL_PARAMETERS),) * 2)
-    cov[np.ix_(free, free)] = cov_free
-    K = np.array([[p[0], 0, p[1]], [0, p[0], p[2]], [0, 0, 1.0]])
-    out = CameraModel(K=K, R=R, C=p[6:9], k1=p[9], k2=p[10], covariance=cov, parameters=PHYSICAL_PARAMETERS)
-    if not (out.depth(x) > 0).all():
-        raise CalibrationError("refinement moved the camera so that markers lie behind it; check the correspondence")
-    resid = out.project(x) - uv
-    info = _residual_info(resid, np.sqrt(s2))
-    info.update(nfev=int(res.nfev), message=str(res.message), free=list(free_names))
-    log.debug("refine(%s): rms %.4f px after %d evaluations", distortion, info["rms_px"], res.nfev)
-    return out, info
-
-
-def leave_one_out(x, uv, *, method: str = "dlt", distortion: str = "none", weights=None,
-                  start: CameraModel | None = None) -> np.ndarray:
-    """Residual of each point when it is left out of the fit.
-
-    A marker whose leave-one-out residual is far above the others is badly
-    detected or wrongly assigned.
-
-    Parameters
-    ----------
-    x, uv : array_like, shapes (N, 3) and (N, 2)
-        Points (mm) and pixel positions (px).
-    method : {"dlt", "refine"}
-        Fit used for each subset: the DLT alone, or the DLT followed by
-        :func:`refine` with ``distortion``.
-    distortion : {"none", "k1", "k1k2"}
-        For ``method="refine"``.
-    weights : array_like (N,), optional
-        As in :func:`dlt`.
-    start : CameraModel, optional
-        Start of each refinement (the fit to all points converges faster
-        than each subset's DLT); default: the subset's DLT.
-
-    Returns
-    -------
-    ndarray, shape (N,)
-        Distance in px between each left-out point's measured and predicted
-        position; NaN when the remaining points cannot be fitted (fewer than
-        6, coplanar).
-    """
-    if method not in ("dlt", "refine"):
-        raise ConfigError(f"`method` must be 'dlt' or 'refine', got {method!r}")
-    x, uv = _pairs(x, uv)
-    n = len(x)
-    w = _weights(weights, n) if weights is not None else None
-    out = np.full(n, np.nan)
-    keep = np.ones(n, dtype=bool)
-    for i in range(n):
-        keep[:] = True
-        keep[i] = False
-        wi = None if w is None else w[keep]
-        try:
-            if method == "refine" and start is not None:
-                m, _ = refine(start, x[keep], uv[keep], distortion=distortion, weights=wi)
-            else:
-                m = CameraModel(dlt(x[keep], uv[keep], wi))
-                if method == "refine":
-                    m, _ = refine(m, x[keep], uv[keep], distortion=distortion, weights=wi)
-        except CalibrationError:
-            continue
-        out[i] = float(np.hypot(*(m.project(x[i]) - uv[i])))
-    return out
+    return CameraModel.from_dataset(cal_ds)

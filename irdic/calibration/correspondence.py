@@ -1,0 +1,377 @@
+"""Correspondence between detected markers and the marker IDs of the DIC export.
+
+:func:`match_seeds` starts from a few user-given pixel positions,
+:func:`propagate` grows any start camera over all markers by assignment
+(:func:`assign`) and refitted DLTs. The automatic correspondence for grid
+targets is in :mod:`irdic.calibration.lattice`.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import Mapping
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
+
+from ..camera import CameraModel, dlt, planarity
+from ..camera.dlt import degeneracy
+from ..errors import CalibrationError, ConfigError, DataError
+
+__all__ = ["assign", "propagate", "match_seeds", "check_ids", "reprojection_rms", "SEEDS_HINT",
+           "SEED_TOLERANCE_PX"]
+
+SEEDS_HINT = (
+    "add approximate pixel positions of at least 6 markers, spread over both wings, to the setup in the "
+    "configuration:\n  seeds: {<marker id>: [u, v], <marker id>: [u, v], ...}\n"
+    "(read u = column and v = row off the detection figure)"
+)
+
+#: Default largest distance (px) of a clicked seed from the camera fitted to the seeds.
+SEED_TOLERANCE_PX = 6.0
+
+
+# ----------------------------------------------------------------------------- correspondence
+
+
+def assign(predicted, detected, gate_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """One-to-one assignment of predicted marker positions to detections.
+
+    Hungarian algorithm on the pixel distances; pairs farther apart than
+    ``gate_px`` are not made.
+
+    Parameters
+    ----------
+    predicted : array_like (M, 2)
+        Projected marker positions, px (NaN rows: marker not visible).
+    detected : array_like (D, 2)
+        Detected centres, px.
+    gate_px : float or array_like (M,)
+        Largest accepted distance, px (one for all markers or one per marker).
+
+    Returns
+    -------
+    marker_index, detection_index : ndarray of int
+        Matched pairs, sorted by marker index.
+    """
+    pred = np.asarray(predicted, dtype=np.float64)
+    det = np.asarray(detected, dtype=np.float64)
+    ok = np.isfinite(pred).all(axis=1)
+    if not ok.any() or len(det) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    mi = np.flatnonzero(ok)
+    gate = np.broadcast_to(np.asarray(gate_px, dtype=np.float64), (len(pred),))[mi, None]
+    d = np.hypot(pred[mi, None, 0] - det[None, :, 0], pred[mi, None, 1] - det[None, :, 1])
+    big = 1e6 + d.max()
+    cost = np.where(d <= gate, d, big)
+    r, c = linear_sum_assignment(cost)
+    good = cost[r, c] <= gate[r, 0]
+    order = np.argsort(mi[r[good]])
+    return mi[r[good]][order], c[good][order]
+
+
+def _spacing(uv: np.ndarray) -> float:
+    """Median nearest-neighbour distance of the detections, px."""
+    if len(uv) < 2:
+        return np.inf
+    d, _ = cKDTree(uv).query(uv, k=2)
+    return float(np.median(d[:, 1]))
+
+
+def _predicted_spacing(pred: np.ndarray) -> np.ndarray:
+    """Distance (px) of every predicted marker position from the nearest other one (inf if none)."""
+    out = np.full(len(pred), np.inf)
+    ok = np.isfinite(pred).all(axis=1)
+    if ok.sum() >= 2:
+        d, _ = cKDTree(pred[ok]).query(pred[ok], k=2)
+        out[ok] = d[:, 1]
+    return out
+
+
+def propagate(model: CameraModel, marker_x, detected_uv, *, gate_px: float | None = None,
+              max_iter: int = 20) -> tuple[np.ndarray, np.ndarray, CameraModel]:
+    """Grow a correspondence: project all markers, assign detections, refit the DLT, repeat.
+
+    Parameters
+    ----------
+    model : CameraModel
+        Start camera (from seeds or a lattice match).
+    marker_x : array_like (M, 3)
+        All marker centres, mm.
+    detected_uv : array_like (D, 2)
+        All detections, px.
+    gate_px : float, optional
+        Assignment gate, px; default per marker 0.4 x the distance of its
+        predicted position from the nearest other predicted marker (on a
+        strongly foreshortened wing the markers are much closer than on the
+        other; spurious detections must not shrink the gate).
+
+    Returns
+    -------
+    marker_index, detection_index : ndarray of int
+    model : CameraModel
+        DLT of the final pairs.
+    """
+    X = np.asarray(marker_x, dtype=np.float64)
+    D = np.asarray(detected_uv, dtype=np.float64)
+    prev = None
+    mi = di = np.zeros(0, int)
+    gate = gate_px
+    for _ in range(max_iter):
+        pred = model.project(X)
+        if gate_px is None:
+            gate = 0.4 * _predicted_spacing(pred)
+        mi, di = assign(pred, D, gate)
+        key = (tuple(mi), tuple(di))
+        if key == prev or len(mi) < 6:
+            break
+        prev = key
+        try:
+            model = CameraModel(dlt(X[mi], D[di]))
+        except CalibrationError:
+            break
+    if len(mi) < 6:
+        g = np.nanmedian(gate) if np.size(gate) else np.nan
+        raise CalibrationError(
+            f"only {len(mi)} markers could be matched to detections (gate {g:.1f} px); the DLT needs 6. "
+            + SEEDS_HINT
+        )
+    return mi, di, model
+
+
+def _seed_table(seeds: Mapping, marker_ids) -> tuple[np.ndarray, np.ndarray, list]:
+    if not isinstance(seeds, Mapping):
+        raise ConfigError(f"`seeds` must be a mapping {{marker_id: [u, v]}}, got {type(seeds).__name__}")
+    lookup = {str(m): i for i, m in enumerate(np.asarray(marker_ids).tolist())}
+    unknown = [k for k in seeds if str(k) not in lookup]
+    if unknown:
+        raise ConfigError(
+            f"seeds name marker IDs that are not in the marker file: {sorted(map(str, unknown))}; "
+            f"known IDs are e.g. {list(lookup)[:8]}"
+        )
+    idx, uv, keys = [], [], []
+    for k, val in seeds.items():
+        try:
+            pos = np.asarray(val, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            pos = np.zeros(0)
+        if pos.shape != (2,) or not np.isfinite(pos).all():
+            raise ConfigError(f"seeds[{k!r}] must be a pair [u, v] of pixel positions, got {val!r}")
+        idx.append(lookup[str(k)])
+        uv.append(pos)
+        keys.append(k)
+    if len(set(idx)) != len(idx):
+        raise ConfigError("seeds name the same marker twice (keys that differ only in type, e.g. 12 and '12')")
+    if len(idx) < 6:
+        raise ConfigError(f"`seeds` needs at least 6 markers (11 camera parameters), got {len(idx)}")
+    return np.array(idx), np.array(uv), keys
+
+
+def match_seeds(detected_uv, marker_x, marker_ids, seeds: Mapping, *, gate_px: float | None = None,
+                seed_tolerance_px: float | None = None) -> tuple[np.ndarray, np.ndarray, CameraModel]:
+    """Correspondence from a few user-given marker positions.
+
+    Each seed is snapped to the nearest detection where that is unambiguous;
+    the seeds are judged against a camera fitted robustly to all of them
+    (RANSAC over 6-seed DLTs, :func:`_robust_seed_fit`): every seed must lie
+    within ``seed_tolerance_px`` of it, else the ones that do not are named.
+    The DLT through the seeds predicts all markers, and :func:`propagate`
+    grows the assignment.
+
+    Parameters
+    ----------
+    detected_uv : array_like (D, 2)
+        Detected centres, px.
+    marker_x : array_like (M, 3)
+        Marker centres, mm.
+    marker_ids : array_like (M,)
+        Marker IDs (compared as strings with the seed keys).
+    seeds : mapping
+        ``{marker_id: (u, v)}`` for at least 6 markers, a few px off at most.
+    gate_px : float, optional
+        Assignment gate (default per marker: 0.4 x the distance of its
+        predicted position from the nearest other predicted marker).
+    seed_tolerance_px : float, optional
+        Largest accepted distance of a seed from the camera fitted robustly
+        to all seeds (default :data:`SEED_TOLERANCE_PX` = 6 px: honest
+        clicks are a few px off, a seed on a neighbouring marker a marker
+        spacing).
+
+    Returns
+    -------
+    marker_index, detection_index : ndarray of int
+    model : CameraModel
+
+    Raises
+    ------
+    ConfigError
+        Unknown seed IDs, fewer than 6 seeds, coplanar seeds or seeds that
+        contradict each other (the worst one is named).
+    """
+    D = np.asarray(detected_uv, dtype=np.float64)
+    X = np.asarray(marker_x, dtype=np.float64)
+    idx, suv, keys = _seed_table(seeds, marker_ids)
+    tol = float(seed_tolerance_px) if seed_tolerance_px is not None else SEED_TOLERANCE_PX
+    if not (np.isfinite(tol) and tol > 0):
+        raise ConfigError(f"`seed_tolerance_px` must be a positive number of pixels, got {seed_tolerance_px!r}")
+    clicked = suv
+    suv, snap = _snap_seeds(D, suv, keys)
+    _check_seed_layout(X[idx])
+    inl, model, res = _robust_seed_fit(X[idx], suv, tol)
+    if model is not None and (snap & ~inl).any():
+        # where its marker was not detected, a click may have snapped to a neighbour: the click
+        # itself is what the user said
+        suv = np.where((snap & ~inl)[:, None], clicked, suv)
+        inl, model, res = _robust_seed_fit(X[idx], suv, tol)
+    if model is None or not inl.all():
+        raise ConfigError(_seed_message(keys, suv, inl, model, res, tol))
+    return propagate(model, X, D, gate_px=gate_px)
+
+
+def _snap_seeds(D: np.ndarray, suv: np.ndarray, keys: list) -> tuple[np.ndarray, np.ndarray]:
+    """Seed positions (n, 2) px snapped to a detection where that is unambiguous, and which were snapped.
+
+    Raises
+    ------
+    ConfigError
+        A seed lies several marker spacings from every detection.
+    """
+    snap = np.zeros(len(suv), bool)
+    if len(D) < 2:
+        return suv, snap
+    spacing = _spacing(D)
+    d, j = cKDTree(D).query(suv, k=2)
+    # a seed several marker spacings away from every blob points at no
+    # marker at all (off the target, u and v swapped, a typo): say so
+    # rather than letting the fit report the seeds as degenerate. (One
+    # spacing is not enough: the neighbours of an undetected marker on a
+    # faint or foreshortened wing may be undetected too.)
+    far = np.flatnonzero(d[:, 0] > max(3.0 * spacing, 3.0))
+    if far.size:
+        names = "; ".join(f"seed for marker {keys[f]!r} at ({suv[f, 0]:.1f}, {suv[f, 1]:.1f}) is "
+                          f"{d[f, 0]:.1f} px from any detected blob" for f in far[:5])
+        raise ConfigError(
+            f"{names} (detections are {spacing:.1f} px apart); give the pixel position (u = column, v = row) "
+            "of a detected marker, read off the detection figure"
+        )
+    # snap a click to a detection only where that is unambiguous (the next detection is 3x
+    # farther): on a strongly foreshortened wing the neighbours are closer than a click's error
+    snap = (d[:, 0] <= 0.5 * spacing) & (d[:, 1] > 3.0 * d[:, 0])
+    return np.where(snap[:, None], D[j[:, 0]], suv), snap
+
+
+def _check_seed_layout(x: np.ndarray) -> None:
+    """ConfigError when the seed markers ``x`` (n, 3) mm are collinear or coplanar."""
+    line = degeneracy(x, "seed markers")
+    if line is not None and "coplanar" not in line:
+        raise ConfigError(f"{line}, so they do not determine a camera; choose seeds spread over both wings of "
+                          "the target")
+    thick = planarity(x)
+    if thick < 1e-3:
+        raise ConfigError(
+            f"the {len(x)} seed markers are coplanar (thickness ratio {thick:.1e}), so they do not determine a "
+            "camera; choose seeds spread over both wings of the target"
+        )
+
+
+def _robust_seed_fit(x: np.ndarray, uv: np.ndarray, tol: float, max_sets: int = 400, seed: int = 0):
+    """Seeds that agree on one camera: RANSAC over minimal (6-point) DLT sets.
+
+    Every 6-seed subset (or ``max_sets`` random ones when there are more),
+    and with 8 or more seeds every set without one seed and the full set,
+    gives a DLT; the one that puts the most seeds within ``tol`` px (ties:
+    smallest sum of squared residuals capped at ``tol``) wins, and the DLT
+    of its inliers is refitted until the inlier set is stable.
+
+    Returns
+    -------
+    inliers : ndarray of bool (n,)
+    model : CameraModel or None
+        DLT of the inliers (None when no subset gives a camera).
+    residuals : ndarray (n,)
+        Distance of every seed from the projection of its marker by ``model``, px.
+
+    Notes
+    -----
+    Leave-one-out DLTs through the other seeds do not work here: with 7 or 8
+    seeds on an oblique view the system is so ill-conditioned that an
+    honest 2 px click error is magnified to tens of px. A minimal set that
+    avoids a wrong seed predicts the honest ones within a few px, and the
+    wrong one by about a marker spacing.
+    """
+    n = len(x)
+    combos = itertools.combinations(range(n), 6)
+    n_sets = int(np.prod(np.arange(n - 5, n + 1)) // 720)
+    if n_sets > max_sets:
+        rng = np.random.default_rng(seed)
+        combos = (np.sort(rng.choice(n, 6, replace=False)) for _ in range(max_sets))
+    # the sets without one seed and the full set as well: a 6-point DLT through clicks a few px
+    # off can extrapolate poorly on an oblique view, where all honest seeds together fit well
+    larger = [[j for j in range(n) if j != i] for i in range(n)] + [list(range(n))] if n >= 8 else []
+    best, best_key = None, (-1, -np.inf)
+    fatal = None
+    for sub in itertools.chain(combos, larger):
+        sub = list(sub)
+        if planarity(x[sub]) < 1e-3:
+            continue
+        try:
+            res = np.hypot(*(CameraModel(dlt(x[sub], uv[sub])).project(x) - uv).T)
+        except CalibrationError as exc:
+            # inconsistent seeds put some markers behind the camera; a mirrored
+            # image puts all of them there, which no choice of seeds mends
+            if getattr(exc, "reason", None) != "inconsistent":
+                fatal = fatal or exc
+            continue
+        res = np.where(np.isfinite(res), res, np.inf)
+        inl = res <= tol
+        key = (int(inl.sum()), -float(np.minimum(res, tol) ** 2 @ np.ones(n)))
+        if key > best_key:
+            best, best_key = inl, key
+    if best is None and fatal is not None:
+        raise fatal
+    if best is None or best.sum() < 6:
+        return np.zeros(n, bool) if best is None else best, None, np.full(n, np.inf)
+    inl = best
+    model = None
+    for _ in range(5):
+        try:
+            model = CameraModel(dlt(x[inl], uv[inl]))
+        except CalibrationError:
+            return inl, None, np.full(n, np.inf)
+        res = np.hypot(*(model.project(x) - uv).T)
+        new = res <= tol
+        if new.sum() < 6 or (new == inl).all():
+            break
+        inl = new
+    return inl, model, res
+
+
+def _seed_message(keys, suv, inl, model, res, tol) -> str:
+    """User message for seeds that do not agree on one camera (culprits named by marker ID)."""
+    n = len(keys)
+    if model is None:
+        return (f"the seeds contradict each other: no 6 of the {n} seeds fit one camera within {tol:.1f} px "
+                "(the seed tolerance); check their marker IDs and positions (u = column, v = row)")
+    bad = np.flatnonzero(~inl)
+    names = " and ".join(f"seed {keys[b]!r} at {suv[b].round(1).tolist()} ({res[b]:.1f} px off)" for b in bad)
+    return (f"the seeds contradict each other: {n - len(bad)} of the {n} seeds fit one camera within "
+            f"{tol:.1f} px (the seed tolerance), {len(bad)} do not; the worst "
+            f"{'is' if len(bad) == 1 else 'are'} {names}, judged by the camera of the other seeds. A seed "
+            "that far off is probably on another marker: check its marker ID and position")
+
+
+def reprojection_rms(model: CameraModel, x: np.ndarray, uv: np.ndarray) -> float:
+    """RMS distance (px) between the projections of ``x`` (N, 3) mm and ``uv`` (N, 2) px."""
+    return float(np.sqrt(np.mean(np.sum((model.project(x) - uv) ** 2, axis=1))))
+
+
+def check_ids(marker_ids) -> np.ndarray:
+    """Marker IDs as an array, refusing duplicates (DataError naming them)."""
+    ids = np.asarray(marker_ids)
+    if ids.ndim != 1:
+        raise ConfigError(f"marker IDs must be 1-D, got shape {ids.shape}")
+    uniq, counts = np.unique(ids.astype(str), return_counts=True)
+    if (counts > 1).any():
+        raise DataError(f"duplicate marker IDs: {uniq[counts > 1][:10].tolist()}; every marker needs its own ID")
+    return ids
