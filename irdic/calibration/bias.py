@@ -11,6 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..camera import CameraModel
+from ..pointcloud import plane_normal
 
 __all__ = ["plane_normals", "find_planes", "perspective_bias"]
 
@@ -37,21 +38,14 @@ def plane_normals(x, *, k: int = 6) -> np.ndarray:
     n = len(x)
     normals = np.full((n, 3), np.nan)
     for members in find_planes(x):
-        normals[members] = _pca_normal(x[members])
+        normals[members] = plane_normal(x[members])
     rest = np.flatnonzero(np.isnan(normals[:, 0]))
     if len(rest):
         tree = cKDTree(x)
         _, idx = tree.query(x[rest], k=min(k + 1, n))
         for i, nb in zip(rest, idx):
-            normals[i] = _pca_normal(x[nb])
+            normals[i] = plane_normal(x[nb])
     return normals
-
-
-# TODO(redesign): use irdic.pointcloud.plane_normal
-def _pca_normal(p: np.ndarray) -> np.ndarray:
-    """Unit normal (3,) of the least-squares plane through the points ``p`` (N, 3)."""
-    _, _, vt = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)
-    return vt[-1]
 
 
 def find_planes(x: np.ndarray, min_size: int = 6, tol: float | None = None, seed: int = 0) -> list[np.ndarray]:
@@ -99,7 +93,7 @@ def find_planes(x: np.ndarray, min_size: int = 6, tol: float | None = None, seed
             break
         # refit on the inliers, then take the points near the refined plane
         c = pts[best].mean(axis=0)
-        nrm = _pca_normal(pts[best])
+        nrm = plane_normal(pts[best])
         best = np.abs((pts - c) @ nrm) < tol
         if best.sum() < min_size:
             break

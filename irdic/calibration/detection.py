@@ -321,11 +321,21 @@ def _detect_polarity(img, sign, *, size, thr, noise, min_r, max_r, min_contrast,
         if labels[int(vc), int(uc)] > 0 or any(np.hypot(uc - m["u"], vc - m["v"]) <= max(m["semi_major_px"], 2.0)
                                                for m in rows):
             continue
+        if invalid is not None and _touches(invalid, vc, uc, 3.0 * r + 6.0):
+            # the filter answers the edges of a filled NaN hole: no evidence of a marker
+            continue
         n += 1
         # the matched filter is circular; a foreshortened marker is up to 1/sqrt(0.26) ~ 2x longer
         m, why = _measure_at(img, sign, vc, uc, r, 2.0 * r, others, noise, smooth=1.0, invalid=invalid)
         _accept(m, why, rows, rejected, min_r, max_r, max_ecc, min_sol, min_contrast)
     return rows, rejected, n
+
+
+def _touches(mask: np.ndarray, vc: float, uc: float, half: float) -> bool:
+    """True when ``mask`` has a pixel in the box of half-width ``half`` (px) around (``uc``, ``vc``)."""
+    h = int(np.ceil(half))
+    v, u = int(round(vc)), int(round(uc))
+    return bool(mask[max(v - h, 0):v + h + 1, max(u - h, 0):u + h + 1].any())
 
 
 def _accept(m, why, rows, rejected, min_r, max_r, max_ecc, min_sol, min_contrast):
