@@ -31,7 +31,7 @@ import numpy as np
 import xarray as xr
 
 from .errors import ConfigError, DataError
-from .store import atomic_directory
+from .outputs import atomic_directory
 
 __all__ = [
     "select_times",

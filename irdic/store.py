@@ -8,13 +8,10 @@ half-way therefore leaves either nothing or a temporary directory that no
 later stage will take for a result, and :func:`open_store` refuses a store
 without the completion mark or with fewer chunks than the mark promises.
 
-Replacing a store never exposes a mix: the old store is exchanged with the
-new one in one step (two renames where the system cannot) and deleted only
-afterwards, and a dataset still reading the old store lazily gets a
-:class:`~irdic.errors.DataError`, never fill values. Jobs writing the same
-store take turns through a lock file ``.<name>.lock`` next to it. Only
-irdic's own outputs are ever replaced: an existing file or folder that irdic
-did not write is refused.
+Replacing a store never exposes a mix (see :mod:`irdic.outputs`, which
+also keeps irdic from replacing anything it did not write), and a dataset
+still reading the old store lazily gets a :class:`~irdic.errors.DataError`,
+never fill values.
 
 Provenance attributes (all stores):
 
@@ -29,41 +26,30 @@ Provenance attributes (all stores):
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import datetime as _dt
-import errno
-import glob
 import itertools
 import json
 import os
-import re
-import shutil
-import socket
-import sys
-import time
-import uuid
 import warnings
 from pathlib import Path
 from typing import Any, Iterator, Mapping, Sequence
 
-import filelock
 import numpy as np
 import xarray as xr
 import zarr
 
 from .errors import DataError, IrdicError
+from .outputs import COMPLETE_ATTR, atomic_directory, zarr_group_attrs
 
 __all__ = [
     "provenance",
     "write_dataset",
     "open_store",
-    "atomic_directory",
     "FrameStore",
     "COMPLETE_ATTR",
     "CHUNKS_ATTR",
 ]
 
-COMPLETE_ATTR = "irdic_complete"
 #: JSON text written with the completion mark: chunk files of every array (see :func:`open_store`)
 CHUNKS_ATTR = "irdic_chunks"
 
@@ -113,222 +99,6 @@ def provenance(stage: str, params: Mapping | None = None, inputs: Sequence | Non
         "irdic_parameters": json.dumps(_jsonable(dict(params or {})), sort_keys=True),
         "irdic_inputs": json.dumps(_jsonable(list(inputs or []))),
     }
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-#: a temporary or set-aside copy of another host's job is removed only when older than this (s):
-#: that job may still be running on a shared file system, and its process cannot be asked about
-STALE_AGE_S = 7 * 24 * 3600.0
-#: how long a writer waits for another job writing the same output before giving up (s)
-LOCK_TIMEOUT_S = 600.0
-#: file that marks a folder (not a zarr store) as written by irdic, so that it may be replaced
-OUTPUT_MARK = ".irdic-output"
-#: files other tools drop into output folders that do not make a folder the user's
-_HARMLESS = {".snakemake_timestamp"}
-
-
-def _host() -> str:
-    # the host is part of temporaries' names: '/' would make a path, and '.' keeps names readable
-    return re.sub(r"[^A-Za-z0-9_.-]", "_", socket.gethostname() or "unknown")
-
-
-def _sibling(final: Path, kind: str) -> Path:
-    return final.with_name(f".{final.name}.{kind}-{os.getpid()}-{uuid.uuid4().hex[:8]}-{_host()}")
-
-
-def _owner(tmp: Path, final: Path, kind: str) -> tuple[int | None, str | None]:
-    """(pid, host) encoded in a temporary's name; host is None for names of older irdic versions."""
-    rest = tmp.name[len(f".{final.name}.{kind}-"):]
-    parts = rest.split("-", 2)
-    try:
-        pid = int(parts[0])
-    except ValueError:
-        return None, None
-    return pid, (parts[2] if len(parts) == 3 else None)
-
-
-def _remove_stale_siblings(final: Path) -> None:
-    """Remove temporaries of ``final`` left by dead jobs.
-
-    A temporary of this host is removed when its process is gone; one of
-    another host (or of an older irdic, whose names carry no host) only when
-    it is older than :data:`STALE_AGE_S`, because ``os.kill`` cannot see
-    processes on other nodes of a cluster sharing the file system.
-    """
-    now = time.time()
-    for kind in ("tmp", "old"):
-        for tmp in final.parent.glob(f".{glob.escape(final.name)}.{kind}-*"):
-            pid, host = _owner(tmp, final, kind)
-            if pid is None:
-                continue
-            if host == _host():
-                stale = not _pid_alive(pid)
-            else:
-                try:
-                    stale = now - tmp.lstat().st_mtime > STALE_AGE_S
-                except OSError:
-                    continue
-            if stale:
-                _remove(tmp)
-
-
-def _remove(p: Path) -> None:
-    if p.is_dir() and not p.is_symlink():
-        shutil.rmtree(p, ignore_errors=True)
-    else:
-        with contextlib.suppress(OSError):
-            p.unlink()
-
-
-def _zarr_attrs(path: Path) -> dict | None:
-    """Attributes of the zarr v3 group at ``path``, or None when it is not one."""
-    try:
-        with open(path / "zarr.json", encoding="utf-8") as fh:
-            meta = json.load(fh)
-    except (OSError, ValueError):
-        return None
-    if not isinstance(meta, dict) or meta.get("node_type") != "group":
-        return None
-    attrs = meta.get("attributes")
-    return attrs if isinstance(attrs, dict) else {}
-
-
-def _replaceable(final: Path) -> bool:
-    """True when ``final`` may be replaced: absent, empty, an irdic store or an irdic-marked folder."""
-    if not os.path.lexists(final):
-        return True
-    if final.is_symlink() or not final.is_dir():
-        return False
-    attrs = _zarr_attrs(final)
-    if attrs is not None and ("irdic_stage" in attrs or COMPLETE_ATTR in attrs):
-        return True
-    if (final / OUTPUT_MARK).is_file():
-        return True
-    return all(p.name in _HARMLESS for p in final.iterdir())
-
-
-def _check_replaceable(final: Path) -> None:
-    if not _replaceable(final):
-        what = ("a symbolic link" if final.is_symlink() else "a folder" if final.is_dir() else "a file")
-        raise DataError(
-            f"{final}: output path exists and is {what} that irdic did not write; irdic replaces only "
-            "its own stores and output folders. Choose another output path, or move it away yourself"
-        )
-
-
-_RENAME_EXCHANGE = 2
-
-
-def _exchange(a: Path, b: Path) -> bool:
-    """Swap ``a`` and ``b`` in one step (Linux ``renameat2``); False where unsupported."""
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        fn = libc.renameat2
-    except (OSError, AttributeError):
-        return False
-    at_fdcwd = -100
-    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
-    if rc == 0:
-        return True
-    err = ctypes.get_errno()
-    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.ENOTSUP):
-        return False  # file system without exchange (some network ones): fall back to two renames
-    raise OSError(err, os.strerror(err), os.fspath(b))
-
-
-def _swap_in(tmp: Path, final: Path) -> None:
-    """Put ``tmp`` at ``final`` so that a reader sees the old or the new directory, never a mix.
-
-    The old directory is moved aside (exchanged in one step where the
-    system can) and only then deleted; readers of the old one that are
-    still loading chunks then meet missing files, which :func:`open_store`
-    reports, instead of the new store's chunks.
-    """
-    if not os.path.lexists(final):
-        os.replace(tmp, final)
-        return
-    if _exchange(tmp, final):
-        _remove(tmp)  # now holds the old directory
-        return
-    aside = _sibling(final, "old")
-    os.replace(final, aside)
-    os.replace(tmp, final)
-    _remove(aside)
-
-
-@contextlib.contextmanager
-def _writer_lock(final: Path, timeout: float | None) -> Iterator[None]:
-    """Hold the lock of ``final`` so that two jobs writing it take turns."""
-    timeout = LOCK_TIMEOUT_S if timeout is None else timeout
-    lock = filelock.FileLock(os.fspath(final.with_name(f".{final.name}.lock")))
-    try:
-        lock.acquire(timeout=timeout)
-    except filelock.Timeout:
-        others = sorted(p.name for p in final.parent.glob(f".{glob.escape(final.name)}.tmp-*"))
-        who = f" (its temporary: {others[0]})" if others else ""
-        raise DataError(
-            f"{final}: another job has been writing this output for over {timeout:g} s{who}; "
-            "wait for it to finish, or stop it, then run again"
-        ) from None
-    try:
-        yield
-    finally:
-        lock.release()
-
-
-@contextlib.contextmanager
-def atomic_directory(path: str | os.PathLike, *, lock_timeout: float | None = None) -> Iterator[Path]:
-    """Yield a temporary sibling of ``path``; move it to ``path`` on success.
-
-    On any exception the temporary directory is removed and ``path`` is left
-    as it was before (an older complete result stays; nothing half-written
-    appears). An existing ``path`` is replaced only when irdic wrote it (an
-    irdic zarr store, or a folder carrying :data:`OUTPUT_MARK`) or when it is
-    an empty folder; anything else is refused before any work is done.
-    Jobs writing the same ``path`` take turns (a lock file next to it).
-
-    Parameters
-    ----------
-    path : path-like
-        Final location of the directory (for example ``results/x/ir.zarr``).
-    lock_timeout : float, optional
-        Seconds to wait for another job writing ``path`` (default
-        :data:`LOCK_TIMEOUT_S`).
-
-    Raises
-    ------
-    DataError
-        ``path`` exists and was not written by irdic, or another job holds
-        it for longer than ``lock_timeout``.
-    """
-    final = Path(path)
-    _check_replaceable(final)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    with _writer_lock(final, lock_timeout):
-        _remove_stale_siblings(final)
-        tmp = _sibling(final, "tmp")
-        try:
-            yield tmp
-            if tmp.is_dir() and not (tmp / "zarr.json").exists():
-                # a plain output folder: mark it as irdic's so that a later run may replace it
-                (tmp / OUTPUT_MARK).write_text("written by irdic; the whole folder is replaced on the next run\n",
-                                              encoding="utf-8")
-            _check_replaceable(final)  # something may have appeared while we were computing
-            _swap_in(tmp, final)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
 
 
 def _chunk_manifest(root: Path) -> dict:
@@ -511,7 +281,7 @@ def open_store(path: str | os.PathLike) -> xr.Dataset:
     if not p.exists():
         raise DataError(f"{p}: store not found (run the stage that produces it first)")
     identity = _identity(p)
-    attrs = _zarr_attrs(p)
+    attrs = zarr_group_attrs(p)
     if identity is None or attrs is None:
         raise DataError(f"{p}: not a readable zarr store (no group metadata zarr.json)")
     if not attrs.get(COMPLETE_ATTR, False):

@@ -4,7 +4,8 @@ import xarray as xr
 import zarr
 
 from irdic.errors import DataError
-from irdic.store import COMPLETE_ATTR, OUTPUT_MARK, FrameStore, atomic_directory, open_store, write_dataset
+from irdic.outputs import OUTPUT_MARK, atomic_directory
+from irdic.store import COMPLETE_ATTR, FrameStore, open_store, write_dataset
 
 
 def _ds():
@@ -265,17 +266,17 @@ def test_stale_temporaries_of_other_hosts_are_kept(tmp_path, monkeypatch):
     import os
     import time
 
-    from irdic import store
+    from irdic import outputs
 
     path = tmp_path / "s.zarr"
     other = tmp_path / ".s.zarr.tmp-999999-abcdef12-othernode-7"
-    mine_dead = tmp_path / f".s.zarr.tmp-999999-abcdef12-{store._host()}"
+    mine_dead = tmp_path / f".s.zarr.tmp-999999-abcdef12-{outputs._host()}"
     old_other = tmp_path / ".s.zarr.tmp-999999-abcdef13-othernode-8"
     for d in (other, mine_dead, old_other):
         d.mkdir()
-    old = time.time() - store.STALE_AGE_S - 10
+    old = time.time() - outputs.STALE_AGE_S - 10
     os.utime(old_other, (old, old))
-    monkeypatch.setattr(store, "_pid_alive", lambda pid: False)
+    monkeypatch.setattr(outputs, "_pid_alive", lambda pid: False)
     write_dataset(_ds(), path, stage="x")
     names = {p.name for p in tmp_path.iterdir()}
     assert other.name in names  # a live job on another node may own it: os.kill cannot tell

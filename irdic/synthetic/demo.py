@@ -46,7 +46,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError
-from ..store import atomic_directory, write_dataset
+from ..outputs import atomic_directory
+from ..store import write_dataset
 from ..validation import choice
 from .camera import lab_camera
 from .experiments import EXPERIMENTS, SCALES, Experiment, experiment
