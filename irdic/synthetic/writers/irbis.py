@@ -86,6 +86,23 @@ def write_irbis(
     ConfigError
         An argument is invalid (named), or the file cannot be written.
     """
+    arr = _checked_frame(temperature)
+    unit = _checked_format(sep, decimal, decimals, temp_unit)
+    origin, sensor = _checked_placement(start_pos, sensor_size, arr.shape)
+    ms = _checked_stamps(ms, frame_index, rec_datetime)
+    arr = arr + 273.15 if unit == "K" else arr
+    head = _header(arr, unit, origin, sensor, decimal, filename=filename, frame_index=frame_index,
+                   rec_datetime=rec_datetime, ms=ms, parameters=parameters)
+    p = Path(path)
+    try:
+        p.write_bytes(head.encode("cp1252") + _body(arr, sep, decimal, decimals, trailing_sep).encode("ascii"))
+    except (OSError, UnicodeEncodeError) as exc:
+        raise ConfigError(f"cannot write {p}: {exc}") from exc
+    return p
+
+
+def _checked_frame(temperature) -> np.ndarray:
+    """``temperature`` as a finite float64 (H, W) array, or a ConfigError naming the first bad value."""
     arr = np.asarray(temperature)
     if arr.ndim != 2 or 0 in arr.shape:
         raise ConfigError(f"temperature must be a non-empty 2-D array (rows, columns), got shape {arr.shape}")
@@ -95,6 +112,11 @@ def write_irbis(
     if not np.isfinite(arr).all():
         idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
         raise ConfigError(f"temperature[{idx[0]}, {idx[1]}] = {arr[idx]}; IRBIS text cannot hold non-finite values")
+    return arr
+
+
+def _checked_format(sep: str, decimal: str, decimals: int, temp_unit: str) -> str:
+    """Check the number format; return the unit, ``"degC"`` or ``"K"``."""
     if sep not in ("\t", ";", " ", ","):
         raise ConfigError(f"sep={sep!r}; expected one of '\\t', ';', ' ', ','")
     if decimal not in (".", ","):
@@ -106,7 +128,13 @@ def write_irbis(
     unit = normalise_unit(temp_unit)
     if unit not in ("degC", "K"):
         raise ConfigError(f"temp_unit={temp_unit!r}; expected '°C' or 'K'")
-    h, w = arr.shape
+    return unit
+
+
+def _checked_placement(start_pos, sensor_size, shape: tuple[int, int]):
+    """Check the crop position and sensor size; return ``(u0, v0)`` and ``(width, height)`` (each or None)."""
+    h, w = shape
+    origin = sensor = None
     if start_pos is not None:
         try:
             u0, v0 = (int(x) for x in start_pos)
@@ -114,15 +142,22 @@ def write_irbis(
             raise ConfigError(f"start_pos={start_pos!r}; expected (u0, v0) integers") from None
         if u0 < 0 or v0 < 0:
             raise ConfigError(f"start_pos={start_pos!r}; expected non-negative pixel positions")
+        origin = (u0, v0)
     if sensor_size is not None:
         try:
             sw, sh = (int(x) for x in sensor_size)
         except (TypeError, ValueError):
             raise ConfigError(f"sensor_size={sensor_size!r}; expected (width, height) integers") from None
-        su, sv = (u0, v0) if start_pos is not None else (0, 0)
+        su, sv = origin if origin is not None else (0, 0)
         if su + w > sw or sv + h > sh:
             raise ConfigError(f"a {w} x {h} frame at start_pos=({su}, {sv}) does not fit on a "
                               f"{sw} x {sh} sensor_size")
+        sensor = (sw, sh)
+    return origin, sensor
+
+
+def _checked_stamps(ms, frame_index, rec_datetime) -> float | None:
+    """Check the frame's time stamps; return ``ms`` as a float (or None)."""
     if ms is not None:
         ms = float(ms)
         if not math.isfinite(ms):
@@ -132,15 +167,20 @@ def write_irbis(
             raise ConfigError(f"frame_index={frame_index!r}; expected a non-negative integer")
     if rec_datetime is not None and not isinstance(rec_datetime, _dt.datetime):
         raise ConfigError(f"rec_datetime must be a datetime.datetime, got {type(rec_datetime).__name__}")
+    return ms
 
-    if unit == "K":
-        arr = arr + 273.15
+
+def _header(arr: np.ndarray, unit: str, origin, sensor, decimal: str, *, filename, frame_index, rec_datetime,
+            ms, parameters) -> str:
+    """``[Settings]`` and ``[Parameter]`` sections up to the ``[Data]`` line (CRLF-joined)."""
+    h, w = arr.shape
     unit_text = "°C" if unit == "degC" else "K"
     lines = ["[Settings]", "Version=3", f"ImageWidth={w}", f"ImageHeight={h}"]
-    if start_pos is not None:
+    if origin is not None:
+        u0, v0 = origin
         lines += [f"StartPos={u0};{v0}", f"EndPos={u0 + w - 1};{v0 + h - 1}"]
-    if sensor_size is not None:
-        lines += [f"SensorWidth={sw}", f"SensorHeight={sh}"]
+    if sensor is not None:
+        lines += [f"SensorWidth={sensor[0]}", f"SensorHeight={sensor[1]}"]
     lo, hi = float(arr.min()), float(arr.max())
     lines += [f"ShotRange={_fmt_number(lo, 2, decimal)};{_fmt_number(hi, 2, decimal)}",
               f"TempUnit={unit_text}", "", "[Parameter]"]
@@ -158,16 +198,14 @@ def write_irbis(
             value = repr(float(value)).replace(".", decimal)
         lines.append(f"{key}={value}")
     lines += ["", "[Data]", ""]
-    head = "\r\n".join(lines)
+    return "\r\n".join(lines)
 
+
+def _body(arr: np.ndarray, sep: str, decimal: str, decimals: int, trailing_sep: bool) -> str:
+    """The ``[Data]`` rows, top row first, each ended by CRLF."""
     cell = f"%.{decimals}f"
-    row_fmt = sep.join([cell] * w) + (sep if trailing_sep else "")
+    row_fmt = sep.join([cell] * arr.shape[1]) + (sep if trailing_sep else "")
     body = "\r\n".join([row_fmt % tuple(row) for row in arr.tolist()]) + "\r\n"
     if decimal == ",":
         body = body.replace(".", ",")
-    p = Path(path)
-    try:
-        p.write_bytes(head.encode("cp1252") + body.encode("ascii"))
-    except (OSError, UnicodeEncodeError) as exc:
-        raise ConfigError(f"cannot write {p}: {exc}") from exc
-    return p
+    return body
