@@ -11,6 +11,7 @@ import math
 import os
 import struct
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -120,6 +121,40 @@ def write_irb(
     ConfigError
         An argument is invalid (named), or the file cannot be written.
     """
+    n, source = _frame_source(frames, times)
+    t = _checked_times(times, n)
+    fidx = _checked_metadata(n, rec_datetime, frame_indices, emissivity, distance, env_temp, wavelength)
+    values = (emissivity, distance, env_temp, env_temp if path_temp is None else path_temp, wavelength,
+              calib_range, device)
+    first = _checked_frame(next(source, np.empty((0, 0))), 0, None)
+    epoch = (rec_datetime - OLE_EPOCH).total_seconds()
+    p = Path(path)
+    try:
+        with open(p, "wb") as fh:
+            fh.write(_file_head(fidx, PIXEL_OFFSET + 2 * first.size))
+            for k, frame in enumerate(_checked_frames(first, source, n)):
+                fh.write(_image_block(frame, epoch + t[k], *values))
+    except OSError as exc:
+        p.unlink(missing_ok=True)
+        raise ConfigError(f"cannot write {p}: {exc}") from exc
+    except BaseException:
+        p.unlink(missing_ok=True)
+        raise
+    return p
+
+
+def _checked_frames(first: np.ndarray, source: Iterator, n: int) -> Iterator[np.ndarray]:
+    """``first``, then the next ``n - 1`` frames of ``source``, each checked against the first's size."""
+    yield first
+    for k in range(1, n):
+        nxt = next(source, None)
+        if nxt is None:
+            raise ConfigError(f"frames ended after {k} frames; times has {n}")
+        yield _checked_frame(nxt, k, first.shape)
+
+
+def _frame_source(frames, times) -> tuple[int, Iterator]:
+    """Number of frames and an iterator over them (arrays, lists of frames or a generator with ``times``)."""
     arr = None
     if isinstance(frames, (np.ndarray, list, tuple)):
         try:
@@ -144,14 +179,24 @@ def write_irb(
         n = int(np.size(times))
     if n == 0:
         raise ConfigError("frames is empty; an IRB file needs at least one frame")
+    return n, source
+
+
+def _checked_times(times, n: int) -> np.ndarray:
+    """Frame times (s), shape (n,); 0, 1, 2, ... s when ``times`` is None."""
     if times is None:
-        t = np.arange(n, dtype=np.float64)
-    else:
-        t = np.asarray(times, dtype=np.float64).reshape(-1)
-        if t.shape != (n,):
-            raise ConfigError(f"times must have one value per frame ({n}), got shape {np.shape(times)}")
-        if not np.isfinite(t).all():
-            raise ConfigError("times must be finite (s)")
+        return np.arange(n, dtype=np.float64)
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    if t.shape != (n,):
+        raise ConfigError(f"times must have one value per frame ({n}), got shape {np.shape(times)}")
+    if not np.isfinite(t).all():
+        raise ConfigError("times must be finite (s)")
+    return t
+
+
+def _checked_metadata(n: int, rec_datetime, frame_indices, emissivity, distance, env_temp,
+                      wavelength) -> np.ndarray:
+    """Check the recording time and image header values; return the directory's frame numbers, shape (n,)."""
     if not isinstance(rec_datetime, _dt.datetime):
         raise ConfigError(f"rec_datetime must be a datetime.datetime, got {type(rec_datetime).__name__}")
     if frame_indices is None:
@@ -166,11 +211,12 @@ def write_irb(
             raise ConfigError(f"{name}={value!r}; expected a finite number")
     if not 0 < emissivity <= 1:
         raise ConfigError(f"emissivity={emissivity}; expected 0 < emissivity <= 1")
-    ptemp = env_temp if path_temp is None else path_temp
+    return fidx
 
-    first_frame = _checked_frame(next(source, np.empty((0, 0))), 0, None)
-    h, w = first_frame.shape
-    block_size = PIXEL_OFFSET + 2 * w * h
+
+def _file_head(fidx: np.ndarray, block_size: int) -> bytes:
+    """File header and block directory of ``len(fidx)`` image blocks of ``block_size`` bytes each."""
+    n = len(fidx)
     first = HEADER_SIZE + ENTRY_SIZE * n
     header = bytearray(HEADER_SIZE)
     header[:5] = MAGIC
@@ -180,28 +226,7 @@ def write_irb(
     for k in range(n):
         directory += struct.pack("<8i", BLOCK_IMAGE, 101, int(fidx[k]), first + k * block_size,
                                  block_size, 0, 1, 0)
-    epoch = (rec_datetime - OLE_EPOCH).total_seconds()
-    p = Path(path)
-    try:
-        with open(p, "wb") as fh:
-            fh.write(header)
-            fh.write(directory)
-            frame = first_frame
-            for k in range(n):
-                if k:
-                    nxt = next(source, None)
-                    if nxt is None:
-                        raise ConfigError(f"frames ended after {k} frames; times has {n}")
-                    frame = _checked_frame(nxt, k, (h, w))
-                fh.write(_image_block(frame, epoch + t[k], emissivity, distance, env_temp, ptemp,
-                                      wavelength, calib_range, device))
-    except OSError as exc:
-        p.unlink(missing_ok=True)
-        raise ConfigError(f"cannot write {p}: {exc}") from exc
-    except BaseException:
-        p.unlink(missing_ok=True)
-        raise
-    return p
+    return bytes(header + directory)
 
 
 def _image_block(frame: np.ndarray, seconds: float, emissivity, distance, env_temp, path_temp,
