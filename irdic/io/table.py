@@ -99,6 +99,31 @@ def read_table(path: str | os.PathLike, *, columns: Mapping[str, str], sep: str 
         Problems in the file (named by line and column).
     """
     cols = _check_columns(columns)
+    sep, t_param = _check_options(cols, sep, decimal, time, invalid_value)
+    text = TextFile(path)
+    p = text.path
+    k, sep_found, header = find_named_header(_head(text, header_line), list(cols.values()), sep, header_line, p)
+    if decimal == "," and sep_found == ",":
+        raise ConfigError(f"{p} is comma-separated, so decimal ',' is impossible; use decimal='.'")
+    rows = read_body(text, k + 1, header, sep=sep_found, decimal=decimal, quoting=csv.QUOTE_MINIMAL)
+    idx = {role: match_column(header, name) for role, name in cols.items()}
+    x, x_ref = _positions(rows, header, idx, p)
+    if "id" in cols:
+        ids = rows.integers(idx["id"])
+        check_unique(ids, rows.line_nos, p)
+    else:
+        ids = np.arange(len(rows), dtype=np.int64)
+    valid = _valid(rows, idx["valid"], invalid_value) if "valid" in cols else None
+    t = _stage_time(rows, header, idx["time"], p) if "time" in cols else t_param
+    extras = extra_columns(rows, {j for j in idx.values() if j is not None}, strict=False)
+    attrs = {"columns": json.dumps(cols), "separator": "whitespace" if sep_found is None else sep_found,
+             "decimal": rows.decimal, "header_line": header.line}
+    return stage_dataset(ids, x, x_ref, path=p, fmt="table", valid=valid, time=t, attrs=attrs,
+                         extras=extras, point_id_source="file" if "id" in cols else "row")
+
+
+def _check_options(cols: dict[str, str], sep, decimal, time, invalid_value) -> tuple[str | None, float | None]:
+    """Check the reading options; return the separator (None: sniff or any whitespace) and the stage time (s)."""
     if sep is not None and (not isinstance(sep, str) or len(sep) != 1 or sep in "\r\n\"'#"):
         raise ConfigError(f"sep must be one character such as ',', ';' or '\\t' (or None to sniff), got {sep!r}")
     if sep is not None and not sep.strip():
@@ -120,63 +145,50 @@ def read_table(path: str | os.PathLike, *, columns: Mapping[str, str], sep: str 
             raise ConfigError(f"time must be finite, got {time!r}")
     if not np.isfinite(invalid_value):
         raise ConfigError(f"invalid_value must be a finite number, got {invalid_value!r}")
+    return sep, t_param
 
-    text = TextFile(path)
-    p = text.path
-    # the header is searched in the first 1000 lines, or up to header_line; an invalid header_line is
-    # reported with the file's line count, so then all lines are read (an error path only)
+
+def _head(text: TextFile, header_line) -> list[str]:
+    """The lines searched for the header: the first 1000, or up to ``header_line``."""
+    # an invalid header_line is reported with the file's line count, so then all lines are read
+    # (an error path only)
     limit: int | None = 1000
     if header_line is not None:
         valid_line = isinstance(header_line, (int, np.integer)) and not isinstance(header_line, bool) \
             and header_line >= 1
         limit = max(1000, int(header_line)) if valid_line else None
-    head = text.head(limit) if limit is not None else [ln for _k, ln in text.lines()]
-    k, sep_found, header = find_named_header(head, list(cols.values()), sep, header_line, p)
-    if decimal == "," and sep_found == ",":
-        raise ConfigError(f"{p} is comma-separated, so decimal ',' is impossible; use decimal='.'")
-    rows = read_body(text, k + 1, header, sep=sep_found, decimal=decimal, quoting=csv.QUOTE_MINIMAL)
-    dec = rows.decimal
-    idx = {role: match_column(header, name) for role, name in cols.items()}
+    return text.head(limit) if limit is not None else [ln for _k, ln in text.lines()]
+
+
+def _positions(rows, header, idx: dict, p) -> tuple[np.ndarray, np.ndarray | None]:
+    """Current positions ``x`` and, with displacement columns, reference positions ``x_ref`` (mm, (N, 3))."""
 
     def coord(role: str) -> np.ndarray:
         j = idx[role]
         return rows.number(j) * length_scale(header.units[j], header.names[j], p, header.line)
 
     first = np.column_stack([coord(r) for r in ("x", "y", "z")])
-    if "u" in cols:
-        x_ref = first
-        x = x_ref + np.column_stack([coord(r) for r in ("u", "v", "w")])
-    else:
-        x_ref, x = None, first
-    if "id" in cols:
-        ids = rows.integers(idx["id"])
-        check_unique(ids, rows.line_nos, p)
-        id_source = "file"
-    else:
-        ids = np.arange(len(rows), dtype=np.int64)
-        id_source = "row"
-    valid = None
-    if "valid" in cols:
-        j = idx["valid"]
-        col = rows.frame.iloc[:, j]
-        if pd.api.types.is_bool_dtype(col.dtype):
-            valid = col.to_numpy(dtype=bool)
-        else:
-            v = rows.number(j, finite=False)
-            valid = np.isfinite(v) & (v != invalid_value)
-    t = t_param
-    if "time" in cols:
-        j = idx["time"]
-        tv = rows.number(j) * time_scale(header.units[j], header.names[j], p, header.line)
-        tv = tv[np.isfinite(tv)]
-        if tv.size:
-            if np.ptp(tv) > 1e-9 * max(1.0, float(np.abs(tv).max())):
-                raise DataError(f"{p}: time column {header.names[j]!r} varies within the file "
-                                f"({tv.min():g} to {tv.max():g} s); expected one stage per file")
-            t = float(tv[0])
-    used = {j for j in idx.values() if j is not None}
-    extras = extra_columns(rows, used, strict=False)
-    attrs = {"columns": json.dumps(cols), "separator": "whitespace" if sep_found is None else sep_found,
-             "decimal": dec, "header_line": header.line}
-    return stage_dataset(ids, x, x_ref, path=p, fmt="table", valid=valid, time=t, attrs=attrs,
-                         extras=extras, point_id_source=id_source)
+    if "u" not in idx:
+        return first, None
+    return first + np.column_stack([coord(r) for r in ("u", "v", "w")]), first
+
+
+def _valid(rows, j: int, invalid_value: float) -> np.ndarray:
+    """Validity of each point from column ``j``: a boolean column, or not NaN and not ``invalid_value``."""
+    col = rows.frame.iloc[:, j]
+    if pd.api.types.is_bool_dtype(col.dtype):
+        return col.to_numpy(dtype=bool)
+    v = rows.number(j, finite=False)
+    return np.isfinite(v) & (v != invalid_value)
+
+
+def _stage_time(rows, header, j: int, p) -> float | None:
+    """The stage time (s) from time column ``j``, which must be constant; None when it is all empty."""
+    tv = rows.number(j) * time_scale(header.units[j], header.names[j], p, header.line)
+    tv = tv[np.isfinite(tv)]
+    if not tv.size:
+        return None
+    if np.ptp(tv) > 1e-9 * max(1.0, float(np.abs(tv).max())):
+        raise DataError(f"{p}: time column {header.names[j]!r} varies within the file "
+                        f"({tv.min():g} to {tv.max():g} s); expected one stage per file")
+    return float(tv[0])
