@@ -91,11 +91,36 @@ def point_truth(specimen, camera: TrueCamera, s, h, times, *, ids=None, window=N
     if s.shape != h.shape:
         raise ConfigError(f"`s` and `h` must have the same length; got {s.size} and {h.size}")
     times = as_finite(times, "times").ravel()
-    N, T = s.size, times.size
-    ids = np.arange(N) if ids is None else np.asarray(ids)
-    if ids.shape != (N,):
-        raise ConfigError(f"Expected `ids` to have shape ({N},); got {ids.shape}")
+    ids = np.arange(s.size) if ids is None else np.asarray(ids)
+    if ids.shape != (s.size,):
+        raise ConfigError(f"Expected `ids` to have shape ({s.size},); got {ids.shape}")
+    data = _material_truth(specimen, s, h, times)
+    data.update(_image_truth(specimen, camera, data["x"][1], data["velocity"][1], times, max_rays))
+    uv = data["pixel"][1]
+    if window is not None:
+        u0, v0, w, hh = check_window(window, camera)
+        with np.errstate(invalid="ignore"):
+            inw = (uv[..., 0] >= u0) & (uv[..., 0] <= u0 + w - 1) & (uv[..., 1] >= v0) & (uv[..., 1] <= v0 + hh - 1)
+        data["in_window"] = (_TP, inw, {"long_name": "projects inside the IR crop window (between its pixel centres)"})
+    if patch is not None:
+        s0, s1, h0, h1 = (float(q) for q in patch)
+        ped = np.minimum(np.minimum(s - s0, s1 - s), np.minimum(h - h0, h1 - h))
+        data["patch_edge_distance"] = (("point",), ped, {"units": "mm", "long_name": "distance to the border of the DIC patch"})
+    ds = xr.Dataset(data, coords={"time": ("time", times, {"units": "s", "long_name": "time"}),
+                                  "point": ("point", ids, {"long_name": "DIC point ID"}),
+                                  "component": ["x", "y", "z"], "pix": ["u", "v"], "i": ["s", "h"], "j": ["s", "h"]})
+    ds.attrs.update({"specimen": specimen.name, "directions": "direction_*: reference configuration; "
+                     "direction_*_cur: current configuration; NaN where the principal strains are equal"})
+    return ds
 
+
+#: dimensions of per-point and per-point vector truth over time
+_TP = ("time", "point")
+_TPC = ("time", "point", "component")
+
+
+def _material_truth(specimen, s: np.ndarray, h: np.ndarray, times: np.ndarray) -> dict:
+    """Variables of the specimen alone (geometry, motion, temperature, strain) at points ``(s, h)``, ``times``."""
     S, Hh, Tt = s[None, :], h[None, :], times[:, None]
     x = specimen.position(S, Hh, Tt)
     vel = specimen.velocity(S, Hh, Tt)
@@ -112,7 +137,35 @@ def point_truth(specimen, camera: TrueCamera, s, h, times, *, ids=None, window=N
         dirs[key] = n[..., :1] * E_s + n[..., 1:] * E_h
         dirs[key + "_cur"] = _unit(n[..., :1] * a_s + n[..., 1:] * a_h)
     x_ref = specimen.position(s, h, specimen.reference_time)
+    return {
+        "s": (("point",), s, {"units": "mm", "long_name": "material arc-length coordinate"}),
+        "h": (("point",), h, {"units": "mm", "long_name": "material height coordinate"}),
+        "x_ref": (("point", "component"), x_ref, {"units": "mm", "long_name": "reference position"}),
+        "edge_distance": (("point",), specimen.edge_distance(s, h),
+                          {"units": "mm", "long_name": "distance to the specimen edge along the reference surface"}),
+        "x": (_TPC, x, {"units": "mm", "long_name": "current position"}),
+        "velocity": (_TPC, vel, {"units": "mm/s", "long_name": "velocity at fixed material point"}),
+        "normal": (_TPC, nrm, {"units": "1", "long_name": "outward unit normal (current)"}),
+        "temperature": (_TP, temp, {"units": "°C", "long_name": "temperature"}),
+        "temperature_gradient": (_TPC, grad, {"units": "K/mm",
+                                             "long_name": "in-plane temperature gradient (current configuration)"}),
+        "temperature_rate": (_TP, rate, {"units": "K/s", "long_name": "material temperature rate"}),
+        "strain": (("time", "point", "i", "j"), E,
+                   {"units": "1", "long_name": "Green-Lagrange strain in the reference basis (e_s, e_h)"}),
+        "strain_max": (_TP, e_max, {"units": "1", "long_name": "maximum principal Green-Lagrange strain"}),
+        "strain_min": (_TP, e_min, {"units": "1", "long_name": "minimum principal Green-Lagrange strain"}),
+        "direction_max": (_TPC, dirs["max"], {"units": "1", "long_name": "direction of strain_max (reference configuration)"}),
+        "direction_min": (_TPC, dirs["min"], {"units": "1", "long_name": "direction of strain_min (reference configuration)"}),
+        "direction_max_cur": (_TPC, dirs["max_cur"], {"units": "1", "long_name": "direction of strain_max (current configuration)"}),
+        "direction_min_cur": (_TPC, dirs["min_cur"], {"units": "1", "long_name": "direction of strain_min (current configuration)"}),
+    }
 
+
+def _image_truth(specimen, camera: TrueCamera, x: np.ndarray, vel: np.ndarray, times: np.ndarray,
+                 max_rays: int) -> dict:
+    """Variables of the IR image: projections, visibility and derivatives of the ray-cast field (batched)."""
+    T, N = x.shape[:2]
+    Tt = times[:, None]
     uv = camera.project(x)
     J = camera.jacobian(x)
     pix_vel = np.einsum("...ij,...j->...i", J, vel)
@@ -127,50 +180,11 @@ def point_truth(specimen, camera: TrueCamera, s, h, times, *, ids=None, window=N
         vis[sl] = visibility(specimen, camera, x[sl], tt)
         du, dv, dt = pixel_derivatives(specimen, camera, uv[sl], tt)
         dTu[sl], dTv[sl], dTt[sl] = (np.where(vis[sl], q, np.nan) for q in (du, dv, dt))
-
-    comp = ["x", "y", "z"]
-    tpa = ("time", "point")
-    tpc = ("time", "point", "component")
-    data = {
-        "s": (("point",), s, {"units": "mm", "long_name": "material arc-length coordinate"}),
-        "h": (("point",), h, {"units": "mm", "long_name": "material height coordinate"}),
-        "x_ref": (("point", "component"), x_ref, {"units": "mm", "long_name": "reference position"}),
-        "edge_distance": (("point",), specimen.edge_distance(s, h),
-                          {"units": "mm", "long_name": "distance to the specimen edge along the reference surface"}),
-        "x": (tpc, x, {"units": "mm", "long_name": "current position"}),
-        "velocity": (tpc, vel, {"units": "mm/s", "long_name": "velocity at fixed material point"}),
-        "normal": (tpc, nrm, {"units": "1", "long_name": "outward unit normal (current)"}),
-        "temperature": (tpa, temp, {"units": "°C", "long_name": "temperature"}),
-        "temperature_gradient": (tpc, grad, {"units": "K/mm",
-                                             "long_name": "in-plane temperature gradient (current configuration)"}),
-        "temperature_rate": (tpa, rate, {"units": "K/s", "long_name": "material temperature rate"}),
-        "strain": (("time", "point", "i", "j"), E,
-                   {"units": "1", "long_name": "Green-Lagrange strain in the reference basis (e_s, e_h)"}),
-        "strain_max": (tpa, e_max, {"units": "1", "long_name": "maximum principal Green-Lagrange strain"}),
-        "strain_min": (tpa, e_min, {"units": "1", "long_name": "minimum principal Green-Lagrange strain"}),
-        "direction_max": (tpc, dirs["max"], {"units": "1", "long_name": "direction of strain_max (reference configuration)"}),
-        "direction_min": (tpc, dirs["min"], {"units": "1", "long_name": "direction of strain_min (reference configuration)"}),
-        "direction_max_cur": (tpc, dirs["max_cur"], {"units": "1", "long_name": "direction of strain_max (current configuration)"}),
-        "direction_min_cur": (tpc, dirs["min_cur"], {"units": "1", "long_name": "direction of strain_min (current configuration)"}),
+    return {
         "pixel": (("time", "point", "pix"), uv, {"units": "px", "long_name": "projected pixel position (u, v)"}),
         "pixel_velocity": (("time", "point", "pix"), pix_vel, {"units": "px/s", "long_name": "pixel velocity of the material point"}),
-        "visible": (tpa, vis, {"long_name": "seen by the IR camera"}),
-        "dT_du": (tpa, dTu, {"units": "K/px", "long_name": "du derivative of the ray-cast IR field"}),
-        "dT_dv": (tpa, dTv, {"units": "K/px", "long_name": "dv derivative of the ray-cast IR field"}),
-        "dT_dt_pixel": (tpa, dTt, {"units": "K/s", "long_name": "local time derivative of the IR field at the fixed pixel"}),
+        "visible": (_TP, vis, {"long_name": "seen by the IR camera"}),
+        "dT_du": (_TP, dTu, {"units": "K/px", "long_name": "du derivative of the ray-cast IR field"}),
+        "dT_dv": (_TP, dTv, {"units": "K/px", "long_name": "dv derivative of the ray-cast IR field"}),
+        "dT_dt_pixel": (_TP, dTt, {"units": "K/s", "long_name": "local time derivative of the IR field at the fixed pixel"}),
     }
-    if window is not None:
-        u0, v0, w, hh = check_window(window, camera)
-        with np.errstate(invalid="ignore"):
-            inw = (uv[..., 0] >= u0) & (uv[..., 0] <= u0 + w - 1) & (uv[..., 1] >= v0) & (uv[..., 1] <= v0 + hh - 1)
-        data["in_window"] = (tpa, inw, {"long_name": "projects inside the IR crop window (between its pixel centres)"})
-    if patch is not None:
-        s0, s1, h0, h1 = (float(q) for q in patch)
-        ped = np.minimum(np.minimum(s - s0, s1 - s), np.minimum(h - h0, h1 - h))
-        data["patch_edge_distance"] = (("point",), ped, {"units": "mm", "long_name": "distance to the border of the DIC patch"})
-    ds = xr.Dataset(data, coords={"time": ("time", times, {"units": "s", "long_name": "time"}),
-                                  "point": ("point", ids, {"long_name": "DIC point ID"}),
-                                  "component": comp, "pix": ["u", "v"], "i": ["s", "h"], "j": ["s", "h"]})
-    ds.attrs.update({"specimen": specimen.name, "directions": "direction_*: reference configuration; "
-                     "direction_*_cur: current configuration; NaN where the principal strains are equal"})
-    return ds
