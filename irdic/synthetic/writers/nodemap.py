@@ -97,6 +97,30 @@ def write_nodemap(path: str | os.PathLike, ids: Any, x_undef: Any, displacement:
     ConfigError
         An argument has the wrong shape, type or value.
     """
+    ids_arr = _checked_ids(ids)
+    n = ids_arr.size
+    xu = _as_points(x_undef, "x_undef", n)
+    d = _as_points(displacement, "displacement", n)
+    stage_date = _checked_stage(stage_index, reference_stage_index, decimals, relative_time, stage_name,
+                                stage_date)
+    strain_cols = _strain_table(strains, n)
+    signal_items = _checked_signals(signals)
+    head = _header(stage_index, reference_stage_index, stage_name, stage_date, relative_time, rbm_compensation,
+                   signal_items)
+    names = ["ID", "x_undef [mm]", "y_undef [mm]", "z_undef [mm]", "u [mm]", "v [mm]", "w [mm]"]
+    names += [f"{key} [{unit}]" for key, unit, _ in strain_cols]
+    head.append("#" + "; ".join([f"{names[0]:>10}"] + [f"{c:>20}" for c in names[1:]]))
+    fmt = "%10d; " + "; ".join([f"%20.{decimals}f"] * 6 + ["%20.10f"] * len(strain_cols))
+    cols = [xu, d] + [v[:, None] for _, _, v in strain_cols]
+    values = np.column_stack(cols).tolist()
+    body = [fmt % (i, *row) for i, row in zip(ids_arr.tolist(), values)]
+    out = Path(path)
+    out.write_text("\n".join(head + body) + "\n", encoding="utf-8", newline="\n")
+    return out
+
+
+def _checked_ids(ids: Any) -> np.ndarray:
+    """Facet IDs as unique int64, shape (n,)."""
     ids_arr = np.asarray(ids)
     if ids_arr.ndim != 1 or ids_arr.size == 0:
         raise ConfigError(f"ids must be a non-empty 1-D array of integers, got shape {ids_arr.shape}")
@@ -108,9 +132,12 @@ def write_nodemap(path: str | os.PathLike, ids: Any, x_undef: Any, displacement:
     ids_arr = ids_arr.astype(np.int64)
     if np.unique(ids_arr).size != ids_arr.size:
         raise ConfigError("ids must be unique")
-    n = ids_arr.size
-    xu = _as_points(x_undef, "x_undef", n)
-    d = _as_points(displacement, "displacement", n)
+    return ids_arr
+
+
+def _checked_stage(stage_index, reference_stage_index, decimals, relative_time, stage_name,
+                   stage_date) -> str | None:
+    """Check the stage's indices, decimals, time and texts; return ``stage_date`` as ISO 8601 text (or None)."""
     for name, value in (("stage_index", stage_index), ("reference_stage_index", reference_stage_index)):
         if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 0:
             raise ConfigError(f"{name} must be a non-negative integer, got {value!r}")
@@ -128,7 +155,11 @@ def write_nodemap(path: str | os.PathLike, ids: Any, x_undef: Any, displacement:
     for name, text in (("stage_name", stage_name), ("stage_date", stage_date)):
         if text is not None and ("\n" in str(text) or "\r" in str(text)):
             raise ConfigError(f"{name} must be one line of text")
-    strain_cols = _strain_table(strains, n)
+    return stage_date
+
+
+def _checked_signals(signals: Any) -> list[tuple[str, str, float]]:
+    """``(name, kind, value)`` triples of the ``# SIGNALS:`` section."""
     signal_items = []
     for item in signals or ():
         try:
@@ -139,31 +170,28 @@ def write_nodemap(path: str | os.PathLike, ids: Any, x_undef: Any, displacement:
         if not str(name).strip() or any(c in f"{name}{kind}" for c in ":\n\r"):
             raise ConfigError(f"signal name and kind must be one line of text without ':', got {name!r}, {kind!r}")
         signal_items.append((str(name), str(kind), value))
+    return signal_items
 
-    def block(title: str, items: list[tuple[str, Any]]) -> list[str]:
-        return [f"# {title}:"] + [f"# {k.ljust(30)}: {v}" for k, v in items] + ["#" * 100]
 
+def _block(title: str, items: list[tuple[str, Any]]) -> list[str]:
+    return [f"# {title}:"] + [f"# {k.ljust(30)}: {v}" for k, v in items] + ["#" * 100]
+
+
+def _header(stage_index, reference_stage_index, stage_name, stage_date, relative_time, rbm_compensation,
+            signal_items) -> list[str]:
+    """Comment blocks above the column names: process, stage, rigid body motion and signals."""
     head: list[str] = []
-    head += block("Process data", [("application_name", "irdic nodemap writer"),
-                                   ("export_format", "ARAMIS data exporter text layout")])
-    head += block("stage data", [
+    head += _block("Process data", [("application_name", "irdic nodemap writer"),
+                                    ("export_format", "ARAMIS data exporter text layout")])
+    head += _block("stage data", [
         ("current_stage_index", int(stage_index)),
         ("current_stage_name", stage_name if stage_name is not None else f"Stage {int(stage_index)}"),
         ("current_stage_date", stage_date if stage_date is not None else "None"),
         ("current_stage_relative_date", repr(float(relative_time)) if relative_time is not None else "None"),
         ("reference_stage_index", int(reference_stage_index)),
     ])
-    head += block("rigid body motion compensation", [("alignment_is_active", bool(rbm_compensation))]
-                  + [(f"alignment_{kind}_{c}", 0.0) for kind in ("rotation", "translation") for c in "xyz"])
+    head += _block("rigid body motion compensation", [("alignment_is_active", bool(rbm_compensation))]
+                   + [(f"alignment_{kind}_{c}", 0.0) for kind in ("rotation", "translation") for c in "xyz"])
     if signal_items:
         head += format_signals(signal_items) + ["#" * 100]
-    names = ["ID", "x_undef [mm]", "y_undef [mm]", "z_undef [mm]", "u [mm]", "v [mm]", "w [mm]"]
-    names += [f"{key} [{unit}]" for key, unit, _ in strain_cols]
-    head.append("#" + "; ".join([f"{names[0]:>10}"] + [f"{c:>20}" for c in names[1:]]))
-    fmt = "%10d; " + "; ".join([f"%20.{decimals}f"] * 6 + ["%20.10f"] * len(strain_cols))
-    cols = [xu, d] + [v[:, None] for _, _, v in strain_cols]
-    values = np.column_stack(cols).tolist()
-    body = [fmt % (i, *row) for i, row in zip(ids_arr.tolist(), values)]
-    out = Path(path)
-    out.write_text("\n".join(head + body) + "\n", encoding="utf-8", newline="\n")
-    return out
+    return head
