@@ -329,6 +329,29 @@ def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str =
     book = OpenBook() if book is None else book
     gradient_k = float(as_finite(gradient_k, "gradient_k", ()))
     T_marker = body - contrast if polarity == "dark" else body + contrast
+    temp = _temperature_model(book, body, T_marker, background, gradient_k)
+    img = _render(book, camera, temp, background, n)
+    if noise > 0:
+        img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
+    image = xr.DataArray(
+        img.astype(np.float32), dims=("v", "u"),
+        coords={"v": np.arange(camera.height), "u": np.arange(camera.width)}, name="temperature",
+        attrs={"units": "°C", "long_name": "apparent temperature of the open-book target", "noise_K": noise,
+               "polarity": polarity, "supersample": n, "gradient_K": gradient_k},
+    )
+    markers, truth = _marker_datasets(book, camera)
+    truth.attrs.update({"marker_polarity": polarity, "marker_temperature": T_marker, "body_temperature": body,
+                        "background_temperature": background, "noise_K": noise,
+                        "marker_contrast": float(contrast), "gradient_K": gradient_k})
+    return TargetImage(image=image, markers=markers, truth=truth, book=book, camera=camera)
+
+
+def _temperature_model(book: OpenBook, body: float, T_marker: float, background: float, gradient_k: float):
+    """``temp(label, o, d, tau)``: apparent temperature (°C) of rays ``o + tau d`` that hit ``label``.
+
+    Labels are those of :meth:`OpenBook.trace` (-1 room, 0 wing, >0 marker);
+    the gradient is linear in ``x`` from the left wing tip to the right one.
+    """
     tips = book.hinge_point + book.wing_length * book.w
     x_lo, x_hi = float(tips[:, 0].min()), float(tips[:, 0].max())
 
@@ -339,6 +362,11 @@ def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str =
         x = o[..., 0] + np.nan_to_num(tau) * d[..., 0]
         return T + np.where(label < 0, 0.0, gradient_k * (x - x_lo) / (x_hi - x_lo))
 
+    return temp
+
+
+def _render(book: OpenBook, camera: TrueCamera, temp, background: float, n: int) -> np.ndarray:
+    """Noise-free image (H, W), °C: one ray per pixel, ``n x n`` rays per pixel near label edges."""
     W, H = camera.width, camera.height
     u0, u1, v0, v1 = _footprint(book, camera)
     uu, vv = np.meshgrid(np.arange(u0, u1, dtype=np.float64), np.arange(v0, v1, dtype=np.float64))
@@ -359,14 +387,11 @@ def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str =
         o, d = camera.ray(su, sv)
         tau_s, sl = book.trace(o, d)
         img[ev[i:i + chunk], eu[i:i + chunk]] = temp(sl, o, d, tau_s).mean(axis=1)
-    if noise > 0:
-        img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
-    image = xr.DataArray(
-        img.astype(np.float32), dims=("v", "u"),
-        coords={"v": np.arange(H), "u": np.arange(W)}, name="temperature",
-        attrs={"units": "°C", "long_name": "apparent temperature of the open-book target", "noise_K": noise,
-               "polarity": polarity, "supersample": n, "gradient_K": gradient_k},
-    )
+    return img
+
+
+def _marker_datasets(book: OpenBook, camera: TrueCamera) -> tuple[xr.Dataset, xr.Dataset]:
+    """The painted markers as DIC exports them, and the camera with the markers' imaged truth."""
     X = book.centres()
     markers = xr.Dataset(
         {"x": (("marker", "component"), X, {"units": "mm", "long_name": "marker centre"})},
@@ -386,10 +411,7 @@ def open_book_target(camera: TrueCamera, *, noise: float = 0.04, polarity: str =
     # software exports them (the IDs do not follow the grid)
     markers = markers.isel(marker=book.painted).sortby("marker")
     truth = truth.isel(marker=book.painted).sortby("marker")
-    truth.attrs.update({"marker_polarity": polarity, "marker_temperature": T_marker, "body_temperature": body,
-                        "background_temperature": background, "noise_K": noise,
-                        "marker_contrast": float(contrast), "gradient_K": gradient_k})
-    return TargetImage(image=image, markers=markers, truth=truth, book=book, camera=camera)
+    return markers, truth
 
 
 def clicked_seeds(target: TargetImage, n: int = 8, *, sigma_px: float = 2.0, seed: int = 0) -> dict:
