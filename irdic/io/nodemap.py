@@ -216,6 +216,21 @@ def read_nodemap(path: str | os.PathLike) -> xr.Dataset:
     x = x_ref + np.column_stack([coord(j) for j in j_xyz[3:]])
     extras = extra_columns(rows, [j_id, *j_xyz], strict=True)
 
+    attrs = _stage_attrs(flat, p)
+    time = _stage_time(flat, p)
+    rbm = _rbm_active(flat, sections, p)
+    attrs["rbm_compensation"] = rbm
+    if rbm:
+        warnings.warn(f"{p}: {RBM_WARNING}", IrdicWarning, stacklevel=2)
+    ds = stage_dataset(ids, x, x_ref, path=p, fmt="nodemap", time=time, attrs=attrs, extras=extras)
+    signals = parse_signals(head, p)
+    if signals:
+        ds = ds.merge(stage_signals(signals))
+    return ds
+
+
+def _stage_attrs(flat: Mapping[str, tuple[str, int]], p: Path) -> dict[str, Any]:
+    """``stage_index``, ``reference_stage_index``, ``stage_name`` and ``stage_date`` (or ``stage_date_text``)."""
     attrs: dict[str, Any] = {}
     stage = _stage_int(flat, "current_stage_index", p)
     ref = _stage_int(flat, "reference_stage_index", p)
@@ -239,6 +254,11 @@ def read_nodemap(path: str | os.PathLike) -> xr.Dataset:
             except ValueError:
                 attrs["stage_date_text"] = flat[key][0]
                 log.info("%s, line %d: stage date %r kept as text", p, flat[key][1], flat[key][0])
+    return attrs
+
+
+def _stage_time(flat: Mapping[str, tuple[str, int]], p: Path) -> float | None:
+    """Stage time (s) from the first time key present; None (with a warning when unreadable) otherwise."""
     time = None
     for key in _TIME_KEYS:
         if key in flat:
@@ -248,14 +268,7 @@ def read_nodemap(path: str | os.PathLike) -> xr.Dataset:
             try:
                 time = parse_duration(value)
             except ValueError as exc:
-                warnings.warn(f"{p}, line {line}: {exc}; the stage has no time", IrdicWarning, stacklevel=2)
+                # stacklevel 3: the warning names the line that called read_nodemap
+                warnings.warn(f"{p}, line {line}: {exc}; the stage has no time", IrdicWarning, stacklevel=3)
             break
-    rbm = _rbm_active(flat, sections, p)
-    attrs["rbm_compensation"] = rbm
-    if rbm:
-        warnings.warn(f"{p}: {RBM_WARNING}", IrdicWarning, stacklevel=2)
-    ds = stage_dataset(ids, x, x_ref, path=p, fmt="nodemap", time=time, attrs=attrs, extras=extras)
-    signals = parse_signals(head, p)
-    if signals:
-        ds = ds.merge(stage_signals(signals))
-    return ds
+    return time
