@@ -116,38 +116,10 @@ def read_markers(path: str | os.PathLike) -> xr.Dataset:
     """
     text = TextFile(path)
     p = text.path
-    found = _find_header(text.head(1000), p)
-    if found is not None:
-        k, sep, header, idx = found
-        start = k + 1
-    else:
-        start = 0
-        first = next(((k, ln) for k, ln in text.lines() if data_lines([ln], 0)[0]), None)
-        if first is None:
-            raise FormatError("no data rows; expected lines 'ID; x; y; z' (mm)", p)
-        sep = _headerless_sep(first[1])
-        fields = split_fields(first[1], sep)
-        if len(fields) != 4:
-            raise FormatError(
-                f"found no header naming the columns ID, x, y, z and {len(fields)} fields in the first data row; "
-                "expected a header such as '# ID; x [mm]; y [mm]; z [mm]' or four columns ID x y z",
-                p, first[0] + 1)
-        header = Header.from_fields(["ID", "x", "y", "z"], 0, p)
-        idx = [0, 1, 2, 3]
+    start, sep, header, idx = _layout(text, p)
     rows = read_body(text, start, header, sep=sep, decimal=None)
     j_id, *j_xyz = idx
-    col = rows.frame.iloc[:, j_id]
-    if not rows.is_numeric(j_id):
-        # say clearly that names such as "P12" are not accepted, instead of "not a number"
-        text = col.astype(str).str.strip()
-        ok = text.str.fullmatch(r"[+-]?\d+(\.0*)?").to_numpy(dtype=bool) | col.isna().to_numpy()
-        bad = np.flatnonzero(~ok)
-        if bad.size:
-            i = int(bad[0])
-            raise FormatError(
-                f"marker ID {rows.cell(i, j_id)!r} in column {header.names[j_id]!r} is not an integer; irdic links "
-                "markers to their IR detections by integer IDs: number the markers (e.g. 12 instead of 'P12')",
-                p, int(rows.line_nos[i]))
+    _check_integer_ids(rows, j_id, header, p)
     ids = rows.integers(j_id, what="marker ID")
     check_unique(ids, rows.line_nos, p, what="marker ID")
     x = np.column_stack([rows.number(j) * length_scale(header.units[j], header.names[j], p, header.line or None)
@@ -169,3 +141,45 @@ def read_markers(path: str | os.PathLike) -> xr.Dataset:
                 "dropped_markers": dropped.tolist()}
     log.info("%s: %d markers read, %d dropped", p, int(seen.sum()), dropped.size)
     return ds
+
+
+def _layout(text: TextFile, p: Path) -> tuple[int, str | None, Header, list[int]]:
+    """First data line (0-based), separator, header and the columns of ID, x, y, z.
+
+    A file without a usable header must have four columns ID x y z.
+    """
+    found = _find_header(text.head(1000), p)
+    if found is not None:
+        k, sep, header, idx = found
+        start = k + 1
+    else:
+        start = 0
+        first = next(((k, ln) for k, ln in text.lines() if data_lines([ln], 0)[0]), None)
+        if first is None:
+            raise FormatError("no data rows; expected lines 'ID; x; y; z' (mm)", p)
+        sep = _headerless_sep(first[1])
+        fields = split_fields(first[1], sep)
+        if len(fields) != 4:
+            raise FormatError(
+                f"found no header naming the columns ID, x, y, z and {len(fields)} fields in the first data row; "
+                "expected a header such as '# ID; x [mm]; y [mm]; z [mm]' or four columns ID x y z",
+                p, first[0] + 1)
+        header = Header.from_fields(["ID", "x", "y", "z"], 0, p)
+        idx = [0, 1, 2, 3]
+    return start, sep, header, idx
+
+
+def _check_integer_ids(rows, j_id: int, header: Header, p: Path) -> None:
+    """Refuse marker IDs that are not integers (``"P12"``), naming the first one and its line."""
+    col = rows.frame.iloc[:, j_id]
+    if not rows.is_numeric(j_id):
+        # say clearly that names such as "P12" are not accepted, instead of "not a number"
+        cells = col.astype(str).str.strip()
+        ok = cells.str.fullmatch(r"[+-]?\d+(\.0*)?").to_numpy(dtype=bool) | col.isna().to_numpy()
+        bad = np.flatnonzero(~ok)
+        if bad.size:
+            i = int(bad[0])
+            raise FormatError(
+                f"marker ID {rows.cell(i, j_id)!r} in column {header.names[j_id]!r} is not an integer; irdic links "
+                "markers to their IR detections by integer IDs: number the markers (e.g. 12 instead of 'P12')",
+                p, int(rows.line_nos[i]))
