@@ -115,17 +115,7 @@ def read_machine(path: str | os.PathLike, *, columns: Mapping[str, str], format:
     DataError
         Fewer than two samples.
     """
-    if format != "csv":
-        raise ConfigError(f"machine.format must be 'csv', got {format!r}")
-    cols = _check_columns(columns)
-    if sep is not None and (not isinstance(sep, str) or len(sep) != 1 or sep in "\r\n\"'#"):
-        raise ConfigError(f"machine.sep must be one character such as ',', ';' or '\\t', got {sep!r}")
-    if decimal not in (".", ",", None):
-        raise ConfigError(f"machine.decimal must be '.', ',' or null (detect), got {decimal!r}")
-    if time_origin not in ("file", "first"):
-        raise ConfigError(f"machine.time_origin must be 'file' or 'first', got {time_origin!r}")
-    if not np.isfinite(time_offset):
-        raise ConfigError(f"machine.time_offset must be a finite number of seconds, got {time_offset!r}")
+    cols = _check_options(format, columns, sep, decimal, time_origin, time_offset)
     p, lines = read_lines(path)
     k, sep_found, header = find_named_header(lines, list(cols.values()), sep, None, p)
     body, nos = data_lines(lines, k + 1)
@@ -135,19 +125,7 @@ def read_machine(path: str | os.PathLike, *, columns: Mapping[str, str], format:
     rows = read_rows(body, nos, header, sep=sep_found, decimal=dec)
     idx = {role: match_column(header, name) for role, name in cols.items()}
     jt = idx["time"]
-    t = rows.number(jt) * time_scale(header.units[jt], header.names[jt], p, header.line)
-    if len(t) < 2:
-        raise DataError(f"{p}: the machine record has {len(t)} sample; expected a time series of at least two")
-    gap = np.flatnonzero(~np.isfinite(t))
-    if gap.size:
-        raise FormatError(f"column {header.names[jt]!r}: missing time; every sample needs a time",
-                          p, int(rows.line_nos[gap[0]]))
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if bad.size:
-        i = int(bad[0])
-        raise FormatError(f"column {header.names[jt]!r}: time {rows.cell(i + 1, jt)!r} does not come after "
-                          f"{rows.cell(i, jt)!r} (line {int(rows.line_nos[i])}); machine times must increase",
-                          p, int(rows.line_nos[i + 1]))
+    t = _machine_times(rows, header, jt, p)
     if time_origin == "first":
         t = t - t[0]
     t = t + float(time_offset)
@@ -163,6 +141,40 @@ def read_machine(path: str | os.PathLike, *, columns: Mapping[str, str], format:
                 **signal_coords(names, ["machine"] * len(names), units, std)},
         attrs={"source_columns": ", ".join(header.names[idx[r]] for r in names)},
     )
+
+
+def _check_options(format, columns, sep, decimal, time_origin, time_offset) -> dict[str, str]:
+    """Check the ``machine`` options; return the checked ``columns``."""
+    if format != "csv":
+        raise ConfigError(f"machine.format must be 'csv', got {format!r}")
+    cols = _check_columns(columns)
+    if sep is not None and (not isinstance(sep, str) or len(sep) != 1 or sep in "\r\n\"'#"):
+        raise ConfigError(f"machine.sep must be one character such as ',', ';' or '\\t', got {sep!r}")
+    if decimal not in (".", ",", None):
+        raise ConfigError(f"machine.decimal must be '.', ',' or null (detect), got {decimal!r}")
+    if time_origin not in ("file", "first"):
+        raise ConfigError(f"machine.time_origin must be 'file' or 'first', got {time_origin!r}")
+    if not np.isfinite(time_offset):
+        raise ConfigError(f"machine.time_offset must be a finite number of seconds, got {time_offset!r}")
+    return cols
+
+
+def _machine_times(rows, header, jt: int, p: Path) -> np.ndarray:
+    """Sample times (s, file clock) from column ``jt``: at least two, none missing, strictly increasing."""
+    t = rows.number(jt) * time_scale(header.units[jt], header.names[jt], p, header.line)
+    if len(t) < 2:
+        raise DataError(f"{p}: the machine record has {len(t)} sample; expected a time series of at least two")
+    gap = np.flatnonzero(~np.isfinite(t))
+    if gap.size:
+        raise FormatError(f"column {header.names[jt]!r}: missing time; every sample needs a time",
+                          p, int(rows.line_nos[gap[0]]))
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        i = int(bad[0])
+        raise FormatError(f"column {header.names[jt]!r}: time {rows.cell(i + 1, jt)!r} does not come after "
+                          f"{rows.cell(i, jt)!r} (line {int(rows.line_nos[i])}); machine times must increase",
+                          p, int(rows.line_nos[i + 1]))
+    return t
 
 
 def ingest_machine(path: str | os.PathLike, out: str | os.PathLike, *, columns: Mapping[str, str],
