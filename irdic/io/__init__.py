@@ -29,10 +29,12 @@ from ..errors import ConfigError, FormatError
 from ._common import head_bytes
 
 __all__ = ["read_ir", "read_dic", "read_markers", "detect_ir_format", "detect_dic_format",
-           "IR_FORMATS", "DIC_FORMATS"]
+           "IR_FORMATS", "DIC_FORMATS", "COMPONENTS"]
 
 IR_FORMATS = ("irbis", "irb", "tiff", "npy")
 DIC_FORMATS = ("nodemap", "dice", "vic", "table")
+#: labels of the ``component`` dimension of DIC coordinates (``x``, ``x_ref``, marker centres)
+COMPONENTS = ("x", "y", "z")
 
 
 def detect_ir_format(path: str | os.PathLike) -> str:

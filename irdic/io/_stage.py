@@ -13,11 +13,10 @@ import numpy as np
 import xarray as xr
 
 from ..errors import IrdicWarning
+from . import COMPONENTS
 from ._tables import Rows
 
 log = logging.getLogger(__name__)
-
-COMPONENTS = ("x", "y", "z")
 
 # Names the stage Dataset uses itself; extra columns with these names are renamed.
 RESERVED = frozenset({"x", "x_ref", "point", "component", "time", "marker"})

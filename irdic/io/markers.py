@@ -31,8 +31,8 @@ import numpy as np
 import xarray as xr
 
 from ..errors import DataError, FormatError, IrdicWarning
+from . import COMPONENTS
 from ._common import TextFile
-from ._stage import COMPONENTS
 from ._tables import Header, check_unique, data_lines, read_body, split_fields
 from .units import length_scale
 

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ConfigError
-from ...io._stage import COMPONENTS  # TODO(redesign): use the dimension names of irdic.vocabulary
+from ...io import COMPONENTS
 
 __all__ = ["write_markers"]
 
