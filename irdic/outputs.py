@@ -187,7 +187,7 @@ def _swap_in(tmp: Path, final: Path) -> None:
 
     The old directory is moved aside (exchanged in one step where the
     system can) and only then deleted; readers of the old one that are
-    still loading chunks then meet missing files, which :func:`open_store`
+    still loading chunks then meet missing files, which :func:`irdic.store.open_store`
     reports, instead of the new store's chunks.
     """
     if not os.path.lexists(final):
