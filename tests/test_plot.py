@@ -149,11 +149,11 @@ def _with_signals(fields, names=("Kraft", "Weg", "machine_torque"), units=("kN",
 
 
 def test_load_figure_against_force_displacement_and_torque(stores, tmp_path):
-    from irdic.plot import _load_signals
+    from irdic.plot import load_signals
 
     points, fields = stores
     f = _with_signals(fields)
-    assert [lab for _, lab in _load_signals(f)] == ["Kraft (kN)", "Weg (mm)", "machine_torque (N*m)"]
+    assert [lab for _, lab in load_signals(f)] == ["Kraft (kN)", "Weg (mm)", "machine_torque (N*m)"]
     img = _check_png(plot_load(points, tmp_path / "load.png", fields=f, point_ids=[1000], experiment="fab"),
                      min_ink=0.08)
     assert img.shape[1] > 1000  # three columns of panels
@@ -163,10 +163,10 @@ def test_load_figure_against_force_displacement_and_torque(stores, tmp_path):
 
 
 def test_load_figure_prefers_the_complete_signal(stores):
-    from irdic.plot import _load_signals
+    from irdic.plot import load_signals
 
     _, fields = stores
     f = _with_signals(fields, names=("force", "machine_force", "cycles"), units=("N", "N", ""),
                       kinds=("value_element", "machine", "value_element"), standard=("force", "force", "cycles"))
     # the DIC force misses a stage, the machine's does not; cycles are no load axis
-    assert [lab for _, lab in _load_signals(f)] == ["machine_force (N)"]
+    assert [lab for _, lab in load_signals(f)] == ["machine_force (N)"]
