@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+from pathlib import Path
 from typing import Iterator, Mapping
 
 from ..errors import ConfigError
 from ..logs import stage_logging
 from ..threads import stage_threads
 
-__all__ = ["stage_context", "paths", "optional_path"]
+__all__ = ["stage_context", "paths", "optional_path", "open_optional"]
 
 
 @contextlib.contextmanager
@@ -54,3 +55,10 @@ def optional_path(items: Mapping, name: str):
     """``items[name]``, or None when it is absent or empty (an optional store not configured)."""
     v = items.get(name)
     return v if v else None
+
+
+def open_optional(path):
+    """The store at ``path``, or None when no path is given or nothing is there (fields.zarr is optional)."""
+    from ..store import open_store
+
+    return open_store(path) if path is not None and Path(path).exists() else None

@@ -6,8 +6,7 @@ import os
 from typing import Mapping
 
 from ..store import open_store
-from .common import optional_path, paths, stage_context
-from .figures import open_optional
+from .common import open_optional, optional_path, paths, stage_context
 from .parameters import settings
 
 __all__ = ["run"]

@@ -3,18 +3,12 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Mapping
 
 from ..store import open_store
-from .common import optional_path, paths, stage_context
+from .common import open_optional, optional_path, paths, stage_context
 
-__all__ = ["run", "open_optional"]
-
-
-def open_optional(path):
-    """The store at ``path``, or None when no path is given or nothing is there (fields.zarr is optional)."""
-    return open_store(path) if path is not None and Path(path).exists() else None
+__all__ = ["run"]
 
 
 def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.PathLike], *,
