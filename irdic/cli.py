@@ -158,6 +158,10 @@ def _run(args: argparse.Namespace) -> None:
     from .logs import configure
 
     configure(None)
+    if args.threads is not None and args.threads < 1:  # checked for every command, info included
+        from .errors import ConfigError
+
+        raise ConfigError(f"--threads must be a whole number of CPU threads >= 1, got {args.threads}")
     # each stage entry (and pipeline.run) applies --threads once
     _dispatch(args)
 
