@@ -182,6 +182,39 @@ def write_pvd(path, files: Sequence[str], times: Sequence[float]) -> Path:
     return p
 
 
+def _check_paraview_args(points, name, compression, dtype, every) -> None:
+    """ConfigError/DataError for arguments of :func:`write_paraview` it cannot write."""
+    require_variables(points, ("x",), "the points store")
+    if not isinstance(name, str) or not name or any(c in name for c in '/\\:*?"<>|'):
+        raise ConfigError(f"name must be a plain file name stem, got {name!r}")
+    if compression not in ("zlib", "lzma", None):
+        raise ConfigError(f"compression must be 'zlib', 'lzma' or None, got {compression!r}")
+    if dtype not in ("float32", "float64"):
+        raise ConfigError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise ConfigError(f"every must be an integer >= 1, got {every!r}")
+
+
+def _write_vtu(path: Path, varying: dict, static: dict, ids, labels, dtype, compression) -> None:
+    """One time step: a vertex per point with coordinates (``varying["x"]``), leaving out points without them.
+
+    ``varying`` and ``static`` map names to (values with the point axis
+    first, the dimensions after ``point``); static arrays hold every point.
+    """
+    import meshio
+
+    x = varying["x"][0].astype(float)
+    keep = np.isfinite(x).all(axis=1)
+    data = {"point_id": ids[keep]}
+    for vname, (a, dims) in varying.items():
+        if vname != "x":
+            data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
+    for vname, (a, dims) in static.items():
+        data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
+    mesh = meshio.Mesh(points=x[keep], cells=[("vertex", np.arange(int(keep.sum()))[:, None])], point_data=data)
+    meshio.vtu.write(os.fspath(path), mesh, binary=True, compression=compression)
+
+
 def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None = None, times=None,
                    every: int = 1, name: str = "points", compression: str | None = "zlib", dtype: str = "float32") -> Path:
     """One ``.vtu`` per time with every point variable, and a ``.pvd`` collection.
@@ -225,17 +258,7 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
     pathlib.Path
         The ``.pvd`` file.
     """
-    import meshio
-
-    require_variables(points, ("x",), "the points store")
-    if not isinstance(name, str) or not name or any(c in name for c in '/\\:*?"<>|'):
-        raise ConfigError(f"name must be a plain file name stem, got {name!r}")
-    if compression not in ("zlib", "lzma", None):
-        raise ConfigError(f"compression must be 'zlib', 'lzma' or None, got {compression!r}")
-    if dtype not in ("float32", "float64"):
-        raise ConfigError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
-    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
-        raise ConfigError(f"every must be an integer >= 1, got {every!r}")
+    _check_paraview_args(points, name, compression, dtype, every)
     t_all = points["time"].values.astype(float)
     idx = np.arange(t_all.size) if times is None else select_times(t_all, times, name="times")
     idx = idx[::every]
@@ -259,20 +282,11 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
             chunk = idx[start:start + block]
             loaded = {k: np.asarray(da.isel(time=chunk).values) for k, da in varying.items()}
             for j, i in enumerate(chunk):
-                x = loaded["x"][j].astype(float)
-                keep = np.isfinite(x).all(axis=1)
-                data = {"point_id": ids[keep]}
-                for vname, da in varying.items():
-                    if vname != "x":
-                        data.update(_vtk_arrays(vname, loaded[vname][j][keep], da.dims[1:], labels, dtype))
-                for vname, (a, dims) in static.items():
-                    data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
-                # one value per time step: VTK field data, shown by ParaView's spreadsheet and plot-over-time
-                mesh = meshio.Mesh(points=x[keep], cells=[("vertex", np.arange(int(keep.sum()))[:, None])],
-                                   point_data=data)
                 fname = f"{name}_{int(i):0{width}d}.vtu"
-                meshio.vtu.write(os.fspath(tmp / fname), mesh, binary=True, compression=compression)
+                point_data = {k: (loaded[k][j], da.dims[1:]) for k, da in varying.items()}
+                _write_vtu(tmp / fname, point_data, static, ids, labels, dtype, compression)
                 if signals:
+                    # one value per time step: VTK field data, shown by ParaView's spreadsheet and plot-over-time
                     _add_field_data(tmp / fname, {k: float(v[i]) for k, v in signals.items()}, compression)
                 files.append(fname)
         write_pvd(tmp / f"{name}.pvd", files, t_all[idx])
@@ -325,16 +339,7 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
     t_all = points["time"].values.astype(float)
     idx = np.arange(t_all.size) if times is None else select_times(t_all, times, name="times")
     avail = point_variables(points, fields)
-    if variables is None:
-        chosen = [v for v in avail if v != "x"]
-    else:
-        if isinstance(variables, str):
-            raise ConfigError(f"variables must be a list of names, got {variables!r}")
-        unknown = [v for v in variables if v not in avail]
-        if unknown:
-            raise ConfigError(f"variables: {', '.join(map(repr, unknown))} not in the stores; "
-                              f"available: {', '.join(avail)}")
-        chosen = [v for v in variables if v != "x"]
+    chosen = _chosen_variables(avail, variables)
     pos = {int(p): k for k, p in enumerate(points["point"].values)}
     sel = np.array([pos[int(p)] for p in ids])
     n_t, n_p = idx.size, sel.size
@@ -356,29 +361,14 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
     for k, c in enumerate("xyz"):
         cols[f"{c} [{_units(avail['x']) or 'mm'}]"] = x[..., k].ravel()
     for v in chosen:
-        da = take(avail[v])
-        a = da.values
-        extra = da.dims[2:]
-        unit = _units(avail[v])
-        suffix = f" [{unit}]" if unit else ""
-        if not extra:
-            cols[v + suffix] = a.ravel()
-            continue
-        labels = [[str(s) for s in (da[d].values if d in da.coords else range(1, da.sizes[d] + 1))] for d in extra]
-        flat = a.reshape(n_t * n_p, -1)
-        combos = np.array(np.meshgrid(*[np.arange(len(lb)) for lb in labels], indexing="ij")).reshape(len(extra), -1).T
-        # tensor components: index labels joined without separator (strain_12)
-        joiner = "" if all(len(s) == 1 and s.isdigit() for lb in labels for s in lb) else "_"
-        for j, combo in enumerate(combos):
-            lab = joiner.join(labels[d][c] for d, c in enumerate(combo))
-            cols[f"{v}_{lab}{suffix}"] = flat[:, j]
+        cols.update(_csv_columns(v, take(avail[v]), _units(avail[v])))
     for name, v in signal_columns(aligned_fields(points, fields), taken=[c.split(" [")[0] for c in cols]).items():
         cols[name] = np.repeat(v[idx], n_p)
     frame = pd.DataFrame(cols)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(f".{p.name}.tmp-{os.getpid()}")
-    try:
+    try:  # written beside and renamed: a reader never sees half a table
         frame.to_csv(tmp, index=False, encoding="utf-8", lineterminator="\n")
         os.replace(tmp, p)
     finally:
@@ -386,3 +376,33 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
             tmp.unlink()
     log.info("csv: %d points x %d times, %d columns -> %s", n_p, n_t, frame.shape[1], p)
     return p
+
+
+def _chosen_variables(avail: dict, variables) -> list[str]:
+    """Export names of the CSV's variable columns (``x`` has its own columns); ConfigError for unknown ones."""
+    if variables is None:
+        return [v for v in avail if v != "x"]
+    if isinstance(variables, str):
+        raise ConfigError(f"variables must be a list of names, got {variables!r}")
+    unknown = [v for v in variables if v not in avail]
+    if unknown:
+        raise ConfigError(f"variables: {', '.join(map(repr, unknown))} not in the stores; "
+                          f"available: {', '.join(avail)}")
+    return [v for v in variables if v != "x"]
+
+
+def _csv_columns(v: str, da: xr.DataArray, unit: str) -> dict[str, np.ndarray]:
+    """Columns of one variable ``da`` (time_sel, point_sel, ...): one per component, labelled, with the unit."""
+    a = da.values
+    extra = da.dims[2:]
+    suffix = f" [{unit}]" if unit else ""
+    if not extra:
+        return {v + suffix: a.ravel()}
+    labels = [[str(s) for s in (da[d].values if d in da.coords else range(1, da.sizes[d] + 1))] for d in extra]
+    flat = a.reshape(a.shape[0] * a.shape[1], -1)
+    combos = np.array(np.meshgrid(*[np.arange(len(lb)) for lb in labels], indexing="ij")).reshape(len(extra), -1).T
+    # tensor components: index labels joined without separator (strain_12)
+    joiner = "" if all(len(s) == 1 and s.isdigit() for lb in labels for s in lb) else "_"
+    return {f"{v}_{joiner.join(labels[d][c] for d, c in enumerate(combo))}{suffix}": flat[:, j]
+            for j, combo in enumerate(combos)}
+
