@@ -6,7 +6,7 @@ import re
 import irdic.config
 import irdic.pipeline
 from irdic.codehash import code_hash
-from irdic.plot import FIGURES as ALL_FIGURES
+import irdic.plot
 from irdic.stages.inputs import list_inputs
 
 irdic.config.validate_config(config)
@@ -66,7 +66,7 @@ def source_settings(kind):
 
 def figure_names():
     """Figures of an experiment: the strain and load figures need the fields rule (fields.zarr)."""
-    return [n for n in ALL_FIGURES if n not in ("strain", "load") or workflow.is_rule("fields")]
+    return [n for n in irdic.plot.FIGURES if n not in ("strain", "load") or workflow.is_rule("fields")]
 
 
 def experiment_results(wildcards):
