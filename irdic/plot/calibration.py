@@ -112,7 +112,8 @@ def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25
     res = cal_ds["residual"].values
     ids = cal_ds["marker"].values
     rms, mx = float(cal_ds["rms_px"]), float(cal_ds["max_px"])
-    from ..calibrate import load_camera  # TODO(redesign): use irdic.camera.load_camera (breaks the cycle calibrate -> plot)
+    # TODO(redesign): use irdic.camera.load_camera (breaks the import cycle calibrate -> plot)
+    from ..calibrate import load_camera
 
     g = load_camera(cal_ds).decompose()
     title = (f"IR camera calibration: {int((status == 'used').sum())} markers, RMS {rms:.3f} px, max {mx:.3f} px; "

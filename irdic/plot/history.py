@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..selection import aligned_fields, select_points
+from ..vocabulary import Status
 from .maps import (DPI, View, annotate_point, colour_limits, colour_norm, draw_map, experiment_name, note,
                    point_values, save_figure, unit_label)
 
@@ -18,7 +19,7 @@ def plot_history(points, path, *, fields=None, point_ids=None, experiment=None):
     """Temperature and temperature rate over time at chosen points, and where they are.
 
     Top: temperature (°C); hollow markers where the value is extrapolated
-    from the specimen mask edge (status 1). Bottom: the material rate with
+    from the specimen mask edge (``Status.EXTRAPOLATED_FROM_EDGE``). Bottom: the material rate with
     its local and convective parts (``fields.zarr``), else the local rate
     at the fixed pixel (``points.zarr``). Right: the surface at the middle
     time with the points marked.
@@ -76,9 +77,9 @@ def _history_temperature(ax_t, points, t, theta, status, ids, colors):
     """Temperature curves; filled markers inside the mask, hollow where extrapolated (status 1)."""
     for k, (pid, c) in enumerate(zip(ids, colors)):
         ax_t.plot(t, theta[:, k], "-", color=c, lw=1.2, label=f"point {pid}")
-        inside = status[:, k] == 0
+        inside = status[:, k] == Status.INTERPOLATED
         ax_t.plot(t[inside], theta[inside, k], "o", color=c, ms=3)
-        extra = status[:, k] == 1
+        extra = status[:, k] == Status.EXTRAPOLATED_FROM_EDGE
         if extra.any():
             ax_t.plot(t[extra], theta[extra, k], "o", mfc="none", mec=c, ms=5,
                       label="extrapolated from the mask edge" if k == 0 else None)
@@ -143,7 +144,8 @@ def _history_summary(ax, points, ids, sel, theta, status, colors):
         rng = (f"{np.nanmin(theta[:, k]):.2f} .. {np.nanmax(theta[:, k]):.2f} °C" if has.any() else "no temperature")
         lines.append((colors[k], f"point {pid}: x = ({ref[0]:.1f}, {ref[1]:.1f}, {ref[2]:.1f}) mm\n"
                                  f"  temperature at {int(has.sum())}/{n_t} times, "
-                                 f"extrapolated at {int((status[:, k] == 1).sum())}\n  {rng}"))
+                                 f"extrapolated at {int((status[:, k] == Status.EXTRAPOLATED_FROM_EDGE).sum())}"
+                                 f"\n  {rng}"))
     step = min(0.16, 1.0 / max(len(lines), 1))
     for k, (c, text) in enumerate(lines):
         ax.text(0.0, 1.0 - step * k, text, color=c, fontsize=8 if len(lines) < 5 else 6.5, va="top", ha="left",
