@@ -3,7 +3,7 @@
 The paper's half-shell at ``scale="paper"`` (irdic.synthetic: ~10,000 DIC
 points, 501 IR frames of a ~290 x 200 px specimen region inside a crop of the
 1024 x 768 sensor, DIC at half the IR rate) is written to temporary stores;
-:func:`irdic.couple.couple_stores` then runs in a fresh subprocess so that its
+:func:`irdic.stages.couple.run` then runs in a fresh subprocess so that its
 peak resident memory is the stage's own. A second run evaluates at every IR
 frame time (501 DIC times, as when both systems run at the same rate).
 
@@ -74,9 +74,10 @@ def main() -> None:
 
         env = dict(os.environ, OPENBLAS_NUM_THREADS=str(args.threads), OMP_NUM_THREADS=str(args.threads))
         for name, d in (("DIC at half the IR rate", "dic.zarr"), ("DIC at every IR frame", "dic_all.zarr")):
-            code = ("import time; from irdic.couple import couple_stores; t=time.perf_counter(); "
-                    f"couple_stores({str(root / d)!r}, {str(root / 'ir.zarr')!r}, {str(root / 'cal.zarr')!r}, "
-                    f"{str(root / ('points_' + d))!r}); print(time.perf_counter()-t)")
+            code = ("import time; from irdic.stages import couple; t=time.perf_counter(); "
+                    f"couple.run({{'dic': {str(root / d)!r}, 'ir': {str(root / 'ir.zarr')!r}, "
+                    f"'calibration': {str(root / 'cal.zarr')!r}}}, {{'store': {str(root / ('points_' + d))!r}}}); "
+                    "print(time.perf_counter()-t)")
             before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
             out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
             peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss

@@ -39,16 +39,15 @@ import _tube  # noqa: E402
 
 _STAGE = """
 import json, resource, sys, time
-from irdic.threads import stage_threads
-from irdic.couple import couple_stores
-from irdic.fields import fields_stores
+from irdic.stages import couple, fields
 root = sys.argv[1]; tag = sys.argv[2]; threads = int(sys.argv[3])
-with stage_threads(threads):
-    t0 = time.perf_counter()
-    couple_stores(root + "/dic.zarr", root + "/ir.zarr", root + "/cal.zarr", root + f"/points{tag}.zarr")
-    t1 = time.perf_counter()
-    fields_stores(root + f"/points{tag}.zarr", root + "/cal.zarr", root + f"/fields{tag}.zarr")
-    t2 = time.perf_counter()
+t0 = time.perf_counter()
+couple.run({"dic": root + "/dic.zarr", "ir": root + "/ir.zarr", "calibration": root + "/cal.zarr"},
+           {"store": root + f"/points{tag}.zarr"}, threads=threads)
+t1 = time.perf_counter()
+fields.run({"points": root + f"/points{tag}.zarr", "calibration": root + "/cal.zarr"},
+           {"store": root + f"/fields{tag}.zarr"}, threads=threads)
+t2 = time.perf_counter()
 print(json.dumps({"couple": t1 - t0, "fields": t2 - t1,
                   "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
 """

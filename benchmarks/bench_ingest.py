@@ -1,7 +1,7 @@
 """Benchmark of the ingest stage: throughput and memory versus series length.
 
 Writes synthetic IRBIS text series (crop exports) of two lengths, ingests
-them with :func:`irdic.ingest.ingest_ir`, and reports wall time, MB/s of text
+them with :func:`irdic.stages.ingest_ir.ingest_ir`, and reports wall time, MB/s of text
 and the peak of Python-allocated memory (tracemalloc): the peak must not grow
 with the number of frames, because frames are streamed into the store. In
 the same run, the obvious approach (read every frame with ``numpy.loadtxt``
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from irdic.ingest import ingest_ir
+from irdic.stages.ingest_ir import ingest_ir
 from irdic.synthetic.writers import write_irbis
 
 

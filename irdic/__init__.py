@@ -2,7 +2,7 @@
 
 Temperatures, in-plane temperature gradients, temperature rates and strains at
 material points of curved surfaces, after the projection-and-interpolation
-method of the accompanying paper (see ``METHOD.md`` in the documentation).
+method of the accompanying paper (see ``docs/method.md``).
 """
 
 from importlib.metadata import PackageNotFoundError, version as _pkg_version

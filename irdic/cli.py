@@ -21,6 +21,7 @@ import argparse
 import json
 import sys
 import traceback
+from pathlib import Path
 from typing import Sequence
 
 from .errors import IrdicError
@@ -75,41 +76,41 @@ def _parser() -> argparse.ArgumentParser:
 
     s = add_parser("demo", help="write the synthetic demo experiment")
     s.add_argument("outdir")
-    s.add_argument("--scale", choices=["tiny", "demo", "paper"], default="demo")
-    s.add_argument("--ir-noise", type=float, default=0.05, help="K")
-    s.add_argument("--dic-noise", type=float, default=0.005, help="mm")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--scale", choices=["tiny", "demo", "paper"], help="default: the schema's demo.scale")
+    s.add_argument("--ir-noise", type=float, help="K")
+    s.add_argument("--dic-noise", type=float, help="mm")
+    s.add_argument("--seed", type=int)
 
     for kind in ("ir", "dic"):
         s = add_parser(f"ingest-{kind}", help=f"{kind.upper()} exports -> {kind}.zarr")
         s.add_argument("source", help="folder, glob or file")
         s.add_argument("out", help="store to write")
-        s.add_argument("--format", default="auto")
-        s.add_argument("--frame-rate", type=float, default=None, help="Hz")
-        s.add_argument("--time-source", choices=["file", "frame_rate"], default="file")
-        s.add_argument("--time-origin", choices=["first", "file"], default="first")
-        s.add_argument("--time-offset", type=float, default=0.0, help="s")
+        s.add_argument("--format")
+        s.add_argument("--frame-rate", type=float, help="Hz")
+        s.add_argument("--time-source", choices=["file", "frame_rate"])
+        s.add_argument("--time-origin", choices=["first", "file"])
+        s.add_argument("--time-offset", type=float, help="s")
 
     s = add_parser("calibrate", help="calibrate the IR camera from one target image")
     s.add_argument("--markers", required=True, help="marker centres export (ID, x, y, z in mm)")
     s.add_argument("--target", required=True, help="IR image of the reference object")
     s.add_argument("--out", required=True, help="calibration.zarr to write")
     s.add_argument("--figure", default=None, help="PNG of detections and residuals")
-    s.add_argument("--distortion", choices=["none", "k1", "k1k2"], default="none")
-    s.add_argument("--polarity", choices=["auto", "dark", "bright"], default="auto")
+    s.add_argument("--distortion", choices=["none", "k1", "k1k2"])
+    s.add_argument("--polarity", choices=["auto", "dark", "bright"])
 
     s = add_parser("couple", help="temperatures at the DIC points -> points.zarr")
     s.add_argument("--dic", required=True, help="dic.zarr")
     s.add_argument("--ir", required=True, help="ir.zarr")
     s.add_argument("--calibration", required=True, help="calibration.zarr")
     s.add_argument("--out", required=True, help="points.zarr to write")
-    s.add_argument("--method", choices=["rbf", "bilinear", "cubic"], default="rbf")
+    s.add_argument("--method", choices=["rbf", "bilinear", "cubic"])
 
     s = add_parser("fields", help="gradient, rate and strain fields -> fields.zarr")
     s.add_argument("--points", required=True, help="points.zarr")
     s.add_argument("--calibration", required=True, help="calibration.zarr")
     s.add_argument("--out", required=True, help="fields.zarr to write")
-    s.add_argument("--temperature-smoothing", default=None, help="none (default), gcv or a number >= 1")
+    s.add_argument("--temperature-smoothing", help="none (default), gcv or a number >= 1")
     s.add_argument("--dic", default=None, help="dic.zarr: its testing machine signals at the DIC times")
     s.add_argument("--machine", default=None, help="machine.zarr: the machine record at the DIC times")
 
@@ -155,53 +156,78 @@ def _one_line(exc: BaseException) -> tuple[int, str]:
 
 def _run(args: argparse.Namespace) -> None:
     from .logs import configure
-    from .threads import stage_threads
 
     configure(None)
-    with stage_threads(args.threads):
-        _dispatch(args)
+    if args.threads is not None and args.threads < 1:  # checked for every command, info included
+        from .errors import ConfigError
+
+        raise ConfigError(f"--threads must be a whole number of CPU threads >= 1, got {args.threads}")
+    # each stage entry (and pipeline.run) applies --threads once
+    _dispatch(args)
+
+
+def _given(args, *names) -> dict:
+    """The options among ``names`` given on the command line (the others take the schema's defaults)."""
+    return {n: getattr(args, n) for n in names if getattr(args, n) is not None}
+
+
+def _smoothing(text: str):
+    """``--temperature-smoothing``: none, gcv or a number (checked by the fields stage)."""
+    if text == "none":
+        return None
+    if text == "gcv":
+        return "gcv"
+    try:
+        return float(text)
+    except ValueError:
+        from .errors import ConfigError
+
+        raise ConfigError(f"--temperature-smoothing must be none, gcv or a number >= 1, got {text!r}") from None
 
 
 def _dispatch(args) -> None:
-    """Run the sub-command of the parsed ``args``."""
+    """Run the sub-command of the parsed ``args`` (threads are set once, by :func:`_run`)."""
     if args.command == "info":
         print(describe_store(args.store))
-    elif args.command == "demo":
-        from .pipeline import make_demo
-
-        make_demo(args.outdir, scale=args.scale, ir_noise=args.ir_noise, dic_noise=args.dic_noise, seed=args.seed)
-    elif args.command in ("ingest-ir", "ingest-dic"):
-        from .ingest import ingest_dic, ingest_ir
-
-        fn = ingest_ir if args.command == "ingest-ir" else ingest_dic
-        fn(args.source, args.out, format=args.format, frame_rate=args.frame_rate, time_source=args.time_source,
-           time_origin=args.time_origin, time_offset=args.time_offset)
-        print(describe_store(args.out))
-    elif args.command == "calibrate":
-        from .pipeline import calibrate_setup
-
-        calibrate_setup(args.markers, args.target, args.out, args.figure,
-                        distortion=args.distortion, polarity=args.polarity)
-        print(describe_store(args.out))
-    elif args.command == "couple":
-        from .couple import couple_stores
-
-        couple_stores(args.dic, args.ir, args.calibration, args.out, method=args.method)
-        print(describe_store(args.out))
-    elif args.command == "fields":
-        from .fields import fields_stores
-
-        sm = args.temperature_smoothing
-        sm = None if sm in (None, "none") else ("gcv" if sm == "gcv" else float(sm))
-        fields_stores(args.points, args.calibration, args.out, dic=args.dic, machine=args.machine,
-                      temperature_smoothing=sm)
-        print(describe_store(args.out))
-    elif args.command == "run":
+        return
+    if args.command == "run":
         from .config import load_config
         from .pipeline import run
 
         paths = run(load_config(args.config), threads=args.threads)
         print(json.dumps(paths, default=str, indent=2))
+        return
+    if args.command == "demo":
+        from .stages import demo
+
+        demo.run({}, {"manifest": Path(args.outdir) / "manifest.yaml"}, threads=args.threads,
+                 **_given(args, "scale", "ir_noise", "dic_noise", "seed"))
+        return
+    if args.command in ("ingest-ir", "ingest-dic"):
+        from .stages import ingest_dic, ingest_ir
+
+        stage = ingest_ir if args.command == "ingest-ir" else ingest_dic
+        stage.run({"source": args.source}, {"store": args.out}, threads=args.threads,
+                  **_given(args, "format", "frame_rate", "time_source", "time_origin", "time_offset"))
+    elif args.command == "calibrate":
+        from .stages import calibrate
+
+        calibrate.run({"markers": args.markers, "target": args.target}, {"store": args.out, "figure": args.figure},
+                      threads=args.threads, **_given(args, "distortion", "polarity"))
+    elif args.command == "couple":
+        from .stages import couple
+
+        couple.run({"dic": args.dic, "ir": args.ir, "calibration": args.calibration}, {"store": args.out},
+                   threads=args.threads, **_given(args, "method"))
+    elif args.command == "fields":
+        from .stages import fields
+
+        params = {}
+        if args.temperature_smoothing is not None:
+            params["temperature_smoothing"] = _smoothing(args.temperature_smoothing)
+        fields.run({"points": args.points, "calibration": args.calibration, "dic": args.dic,
+                    "machine": args.machine}, {"store": args.out}, threads=args.threads, **params)
+    print(describe_store(args.out))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -7,9 +7,7 @@
   ``.pvd`` in ParaView and the time slider steps through the DIC stages.
 * :func:`write_csv` writes selected points over time in long format, one
   row per (time, point), a header with units.
-* :func:`select_times`, :func:`select_points` and :func:`central_point`
-  turn configured times (s) and point IDs into indices and IDs, with the
-  defaults used by the figures and the export alike.
+* which times and points are written: :mod:`irdic.selection`.
 
 Variable names are those of the stores. In the ``.vtu`` files vectors keep
 their components (``x``, ``temperature_gradient``: 3; ``pixel``: 2), a
@@ -21,22 +19,19 @@ dimension is split into ``<name>_max`` and ``<name>_min``.
 from __future__ import annotations
 
 import logging
-import math
 import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 import xarray as xr
 
-from .errors import ConfigError, DataError
+from .errors import ConfigError
+from .selection import aligned_fields, require_variables, select_points, select_times
 from .outputs import atomic_directory
 
 __all__ = [
-    "select_times",
-    "select_points",
-    "central_point",
     "point_variables",
     "write_paraview",
     "write_pvd",
@@ -47,165 +42,6 @@ log = logging.getLogger(__name__)
 
 #: copies of points.zarr variables in fields.zarr: taken from points.zarr
 _COPIED = ("x", "temperature")
-
-
-# --------------------------------------------------------------------------- selection
-
-
-def _require(ds, names, what):
-    missing = [n for n in names if n not in ds.variables]
-    if missing:
-        raise DataError(f"{what} lacks {', '.join(missing)}: is it the output of the couple stage?")
-
-
-def select_times(times, requested=None, *, name: str = "times") -> np.ndarray:
-    """Indices of the stored times nearest to the requested ones.
-
-    Parameters
-    ----------
-    times : array_like, shape (T,)
-        Stored times, s, increasing.
-    requested : sequence of float or None
-        Wanted times, s. None or empty: the stored times nearest 1/3 and 2/3
-        of the series' span (one time if the series has one).
-    name : str
-        Name of the setting, for error messages (``report.times``).
-
-    Returns
-    -------
-    ndarray of int, shape (K,)
-        Increasing, distinct indices into ``times``.
-
-    Raises
-    ------
-    ConfigError
-        A requested time is not a finite number or lies outside the stored
-        span by more than half the median step.
-    """
-    t = np.asarray(times, dtype=float)
-    if t.ndim != 1 or t.size == 0 or not np.isfinite(t).all():
-        raise DataError(f"the store has no usable time axis (got {t.size} times, all finite: {np.isfinite(t).all()})")
-    if requested is None or (not isinstance(requested, str) and len(requested) == 0):
-        if t.size == 1:
-            return np.array([0])
-        want = t[0] + np.array([1.0, 2.0]) / 3.0 * (t[-1] - t[0])
-    else:
-        if isinstance(requested, (str, bytes)) or not isinstance(requested, Iterable):
-            raise ConfigError(f"{name} must be a list of times in s, got {requested!r}")
-        bad = [r for r in requested
-               if isinstance(r, bool) or not isinstance(r, (int, float, np.integer, np.floating))
-               or not math.isfinite(float(r))]
-        if bad:
-            raise ConfigError(f"{name} must be finite numbers (s); got {', '.join(map(repr, bad))}")
-        want = np.asarray(requested, dtype=float)
-        tol = 0.5 * float(np.median(np.diff(t))) if t.size > 1 else 0.0
-        out = want[(want < t[0] - tol) | (want > t[-1] + tol)]
-        if out.size:
-            raise ConfigError(f"{name}: {', '.join(f'{v:g}' for v in out)} s outside the stored times "
-                              f"{t[0]:g} .. {t[-1]:g} s")
-    idx = np.abs(t[None, :] - want[:, None]).argmin(axis=1)
-    for w, i in zip(want, idx):
-        if not np.isclose(w, t[i], rtol=0, atol=1e-9 * max(1.0, abs(w))):
-            log.info("%s: %g s -> nearest stored time %g s", name, w, t[i])
-    return np.unique(idx)
-
-
-def central_point(points: xr.Dataset) -> int:
-    """The visible point nearest the centre of the point cloud.
-
-    Candidates are the points visible at nearly every time (at least 90 % of
-    the largest visible count); among those visible at the middle time the
-    one nearest (3-D) to the centroid of the visible points there is taken.
-
-    Parameters
-    ----------
-    points : xarray.Dataset
-        ``points.zarr``: ``x(time, point, component)`` mm, ``visible(time, point)``.
-
-    Returns
-    -------
-    int
-        The point ID.
-    """
-    _require(points, ("x", "visible"), "the points store")
-    vis = np.asarray(points["visible"].transpose("time", "point").values, dtype=bool)
-    count = vis.sum(axis=0)
-    if count.max(initial=0) == 0:
-        raise DataError("no point is visible at any time: there is no point to show")
-    steady = count >= 0.9 * count.max()
-    ids = points["point"].values
-    # the time with the most steady visible points near the middle of the series
-    n_t = vis.shape[0]
-    order = np.argsort(np.abs(np.arange(n_t) - (n_t - 1) / 2.0), kind="stable")
-    k = next((i for i in order if (vis[i] & steady).any()), order[0])
-    x = np.asarray(points["x"].isel(time=int(k)).transpose("point", "component").values, dtype=float)
-    cand = vis[k] & steady & np.isfinite(x).all(axis=1)
-    if not cand.any():
-        cand = steady & np.isfinite(x).all(axis=1)
-    centre = x[vis[k] & np.isfinite(x).all(axis=1)].mean(axis=0)
-    d = np.where(cand, np.linalg.norm(x - centre, axis=1), np.inf)
-    return int(ids[int(np.argmin(d))])
-
-
-def select_points(points: xr.Dataset, ids=None, *, name: str = "points") -> np.ndarray:
-    """Validated point IDs, in the given order without repeats.
-
-    Parameters
-    ----------
-    points : xarray.Dataset
-        A store with a ``point`` coordinate.
-    ids : sequence of int, "all" or None
-        Point IDs. None or empty: :func:`central_point`; "all": every point.
-    name : str
-        Name of the setting, for error messages.
-
-    Returns
-    -------
-    ndarray of int64
-
-    Raises
-    ------
-    ConfigError
-        An ID is not an integer or not in the store (all unknown IDs are named).
-    """
-    known = np.asarray(points["point"].values)
-    if isinstance(ids, str):
-        if ids != "all":
-            raise ConfigError(f"{name} must be a list of point IDs or 'all', got {ids!r}")
-        return known.astype(np.int64)
-    if ids is None or len(ids) == 0:
-        return np.array([central_point(points)], dtype=np.int64)
-    bad = [i for i in ids if isinstance(i, bool) or not isinstance(i, (int, np.integer))]
-    if bad:
-        raise ConfigError(f"{name} must be integer point IDs; got {', '.join(map(repr, bad))}")
-    req = np.asarray(ids, dtype=np.int64)
-    unknown = req[~np.isin(req, known)]
-    if unknown.size:
-        shown = ", ".join(map(str, unknown[:20])) + (f" and {unknown.size - 20} more" if unknown.size > 20 else "")
-        raise ConfigError(f"{name}: point ID{'s' if unknown.size > 1 else ''} {shown} not in the store "
-                          f"({known.size} points, IDs {known.min()} .. {known.max()})")
-    _, first = np.unique(req, return_index=True)
-    return req[np.sort(first)]
-
-
-# --------------------------------------------------------------------------- variables
-
-
-def _aligned_fields(points: xr.Dataset, fields: xr.Dataset | None) -> xr.Dataset | None:
-    """``fields`` on the time and point axes of ``points`` (DataError if they differ)."""
-    if fields is None:
-        return None
-    tp, tf = points["time"].values, fields["time"].values
-    if tp.shape != tf.shape or not np.allclose(tp, tf, rtol=0, atol=1e-9):
-        raise DataError(f"fields store has {tf.size} times, points store {tp.size} (or different values): "
-                        "were they computed from the same couple result?")
-    pp, pf = points["point"].values, fields["point"].values
-    if not np.array_equal(pp, pf):
-        if np.setxor1d(pp, pf).size:
-            raise DataError(f"fields store has {pf.size} points, points store {pp.size}, "
-                            f"{np.setxor1d(pp, pf).size} IDs in only one of them")
-        fields = fields.sel(point=pp)
-    return fields.assign_coords(time=points["time"].values)
 
 
 def point_variables(points: xr.Dataset, fields: xr.Dataset | None = None) -> dict[str, xr.DataArray]:
@@ -222,7 +58,7 @@ def point_variables(points: xr.Dataset, fields: xr.Dataset | None = None) -> dic
         In store order, points first.
     """
     out: dict[str, xr.DataArray] = {}
-    fields = _aligned_fields(points, fields)
+    fields = aligned_fields(points, fields)
     for source, ds in (("points", points), ("fields", fields)):
         if ds is None:
             continue
@@ -346,6 +182,39 @@ def write_pvd(path, files: Sequence[str], times: Sequence[float]) -> Path:
     return p
 
 
+def _check_paraview_args(points, name, compression, dtype, every) -> None:
+    """ConfigError/DataError for arguments of :func:`write_paraview` it cannot write."""
+    require_variables(points, ("x",), "the points store")
+    if not isinstance(name, str) or not name or any(c in name for c in '/\\:*?"<>|'):
+        raise ConfigError(f"name must be a plain file name stem, got {name!r}")
+    if compression not in ("zlib", "lzma", None):
+        raise ConfigError(f"compression must be 'zlib', 'lzma' or None, got {compression!r}")
+    if dtype not in ("float32", "float64"):
+        raise ConfigError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise ConfigError(f"every must be an integer >= 1, got {every!r}")
+
+
+def _write_vtu(path: Path, varying: dict, static: dict, ids, labels, dtype, compression) -> None:
+    """One time step: a vertex per point with coordinates (``varying["x"]``), leaving out points without them.
+
+    ``varying`` and ``static`` map names to (values with the point axis
+    first, the dimensions after ``point``); static arrays hold every point.
+    """
+    import meshio
+
+    x = varying["x"][0].astype(float)
+    keep = np.isfinite(x).all(axis=1)
+    data = {"point_id": ids[keep]}
+    for vname, (a, dims) in varying.items():
+        if vname != "x":
+            data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
+    for vname, (a, dims) in static.items():
+        data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
+    mesh = meshio.Mesh(points=x[keep], cells=[("vertex", np.arange(int(keep.sum()))[:, None])], point_data=data)
+    meshio.vtu.write(os.fspath(path), mesh, binary=True, compression=compression)
+
+
 def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None = None, times=None,
                    every: int = 1, name: str = "points", compression: str | None = "zlib", dtype: str = "float32") -> Path:
     """One ``.vtu`` per time with every point variable, and a ``.pvd`` collection.
@@ -389,22 +258,12 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
     pathlib.Path
         The ``.pvd`` file.
     """
-    import meshio
-
-    _require(points, ("x",), "the points store")
-    if not isinstance(name, str) or not name or any(c in name for c in '/\\:*?"<>|'):
-        raise ConfigError(f"name must be a plain file name stem, got {name!r}")
-    if compression not in ("zlib", "lzma", None):
-        raise ConfigError(f"compression must be 'zlib', 'lzma' or None, got {compression!r}")
-    if dtype not in ("float32", "float64"):
-        raise ConfigError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
-    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
-        raise ConfigError(f"every must be an integer >= 1, got {every!r}")
+    _check_paraview_args(points, name, compression, dtype, every)
     t_all = points["time"].values.astype(float)
     idx = np.arange(t_all.size) if times is None else select_times(t_all, times, name="times")
     idx = idx[::every]
     variables = point_variables(points, fields)
-    signals = signal_columns(_aligned_fields(points, fields), taken=variables)
+    signals = signal_columns(aligned_fields(points, fields), taken=variables)
     ids = points["point"].values.astype(np.int64)
     width = max(4, len(str(t_all.size - 1)))
     labels = {d: [str(v) for v in ds[d].values] for ds in (points, fields) if ds is not None
@@ -423,20 +282,11 @@ def write_paraview(points: xr.Dataset, directory, *, fields: xr.Dataset | None =
             chunk = idx[start:start + block]
             loaded = {k: np.asarray(da.isel(time=chunk).values) for k, da in varying.items()}
             for j, i in enumerate(chunk):
-                x = loaded["x"][j].astype(float)
-                keep = np.isfinite(x).all(axis=1)
-                data = {"point_id": ids[keep]}
-                for vname, da in varying.items():
-                    if vname != "x":
-                        data.update(_vtk_arrays(vname, loaded[vname][j][keep], da.dims[1:], labels, dtype))
-                for vname, (a, dims) in static.items():
-                    data.update(_vtk_arrays(vname, a[keep], dims, labels, dtype))
-                # one value per time step: VTK field data, shown by ParaView's spreadsheet and plot-over-time
-                mesh = meshio.Mesh(points=x[keep], cells=[("vertex", np.arange(int(keep.sum()))[:, None])],
-                                   point_data=data)
                 fname = f"{name}_{int(i):0{width}d}.vtu"
-                meshio.vtu.write(os.fspath(tmp / fname), mesh, binary=True, compression=compression)
+                point_data = {k: (loaded[k][j], da.dims[1:]) for k, da in varying.items()}
+                _write_vtu(tmp / fname, point_data, static, ids, labels, dtype, compression)
                 if signals:
+                    # one value per time step: VTK field data, shown by ParaView's spreadsheet and plot-over-time
                     _add_field_data(tmp / fname, {k: float(v[i]) for k, v in signals.items()}, compression)
                 files.append(fname)
         write_pvd(tmp / f"{name}.pvd", files, t_all[idx])
@@ -484,21 +334,12 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
     """
     import pandas as pd
 
-    _require(points, ("x",), "the points store")
+    require_variables(points, ("x",), "the points store")
     ids = select_points(points, point_ids, name="point_ids")
     t_all = points["time"].values.astype(float)
     idx = np.arange(t_all.size) if times is None else select_times(t_all, times, name="times")
     avail = point_variables(points, fields)
-    if variables is None:
-        chosen = [v for v in avail if v != "x"]
-    else:
-        if isinstance(variables, str):
-            raise ConfigError(f"variables must be a list of names, got {variables!r}")
-        unknown = [v for v in variables if v not in avail]
-        if unknown:
-            raise ConfigError(f"variables: {', '.join(map(repr, unknown))} not in the stores; "
-                              f"available: {', '.join(avail)}")
-        chosen = [v for v in variables if v != "x"]
+    chosen = _chosen_variables(avail, variables)
     pos = {int(p): k for k, p in enumerate(points["point"].values)}
     sel = np.array([pos[int(p)] for p in ids])
     n_t, n_p = idx.size, sel.size
@@ -520,29 +361,14 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
     for k, c in enumerate("xyz"):
         cols[f"{c} [{_units(avail['x']) or 'mm'}]"] = x[..., k].ravel()
     for v in chosen:
-        da = take(avail[v])
-        a = da.values
-        extra = da.dims[2:]
-        unit = _units(avail[v])
-        suffix = f" [{unit}]" if unit else ""
-        if not extra:
-            cols[v + suffix] = a.ravel()
-            continue
-        labels = [[str(s) for s in (da[d].values if d in da.coords else range(1, da.sizes[d] + 1))] for d in extra]
-        flat = a.reshape(n_t * n_p, -1)
-        combos = np.array(np.meshgrid(*[np.arange(len(lb)) for lb in labels], indexing="ij")).reshape(len(extra), -1).T
-        # tensor components: index labels joined without separator (strain_12)
-        joiner = "" if all(len(s) == 1 and s.isdigit() for lb in labels for s in lb) else "_"
-        for j, combo in enumerate(combos):
-            lab = joiner.join(labels[d][c] for d, c in enumerate(combo))
-            cols[f"{v}_{lab}{suffix}"] = flat[:, j]
-    for name, v in signal_columns(_aligned_fields(points, fields), taken=[c.split(" [")[0] for c in cols]).items():
+        cols.update(_csv_columns(v, take(avail[v]), _units(avail[v])))
+    for name, v in signal_columns(aligned_fields(points, fields), taken=[c.split(" [")[0] for c in cols]).items():
         cols[name] = np.repeat(v[idx], n_p)
     frame = pd.DataFrame(cols)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(f".{p.name}.tmp-{os.getpid()}")
-    try:
+    try:  # written beside and renamed: a reader never sees half a table
         frame.to_csv(tmp, index=False, encoding="utf-8", lineterminator="\n")
         os.replace(tmp, p)
     finally:
@@ -550,3 +376,33 @@ def write_csv(points: xr.Dataset, path, *, fields: xr.Dataset | None = None, poi
             tmp.unlink()
     log.info("csv: %d points x %d times, %d columns -> %s", n_p, n_t, frame.shape[1], p)
     return p
+
+
+def _chosen_variables(avail: dict, variables) -> list[str]:
+    """Export names of the CSV's variable columns (``x`` has its own columns); ConfigError for unknown ones."""
+    if variables is None:
+        return [v for v in avail if v != "x"]
+    if isinstance(variables, str):
+        raise ConfigError(f"variables must be a list of names, got {variables!r}")
+    unknown = [v for v in variables if v not in avail]
+    if unknown:
+        raise ConfigError(f"variables: {', '.join(map(repr, unknown))} not in the stores; "
+                          f"available: {', '.join(avail)}")
+    return [v for v in variables if v != "x"]
+
+
+def _csv_columns(v: str, da: xr.DataArray, unit: str) -> dict[str, np.ndarray]:
+    """Columns of one variable ``da`` (time_sel, point_sel, ...): one per component, labelled, with the unit."""
+    a = da.values
+    extra = da.dims[2:]
+    suffix = f" [{unit}]" if unit else ""
+    if not extra:
+        return {v + suffix: a.ravel()}
+    labels = [[str(s) for s in (da[d].values if d in da.coords else range(1, da.sizes[d] + 1))] for d in extra]
+    flat = a.reshape(a.shape[0] * a.shape[1], -1)
+    combos = np.array(np.meshgrid(*[np.arange(len(lb)) for lb in labels], indexing="ij")).reshape(len(extra), -1).T
+    # tensor components: index labels joined without separator (strain_12)
+    joiner = "" if all(len(s) == 1 and s.isdigit() for lb in labels for s in lb) else "_"
+    return {f"{v}_{joiner.join(labels[d][c] for d, c in enumerate(combo))}{suffix}": flat[:, j]
+            for j, combo in enumerate(combos)}
+

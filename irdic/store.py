@@ -42,6 +42,7 @@ from .errors import DataError, IrdicError
 from .outputs import COMPLETE_ATTR, atomic_directory, zarr_group_attrs
 
 __all__ = [
+    "jsonable",
     "provenance",
     "write_dataset",
     "open_store",
@@ -60,12 +61,12 @@ def _version() -> str:
     return __version__
 
 
-def _jsonable(obj: Any) -> Any:
+def jsonable(obj: Any) -> Any:
     """Turn numpy scalars/arrays and paths into plain JSON types."""
     if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):
@@ -96,8 +97,8 @@ def provenance(stage: str, params: Mapping | None = None, inputs: Sequence | Non
         "irdic_stage": stage,
         "irdic_version": _version(),
         "irdic_created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "irdic_parameters": json.dumps(_jsonable(dict(params or {})), sort_keys=True),
-        "irdic_inputs": json.dumps(_jsonable(list(inputs or []))),
+        "irdic_parameters": json.dumps(jsonable(dict(params or {})), sort_keys=True),
+        "irdic_inputs": json.dumps(jsonable(list(inputs or []))),
     }
 
 

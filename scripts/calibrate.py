@@ -1,9 +1,26 @@
-"""Snakemake script: calibrate the IR camera of one setup -> calibration.zarr + figure."""
+"""Snakemake script: calibrate the IR camera of one setup -> calibration.zarr + figure.
 
-from irdic.logs import stage_logging
-from irdic.pipeline import calibrate_setup
+Inputs
+------
+- the marker export and the target image (or the demo manifest), for
+  Snakemake's bookkeeping only; the files read are ``params.markers`` and
+  ``params.target``.
 
-with stage_logging(snakemake.log[0], "calibrate", threads=snakemake.threads):  # noqa: F821
-    p = snakemake.params  # noqa: F821
-    calibrate_setup(p.markers, p.target, snakemake.output.store, snakemake.output.figure,  # noqa: F821
-                    seeds=p.seeds, **p.settings)
+Outputs
+-------
+- ``store``: ``results/setups/<setup>/calibration.zarr``;
+- ``figure``: ``results/setups/<setup>/calibration.png`` (detections and residuals).
+
+Params
+------
+- ``markers``, ``target``: paths of ``setups.<name>.markers`` and ``.target_image``;
+- ``target_format``: ``setups.<name>.target_image.format``;
+- ``seeds``: ``setups.<name>.seeds``;
+- ``settings``: the ``calibration`` section.
+"""
+
+from irdic.stages import calibrate
+
+p = snakemake.params  # noqa: F821
+calibrate.run({"markers": p.markers, "target": p.target}, snakemake.output, log=snakemake.log[0],  # noqa: F821
+              threads=snakemake.threads, target_format=p.target_format, seeds=p.seeds, **p.settings)  # noqa: F821

@@ -1,8 +1,20 @@
-"""Snakemake script: temperatures at the DIC points of one experiment -> points.zarr."""
+"""Snakemake script: temperatures at the DIC points of one experiment -> points.zarr.
 
-from irdic.couple import couple_stores
-from irdic.logs import stage_logging
+Inputs
+------
+- ``dic``, ``ir``: ``results/<experiment>/dic.zarr``, ``ir.zarr``;
+- ``calibration``: ``results/setups/<setup>/calibration.zarr``.
 
-with stage_logging(snakemake.log[0], "couple", threads=snakemake.threads):  # noqa: F821
-    i = snakemake.input  # noqa: F821
-    couple_stores(i.dic, i.ir, i.calibration, snakemake.output[0], **snakemake.params.settings)  # noqa: F821
+Outputs
+-------
+- ``store``: ``results/<experiment>/points.zarr``.
+
+Params
+------
+- ``settings``: the ``interpolation`` section.
+"""
+
+from irdic.stages import couple
+
+couple.run(snakemake.input, snakemake.output, log=snakemake.log[0], threads=snakemake.threads,  # noqa: F821
+           **snakemake.params.settings)  # noqa: F821

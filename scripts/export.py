@@ -1,9 +1,24 @@
-"""Snakemake script: ParaView time series (.pvd + .vtu) and CSV of selected points of one experiment."""
+"""Snakemake script: ParaView time series and CSV of selected points of one experiment.
 
-from irdic.logs import stage_logging
-from irdic.pipeline import export_experiment
+Inputs
+------
+- ``points``: ``results/<experiment>/points.zarr``;
+- ``fields`` (when the workflow has a fields rule): ``results/<experiment>/fields.zarr``.
 
-with stage_logging(snakemake.log[0], "export", threads=snakemake.threads):  # noqa: F821
-    i, o, p = snakemake.input, snakemake.output, snakemake.params  # noqa: F821
-    export_experiment(i.points, i.get("fields"), o.paraview, o.csv, experiment=snakemake.wildcards.experiment,  # noqa: F821
-                      point_ids=p.points, csv_points=p.csv_points, precision=p.precision, every=p.every)
+Outputs
+-------
+- ``paraview``: ``results/<experiment>/paraview/`` (``.pvd`` + one ``.vtu`` per DIC time);
+- ``csv``: ``results/<experiment>/points.csv``.
+
+Params
+------
+- ``experiment``: the experiment's name;
+- ``points``: ``experiments.<name>.report.points``;
+- ``settings``: the ``export`` section.
+"""
+
+from irdic.stages import export
+
+p = snakemake.params  # noqa: F821
+export.run(snakemake.input, snakemake.output, log=snakemake.log[0], threads=snakemake.threads,  # noqa: F821
+           experiment=p.experiment, points=p.points, **p.settings)

@@ -1,9 +1,22 @@
-"""Snakemake script: gradient, rate and strain fields of one experiment -> fields.zarr."""
+"""Snakemake script: gradient, rate and strain fields of one experiment -> fields.zarr.
 
-from irdic.fields import fields_stores
-from irdic.logs import stage_logging
+Inputs
+------
+- ``points``: ``results/<experiment>/points.zarr``;
+- ``calibration``: ``results/setups/<setup>/calibration.zarr``;
+- ``dic``: ``results/<experiment>/dic.zarr`` (its testing machine signals);
+- ``machine`` (when configured): ``results/<experiment>/machine.zarr``.
 
-with stage_logging(snakemake.log[0], "fields", threads=snakemake.threads):  # noqa: F821
-    i = snakemake.input  # noqa: F821
-    fields_stores(i.points, i.calibration, snakemake.output[0], dic=i.dic, machine=i.get("machine"),  # noqa: F821
-                  **snakemake.params.settings)  # noqa: F821
+Outputs
+-------
+- ``store``: ``results/<experiment>/fields.zarr``.
+
+Params
+------
+- ``settings``: the ``fields`` section.
+"""
+
+from irdic.stages import fields
+
+fields.run(snakemake.input, snakemake.output, log=snakemake.log[0], threads=snakemake.threads,  # noqa: F821
+           **snakemake.params.settings)  # noqa: F821

@@ -1,9 +1,24 @@
-"""Snakemake script: figures of one experiment (points.zarr, fields.zarr if there) -> PNGs."""
+"""Snakemake script: the figures of one experiment -> PNGs for ``snakemake --report``.
 
-from irdic.logs import stage_logging
-from irdic.pipeline import make_figures
+Inputs
+------
+- ``points``: ``results/<experiment>/points.zarr``;
+- ``fields`` (when the workflow has a fields rule): ``results/<experiment>/fields.zarr``.
 
-with stage_logging(snakemake.log[0], "figures", threads=snakemake.threads):  # noqa: F821
-    i, p = snakemake.input, snakemake.params  # noqa: F821
-    make_figures(i.points, i.get("fields"), dict(snakemake.output.items()),  # noqa: F821
-                 experiment=snakemake.wildcards.experiment, times=p.times, point_ids=p.points)  # noqa: F821
+Outputs
+-------
+- one PNG per figure, named by figure (``temperature``, ``gradient``, ``rate``,
+  ``history``, and ``strain``, ``load`` with fields):
+  ``results/<experiment>/figures/<name>.png``.
+
+Params
+------
+- ``experiment``: the experiment's name;
+- ``times``, ``points``: ``experiments.<name>.report.times`` and ``.points``.
+"""
+
+from irdic.stages import figures
+
+p = snakemake.params  # noqa: F821
+figures.run(snakemake.input, snakemake.output, log=snakemake.log[0], threads=snakemake.threads,  # noqa: F821
+            experiment=p.experiment, times=p.times, points=p.points)

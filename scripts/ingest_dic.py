@@ -1,8 +1,21 @@
-"""Snakemake script: DIC stage exports of one experiment -> dic.zarr."""
+"""Snakemake script: the DIC stage exports of one experiment -> dic.zarr.
 
-from irdic.ingest import ingest_dic
-from irdic.logs import stage_logging
+Inputs
+------
+- the raw DIC files (or the demo manifest), for Snakemake's bookkeeping only;
+  the series read is ``params.path``.
 
-with stage_logging(snakemake.log[0], "ingest-dic", threads=snakemake.threads):  # noqa: F821
-    src = dict(snakemake.params.source)  # noqa: F821
-    ingest_dic(src.pop("path"), snakemake.output[0], **src)  # noqa: F821
+Outputs
+-------
+- ``store``: ``results/<experiment>/dic.zarr``.
+
+Params
+------
+- ``path``: folder, glob or file of the DIC exports (``experiments.<name>.dic.path``);
+- ``settings``: the rest of ``experiments.<name>.dic``.
+"""
+
+from irdic.stages import ingest_dic
+
+ingest_dic.run({"source": snakemake.params.path}, snakemake.output, log=snakemake.log[0],  # noqa: F821
+               threads=snakemake.threads, **snakemake.params.settings)  # noqa: F821

@@ -1,8 +1,21 @@
-"""Snakemake script: IR exports of one experiment -> ir.zarr."""
+"""Snakemake script: the IR exports of one experiment -> ir.zarr.
 
-from irdic.ingest import ingest_ir
-from irdic.logs import stage_logging
+Inputs
+------
+- the raw IR files (or the demo manifest), for Snakemake's bookkeeping only;
+  the series read is ``params.path``.
 
-with stage_logging(snakemake.log[0], "ingest-ir", threads=snakemake.threads):  # noqa: F821
-    src = dict(snakemake.params.source)  # noqa: F821
-    ingest_ir(src.pop("path"), snakemake.output[0], **src)  # noqa: F821
+Outputs
+-------
+- ``store``: ``results/<experiment>/ir.zarr``.
+
+Params
+------
+- ``path``: folder, glob or file of the IR exports (``experiments.<name>.ir.path``);
+- ``settings``: the rest of ``experiments.<name>.ir``.
+"""
+
+from irdic.stages import ingest_ir
+
+ingest_ir.run({"source": snakemake.params.path}, snakemake.output, log=snakemake.log[0],  # noqa: F821
+              threads=snakemake.threads, **snakemake.params.settings)  # noqa: F821

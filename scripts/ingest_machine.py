@@ -1,8 +1,21 @@
-"""Snakemake script: the testing machine record of one experiment -> machine.zarr."""
+"""Snakemake script: the testing machine record of one experiment -> machine.zarr.
 
-from irdic.logs import stage_logging
-from irdic.signals import ingest_machine
+Inputs
+------
+- the machine record (or the demo manifest), for Snakemake's bookkeeping only;
+  the file read is ``params.path``.
 
-with stage_logging(snakemake.log[0], "ingest-machine"):  # noqa: F821
-    src = dict(snakemake.params.source)  # noqa: F821
-    ingest_machine(src.pop("path"), snakemake.output[0], **src)  # noqa: F821
+Outputs
+-------
+- ``store``: ``results/<experiment>/machine.zarr``.
+
+Params
+------
+- ``path``: the record (``experiments.<name>.machine.path``);
+- ``settings``: the rest of ``experiments.<name>.machine`` (``columns``, ...).
+"""
+
+from irdic.stages import ingest_machine
+
+ingest_machine.run({"source": snakemake.params.path}, snakemake.output, log=snakemake.log[0],  # noqa: F821
+                   threads=snakemake.threads, **snakemake.params.settings)  # noqa: F821

@@ -1,4 +1,4 @@
-"""ParaView and CSV export, time and point selection (irdic.export)."""
+"""ParaView and CSV export (irdic.export), time and point selection (irdic.selection)."""
 
 import xml.etree.ElementTree as ET
 
@@ -9,8 +9,8 @@ import pytest
 import xarray as xr
 
 from irdic.errors import ConfigError, DataError
-from irdic.export import (central_point, point_variables, select_points, select_times, write_csv, write_paraview,
-                          write_pvd)
+from irdic.export import point_variables, write_csv, write_paraview, write_pvd
+from irdic.selection import central_point, select_points, select_times
 
 R = 60.0  # mm, cylinder radius of the fabricated patch
 

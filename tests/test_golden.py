@@ -51,7 +51,8 @@ def golden_arrays(workdir: Path) -> dict[str, np.ndarray]:
     """Run the tiny demo through :func:`irdic.pipeline.run` and collect its numbers."""
     import os
 
-    from irdic.pipeline import make_demo, run
+    from irdic.pipeline import run
+    from irdic.stages.demo import make_demo
     from irdic.store import open_store
 
     workdir = Path(workdir)

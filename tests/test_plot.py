@@ -47,13 +47,62 @@ def test_view_basis_without_pixels_uses_the_main_axes(stores):
     assert abs(right[0]) > 0.999 and abs(up[1]) > 0.999
 
 
+@pytest.fixture
+def figures(monkeypatch):
+    """The matplotlib figures the plot functions save, to check their content (scales, labels, titles)."""
+    import irdic.plot.calibration
+    import irdic.plot.fields
+    import irdic.plot.history
+    from irdic.plot.maps import save_figure
+
+    saved = []
+
+    def keep(fig, path):
+        saved.append(fig)
+        return save_figure(fig, path)
+
+    for mod in (irdic.plot.fields, irdic.plot.history, irdic.plot.calibration):
+        monkeypatch.setattr(mod, "save_figure", keep)
+    return saved
+
+
+def _colour_bar(fig):
+    """(label, vmin, vmax) of the figure's one colour bar."""
+    bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert len(bars) == 1, [ax.get_label() for ax in fig.axes]
+    cb = bars[0]._colorbar
+    return cb.ax.get_ylabel(), cb.norm.vmin, cb.norm.vmax
+
+
+def _texts(fig):
+    return [t.get_text() for ax in fig.axes for t in (ax.title,)] + [fig._suptitle.get_text()]
+
+
 @pytest.mark.parametrize("func", [plot_temperature, plot_rate])
-def test_map_figures_are_written(stores, tmp_path, func):
+def test_map_figures_show_their_values_on_the_right_scale(stores, tmp_path, func, figures):
     points, fields = stores
     kw = {} if func is plot_temperature else {"fields": fields}
     out = func(points, tmp_path / "sub" / "f.png", times=[0.5, 1.5], experiment="fab", **kw)
     assert out == tmp_path / "sub" / "f.png"
     _check_png(out)
+    fig = figures[-1]
+    k = [int(np.argmin(np.abs(points.time.values - t))) for t in (0.5, 1.5)]
+    label, lo, hi = _colour_bar(fig)
+    if func is plot_temperature:
+        v = points.temperature.values[k]
+        v = v[np.isfinite(v)]
+        # the colour scale spans the 0.5 .. 99.5 percentiles of the temperatures shown
+        assert label == "temperature (°C)"
+        np.testing.assert_allclose([lo, hi], np.percentile(v, [0.5, 99.5]), rtol=1e-12)
+        assert "fab: temperature on the surface" in _texts(fig)[-1]
+    else:
+        v = fields.temperature_rate.values[k]
+        v = v[np.isfinite(v)]
+        # rates diverge about 0 K/s: a symmetric scale to the 99th percentile of |rate|
+        assert label == "temperature rate (K/s)"
+        np.testing.assert_allclose([lo, hi], np.array([-1.0, 1.0]) * np.percentile(np.abs(v), 99), rtol=1e-12)
+        assert "fab: material temperature rate" in _texts(fig)[-1]
+    assert [f"t = {points.time.values[i]:g} s" for i in k] == [t for t in _texts(fig)[:-1] if t.startswith("t =")]
 
 
 def test_gradient_arrows_from_fields_and_from_pixels(stores, tmp_path):
@@ -82,10 +131,21 @@ def test_strain_needs_fields_and_3d_directions(stores, tmp_path):
         plot_strain(fields.assign(principal_direction=d2), tmp_path / "s.png", points=points)
 
 
-def test_history_figure(stores, tmp_path):
+def test_history_figure(stores, tmp_path, figures):
     points, fields = stores
     _check_png(plot_history(points, tmp_path / "h1.png", fields=fields), min_ink=0.08)
     _check_png(plot_history(points, tmp_path / "h2.png", point_ids=[1000, 1025, 1086]), min_ink=0.08)
+    fig = figures[-1]
+    assert fig._suptitle.get_text().endswith("temperature history at points 1000, 1025, 1086")
+    ax_t = fig.axes[0]
+    # one curve per point, with the point's own temperatures over time
+    curves = {ln.get_label(): ln for ln in ax_t.get_lines() if ln.get_label().startswith("point ")}
+    assert list(curves) == ["point 1000", "point 1025", "point 1086"]
+    for pid, ln in curves.items():
+        want = points.temperature.sel(point=int(pid.split()[1])).values
+        np.testing.assert_array_equal(ln.get_xdata(), points.time.values)
+        np.testing.assert_array_equal(ln.get_ydata(), want)
+    assert ax_t.get_ylabel() == "temperature (°C)"
 
 
 def test_experiment_figures_with_and_without_fields(stores, tmp_path):
@@ -149,11 +209,11 @@ def _with_signals(fields, names=("Kraft", "Weg", "machine_torque"), units=("kN",
 
 
 def test_load_figure_against_force_displacement_and_torque(stores, tmp_path):
-    from irdic.plot import _load_signals
+    from irdic.plot import load_signals
 
     points, fields = stores
     f = _with_signals(fields)
-    assert [lab for _, lab in _load_signals(f)] == ["Kraft (kN)", "Weg (mm)", "machine_torque (N*m)"]
+    assert [lab for _, lab in load_signals(f)] == ["Kraft (kN)", "Weg (mm)", "machine_torque (N*m)"]
     img = _check_png(plot_load(points, tmp_path / "load.png", fields=f, point_ids=[1000], experiment="fab"),
                      min_ink=0.08)
     assert img.shape[1] > 1000  # three columns of panels
@@ -163,10 +223,10 @@ def test_load_figure_against_force_displacement_and_torque(stores, tmp_path):
 
 
 def test_load_figure_prefers_the_complete_signal(stores):
-    from irdic.plot import _load_signals
+    from irdic.plot import load_signals
 
     _, fields = stores
     f = _with_signals(fields, names=("force", "machine_force", "cycles"), units=("N", "N", ""),
                       kinds=("value_element", "machine", "value_element"), standard=("force", "force", "cycles"))
     # the DIC force misses a stage, the machine's does not; cycles are no load axis
-    assert [lab for _, lab in _load_signals(f)] == ["machine_force (N)"]
+    assert [lab for _, lab in load_signals(f)] == ["machine_force (N)"]

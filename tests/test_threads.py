@@ -1,13 +1,17 @@
 """Every stage entry limits BLAS/OpenMP to the threads it was given."""
 
+import copy
+
 import numpy as np
 import pytest
+import xarray as xr
 from threadpoolctl import threadpool_info
 
 import irdic.cli
-import irdic.couple
-import irdic.fields
+import irdic.stages.couple
+import irdic.stages.fields
 from irdic import pipeline
+from irdic.config import validate_config
 from irdic.cli import main
 from irdic.errors import ConfigError
 from irdic.logs import stage_logging
@@ -23,22 +27,27 @@ def recorder(monkeypatch):
     seen = []
 
     def fake(*args, **kwargs):
+        # the computation of the stage, inside its entry: stores are neither read nor written
         seen.append((_blas_threads_now(), thread_budget()))
+        return xr.Dataset(coords={"time": [0.0], "point": [0]})
 
-    monkeypatch.setattr(irdic.couple, "couple_stores", fake)
-    monkeypatch.setattr(irdic.fields, "fields_stores", fake)
+    for stage, compute in ((irdic.stages.couple, "couple"), (irdic.stages.fields, "fields")):
+        monkeypatch.setattr(stage, compute, fake)
+        monkeypatch.setattr(stage, "open_store", lambda path: None)
+        monkeypatch.setattr(stage, "write_dataset", lambda *a, **k: None)
     return seen
 
 
 _CONFIG = {
-    "setups": {"lab": {}},
-    "experiments": {"tube": {"setup": "lab"}},
+    "setups": {"lab": {"markers": {"path": "m.txt"}, "target_image": {"path": "t.txt"}}},
+    "experiments": {"tube": {"setup": "lab", "dic": {"path": "dic"}, "ir": {"path": "ir"}}},
+    "demo": {"enabled": False},
 }
 
 
 def test_pipeline_run_uses_the_given_threads(recorder):
     np.ones((4, 4)) @ np.ones((4, 4))  # make sure BLAS is loaded
-    pipeline.run(_CONFIG, stages=("couple", "fields"), threads=1)
+    pipeline.run(validate_config(copy.deepcopy(_CONFIG)), stages=("couple", "fields"), threads=1)
     assert recorder == [({1}, 1), ({1}, 1)]
     # the limit ends with the stage
     assert thread_budget() == default_threads()

@@ -161,3 +161,23 @@ def test_bad_config_is_reported_with_the_key(tmp_path):
     res = _snakemake(tmp_path, "-n", config=cfg)
     assert res.returncode != 0
     assert "calibration.polarty: unknown key" in res.stderr + res.stdout
+
+
+def test_rules_are_thin_and_logged():
+    """Every rule has a log and a benchmark; common.smk imports os and uses no other rule file's names."""
+    import re
+
+    rules_dir = ROOT / "workflow" / "rules"
+    for f in sorted(rules_dir.glob("*.smk")):
+        blocks = re.split(r"^rule ", f.read_text(), flags=re.M)[1:]
+        for b in blocks:
+            name = b.split(":", 1)[0]
+            assert "\n    log:" in b and "\n    benchmark:" in b, f"{f.name}: rule {name}"
+            assert ".get(" not in b, f"{f.name}: rule {name} repeats a default of the schema"
+    common = (rules_dir / "common.smk").read_text()
+    assert re.search(r"^import os$", common, flags=re.M)
+    assert not re.search(r"(?<![.\w])FIGURES\b", common)  # irdic.plot.FIGURES, not report.smk's
+    for script in sorted((ROOT / "scripts").glob("*.py")):
+        text = script.read_text()
+        assert "from irdic.stages import" in text and ".run(" in text, script.name
+        assert "Inputs\n------" in text and "Outputs\n-------" in text, script.name

@@ -15,7 +15,8 @@ rule calibrate:
         ),
     params:
         markers=lambda wc: config["setups"][wc.setup]["markers"]["path"],
-        target=lambda wc: config["setups"][wc.setup]["target_image"],
+        target=lambda wc: config["setups"][wc.setup]["target_image"]["path"],
+        target_format=lambda wc: config["setups"][wc.setup]["target_image"]["format"],
         seeds=lambda wc: config["setups"][wc.setup]["seeds"],
         settings=config["calibration"],
         code=code_hash("calibrate"),

@@ -1,11 +1,13 @@
 # Configuration, lookups and input functions shared by all rules.
 
+import os
 import re
 
 import irdic.config
 import irdic.pipeline
 from irdic.codehash import code_hash
-from irdic.ingest import list_inputs
+import irdic.plot
+from irdic.stages.inputs import list_inputs
 
 irdic.config.validate_config(config)
 # outputs must stay inside the results folder whatever the names (links included)
@@ -53,6 +55,20 @@ def setup_files(wildcards):
     }
 
 
+def source_settings(kind):
+    """Params of an ingest rule: an experiment's ``dic``/``ir``/``machine`` entry without its path."""
+
+    def inner(wildcards):
+        return {k: v for k, v in config["experiments"][wildcards.experiment][kind].items() if k != "path"}
+
+    return inner
+
+
+def figure_names():
+    """Figures of an experiment: the strain and load figures need the fields rule (fields.zarr)."""
+    return [n for n in irdic.plot.FIGURES if n not in ("strain", "load") or workflow.is_rule("fields")]
+
+
 def experiment_results(wildcards):
     """points.zarr of an experiment, and fields.zarr when the workflow has a fields rule."""
     out = {"points": f"{RESULTS}/{wildcards.experiment}/points.zarr"}
@@ -80,6 +96,6 @@ def all_outputs():
         out += [f"{RESULTS}/{e}/dic.zarr", f"{RESULTS}/{e}/ir.zarr", f"{RESULTS}/{e}/points.zarr", f"{RESULTS}/{e}/fields.zarr"]
         if config["experiments"][e].get("machine"):
             out.append(f"{RESULTS}/{e}/machine.zarr")
-        out += [f"{RESULTS}/{e}/figures/{name}.png" for name in FIGURES]
+        out += [f"{RESULTS}/{e}/figures/{name}.png" for name in figure_names()]
         out += [f"{RESULTS}/{e}/paraview", f"{RESULTS}/{e}/points.csv"]
     return out

@@ -7,7 +7,7 @@ rule couple:
         ir=f"{RESULTS}/{{experiment}}/ir.zarr",
         calibration=lambda wc: f"{RESULTS}/setups/{config['experiments'][wc.experiment]['setup']}/calibration.zarr",
     output:
-        directory(f"{RESULTS}/{{experiment}}/points.zarr"),
+        store=directory(f"{RESULTS}/{{experiment}}/points.zarr"),
     params:
         settings=config["interpolation"],
         code=code_hash("couple"),

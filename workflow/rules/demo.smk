@@ -5,11 +5,7 @@ rule demo:
     output:
         manifest=DEMO_MANIFEST,
     params:
-        outdir=lambda wildcards, output: os.path.dirname(output.manifest),
-        scale=DEMO["scale"],
-        ir_noise=DEMO["ir_noise"],
-        dic_noise=DEMO["dic_noise"],
-        seed=DEMO["seed"],
+        settings={k: v for k, v in DEMO.items() if k not in ("enabled", "outdir")},
         code=code_hash("demo"),
     log:
         f"{RESULTS}/logs/demo.log",
@@ -21,4 +17,4 @@ rule demo:
     conda:
         "../envs/irdic.yaml"
     script:
-        "../../scripts/make_demo.py"
+        "../../scripts/demo.py"

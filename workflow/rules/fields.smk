@@ -6,7 +6,7 @@ rule fields:
     input:
         unpack(fields_inputs),
     output:
-        directory(f"{RESULTS}/{{experiment}}/fields.zarr"),
+        store=directory(f"{RESULTS}/{{experiment}}/fields.zarr"),
     params:
         settings=config["fields"],
         code=code_hash("fields"),

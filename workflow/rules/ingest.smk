@@ -5,10 +5,11 @@ rule ingest_ir:
     input:
         experiment_files("ir"),
     output:
-        directory(f"{RESULTS}/{{experiment}}/ir.zarr"),
+        store=directory(f"{RESULTS}/{{experiment}}/ir.zarr"),
     params:
-        source=lambda wc: config["experiments"][wc.experiment]["ir"],
-        code=code_hash("ingest"),
+        path=lambda wc: config["experiments"][wc.experiment]["ir"]["path"],
+        settings=source_settings("ir"),
+        code=code_hash("ingest_ir"),
     log:
         f"{RESULTS}/logs/{{experiment}}/ingest_ir.log",
     benchmark:
@@ -26,10 +27,11 @@ rule ingest_dic:
     input:
         experiment_files("dic"),
     output:
-        directory(f"{RESULTS}/{{experiment}}/dic.zarr"),
+        store=directory(f"{RESULTS}/{{experiment}}/dic.zarr"),
     params:
-        source=lambda wc: config["experiments"][wc.experiment]["dic"],
-        code=code_hash("ingest"),
+        path=lambda wc: config["experiments"][wc.experiment]["dic"]["path"],
+        settings=source_settings("dic"),
+        code=code_hash("ingest_dic"),
     log:
         f"{RESULTS}/logs/{{experiment}}/ingest_dic.log",
     benchmark:
@@ -48,10 +50,11 @@ rule ingest_machine:
     input:
         lambda wc: raw_files(config["experiments"][wc.experiment]["machine"]["path"]),
     output:
-        directory(f"{RESULTS}/{{experiment}}/machine.zarr"),
+        store=directory(f"{RESULTS}/{{experiment}}/machine.zarr"),
     params:
-        source=lambda wc: config["experiments"][wc.experiment]["machine"],
-        code=code_hash("ingest"),
+        path=lambda wc: config["experiments"][wc.experiment]["machine"]["path"],
+        settings=source_settings("machine"),
+        code=code_hash("ingest_machine"),
     log:
         f"{RESULTS}/logs/{{experiment}}/ingest_machine.log",
     benchmark:

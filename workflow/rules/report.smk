@@ -2,9 +2,6 @@
 # Include after fields.smk: without a fields rule the figures and the export use points.zarr alone
 # (experiment_results() in common.smk) and there is no strain figure and no load figure (the signals are in fields.zarr).
 
-FIGURES = ["temperature", "gradient", "rate", "history"] + (["strain", "load"] if workflow.is_rule("fields") else [])
-
-
 rule figures:
     input:
         unpack(experiment_results),
@@ -17,11 +14,12 @@ rule figures:
                 subcategory="figures",
                 labels={"experiment": "{experiment}", "figure": name},
             )
-            for name in FIGURES
+            for name in figure_names()
         },
     params:
-        times=lambda wc: config["experiments"][wc.experiment].get("report", {}).get("times", []),
-        points=lambda wc: config["experiments"][wc.experiment].get("report", {}).get("points", []),
+        experiment=lambda wc: wc.experiment,
+        times=lambda wc: config["experiments"][wc.experiment]["report"]["times"],
+        points=lambda wc: config["experiments"][wc.experiment]["report"]["points"],
         code=code_hash("figures"),
     log:
         f"{RESULTS}/logs/{{experiment}}/figures.log",
@@ -35,7 +33,6 @@ rule figures:
     script:
         "../../scripts/figures.py"
 
-
 rule export:
     input:
         unpack(experiment_results),
@@ -43,10 +40,9 @@ rule export:
         paraview=directory(f"{RESULTS}/{{experiment}}/paraview"),
         csv=f"{RESULTS}/{{experiment}}/points.csv",
     params:
-        points=lambda wc: config["experiments"][wc.experiment].get("report", {}).get("points", []),
-        csv_points=config.get("export", {}).get("csv_points", "selected"),
-        precision=config.get("export", {}).get("paraview_precision", "float32"),
-        every=config.get("export", {}).get("paraview_every", 1),
+        experiment=lambda wc: wc.experiment,
+        points=lambda wc: config["experiments"][wc.experiment]["report"]["points"],
+        settings=config["export"],
         code=code_hash("export"),
     log:
         f"{RESULTS}/logs/{{experiment}}/export.log",

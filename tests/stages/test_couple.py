@@ -6,11 +6,15 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from irdic.couple import couple, couple_stores
 from irdic.errors import CalibrationError, DataError, IrdicWarning
-from irdic.ingest import ingest_dic, ingest_ir
-from irdic.pipeline import calibrate_setup, make_demo
+from irdic.stages import calibrate as calibrate_stage
+from irdic.stages import couple as couple_stage
+from irdic.stages.couple import couple
+from irdic.stages.demo import make_demo
+from irdic.stages.ingest_dic import ingest_dic
+from irdic.stages.ingest_ir import ingest_ir
 from irdic.store import open_store
+from irdic.vocabulary import Status
 
 pytestmark = pytest.mark.slow
 
@@ -20,7 +24,8 @@ def demo(tmp_path_factory):
     """The tiny demo without noise, ingested and calibrated."""
     d = tmp_path_factory.mktemp("couple")
     make_demo(d / "demo", scale="tiny", ir_noise=0.0, dic_noise=0.0)
-    calibrate_setup(d / "demo/setup/markers.txt", d / "demo/setup/target.txt", d / "cal.zarr")
+    calibrate_stage.run({"markers": d / "demo/setup/markers.txt", "target": d / "demo/setup/target.txt"},
+                        {"store": d / "cal.zarr"})
     out = {"cal": open_store(d / "cal.zarr"), "dir": d}
     for exp in ("halfshell", "tube"):
         ingest_ir(d / f"demo/{exp}/ir", d / f"{exp}_ir.zarr")
@@ -137,10 +142,11 @@ def test_ir_frames_larger_than_the_calibration_image(demo):
         couple(dic, ir, cal)
 
 
-def test_couple_stores_writes_points_zarr(demo):
+def test_couple_stage_writes_points_zarr(demo):
     d = demo["dir"]
-    out = couple_stores(d / "tube_dic.zarr", d / "tube_ir.zarr", d / "cal.zarr", d / "points.zarr", method="bilinear")
-    ds = open_store(out)
+    couple_stage.run({"dic": d / "tube_dic.zarr", "ir": d / "tube_ir.zarr", "calibration": d / "cal.zarr"},
+                     {"store": d / "points.zarr"}, threads=1, method="bilinear")
+    ds = open_store(d / "points.zarr")
     assert ds.attrs["irdic_stage"] == "couple" and '"method": "bilinear"' in ds.attrs["irdic_parameters"]
     assert {"temperature", "pixel", "temperature_pixel_gradient", "temperature_local_rate", "visible",
             "edge_distance", "x", "status"} <= set(ds.data_vars)
@@ -150,7 +156,7 @@ def test_nan_under_the_specimen_is_named_in_sensor_pixels(demo, coupled):
     # the message used to name the pixel of the cropped frame array (u=.., v=.. from 0)
     dic, ir, _ = demo["halfshell"]
     ds = coupled["halfshell"]
-    vis = np.argwhere(ds.status.values == 0)
+    vis = np.argwhere(ds.status.values == Status.INTERPOLATED)
     k, j = vis[len(vis) // 2]
     pu, pv = np.rint(ds.pixel.values[k, j]).astype(int)
     u0, v0 = int(ir.u[0]), int(ir.v[0])
@@ -161,3 +167,27 @@ def test_nan_under_the_specimen_is_named_in_sensor_pixels(demo, coupled):
     with pytest.raises(DataError, match=rf"ir: frames: 1 non-finite value\(s\) at masked pixels, first in IR frame 3 "
                                         rf"\(t = {float(ir.time[3]):g} s\) at sensor pixel \(u={pu}, v={pv}\)"):
         couple(dic, bad, demo["cal"])
+
+
+def test_couple_stage_refuses_unknown_parameters_and_paths(demo):
+    from irdic.errors import ConfigError
+
+    d = demo["dir"]
+    inputs = {"dic": d / "tube_dic.zarr", "ir": d / "tube_ir.zarr", "calibration": d / "cal.zarr"}
+    # a typo must not fall back to the default silently
+    with pytest.raises(ConfigError, match="interpolation: unknown parameter.*c_spaec.*expected.*c_space"):
+        couple_stage.run(inputs, {"store": d / "p2.zarr"}, c_spaec=3.0)
+    with pytest.raises(ConfigError, match="stage couple: inputs must name dic, ir, calibration; missing.*'ir'"):
+        couple_stage.run({"dic": inputs["dic"], "calibration": inputs["calibration"]}, {"store": d / "p2.zarr"})
+    assert not (d / "p2.zarr").exists()
+
+
+def test_status_flags_follow_the_vocabulary(coupled):
+    ds = coupled["halfshell"]
+    assert ds.status.attrs["flag_values"] == [int(s) for s in Status]
+    assert ds.status.attrs["flag_meanings"].split() == [s.name.lower() for s in Status]
+    # visible is exactly status interpolated or extrapolated, and only visible points have a temperature
+    vis = ds.status.values <= Status.EXTRAPOLATED_FROM_EDGE
+    np.testing.assert_array_equal(ds.visible.values, vis)
+    np.testing.assert_array_equal(np.isfinite(ds.temperature.values), vis)
+    assert ds.attrs["count_interpolated"] == int((ds.status.values == Status.INTERPOLATED).sum())

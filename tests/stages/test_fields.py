@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from irdic.couple import couple
 from irdic.errors import ConfigError, DataError
-from irdic.fields import fields
+from irdic.stages.couple import couple
+from irdic.stages.fields import fields
 
-from ._synthetic_stores import synthetic_inputs
+from .._synthetic_stores import synthetic_inputs
 
 pytestmark = pytest.mark.slow
 

@@ -1,0 +1,242 @@
+"""Couple stage: DIC points + IR frames + calibration -> temperatures at material points.
+
+For every DIC time the valid DIC points are projected into the IR image with
+the calibrated camera; points behind the camera, outside the IR frame or on
+surface facing away from it are flagged not visible. Only pixels on the
+specimen feed the interpolant: a mask per time from the projected point cloud
+(:mod:`irdic.stages.visibility`, eroded by ``mask_erosion_px``), also
+intersected with the masks of the neighbouring DIC times so that pixels the
+moving edge crosses are left out. The pixel temperatures are interpolated in
+space and time (:func:`irdic.rbf.evaluate_series`, IMQ with the paper's
+shape factors by default) and evaluated at the projected points: temperature,
+pixel gradient and local rate ∂Θ/∂t at the fixed pixel.
+
+Points that project just outside the mask (the outermost DIC points lie on
+the specimen edge, so they always do) are extrapolated linearly from the
+nearest masked pixel, up to ``max_extrapolation_px``; their signed distance to
+the mask edge is stored (negative = extrapolated), so users see which values
+are not interpolated (:mod:`irdic.stages.extrapolation`).
+
+``status`` codes (:class:`irdic.vocabulary.Status`; CF ``flag_values``/``flag_meanings`` in its attributes):
+
+== ==================================================================
+0  interpolated inside the specimen mask
+1  extrapolated from the mask edge (≤ max_extrapolation_px)
+2  DIC point missing at this time
+3  behind the IR camera or outside the IR frame
+4  surface facing away from the IR camera
+5  outside the specimen mask, farther than max_extrapolation_px
+6  DIC time outside the IR time span
+== ==================================================================
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time as _time
+from typing import Mapping
+
+import numpy as np
+import xarray as xr
+
+from ..camera import load_camera
+from ..errors import ConfigError, DataError
+from ..image_rbf import evaluate_series
+from ..store import open_store, write_dataset
+from ..vocabulary import COMPONENTS, PIXEL_AXES, Status, cf_attrs, status_attrs
+from .common import paths, stage_context
+from .extrapolation import extrapolate, extrapolation_samples, in_mask
+from .parameters import settings
+from .visibility import Projection, masks_and_facing, project_points
+
+__all__ = ["run", "couple"]
+
+log = logging.getLogger(__name__)
+
+
+def _check_params(method, mask_erosion_px, max_extrapolation_px, max_view_angle_deg):
+    if method not in ("rbf", "bilinear", "cubic"):
+        raise ConfigError(f"interpolation.method must be rbf, bilinear or cubic, got {method!r}")
+    if not mask_erosion_px >= 0:
+        raise ConfigError(f"interpolation.mask_erosion_px must be >= 0 px, got {mask_erosion_px}")
+    if not max_extrapolation_px >= 0:
+        raise ConfigError(f"interpolation.max_extrapolation_px must be >= 0 px, got {max_extrapolation_px}")
+    if not 0 < max_view_angle_deg <= 90:
+        raise ConfigError(f"interpolation.max_view_angle_deg must lie in (0, 90], got {max_view_angle_deg}")
+
+
+def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
+    """Temperatures, pixel gradients and local rates at the DIC points.
+
+    Parameters
+    ----------
+    dic : xarray.Dataset
+        ``dic.zarr``: ``x(time, point, component)`` mm.
+    ir : xarray.Dataset
+        ``ir.zarr``: ``temperature(time, v, u)`` °C with full-sensor ``u``, ``v``.
+    calibration : xarray.Dataset
+        ``calibration.zarr`` of the setup the experiment was recorded with.
+    **params
+        The ``interpolation`` section of the configuration; absent keys take
+        the schema's defaults:
+
+        - ``method`` {"rbf", "bilinear", "cubic"}: spatial interpolant (the
+          paper's IMQ RBF by default);
+        - ``c_space``, ``R0_space`` (px): IMQ shape factor and distance
+          normalisation in the image;
+        - ``c_time``, ``R0_time`` (s): the same in time;
+        - ``mask_erosion_px``: erosion of the specimen mask (px);
+        - ``max_edge_factor``: triangles longer than this multiple of the
+          point spacing are not specimen;
+        - ``max_view_angle_deg``: points whose surface normal makes a larger
+          angle with the line of sight to the IR camera are not visible;
+        - ``max_extrapolation_px``: how far outside the mask (px) points are
+          still extrapolated;
+        - ``halo`` (px): half-width of the local windows that reproduce the
+          global interpolant.
+
+    Returns
+    -------
+    xarray.Dataset
+        The content of ``points.zarr`` (see the module docstring and README).
+    """
+    p = settings("interpolation", params)
+    _check_params(p["method"], p["mask_erosion_px"], p["max_extrapolation_px"], p["max_view_angle_deg"])
+    started = _time.perf_counter()
+    camera = load_camera(calibration)
+    u, v = ir["u"].values, ir["v"].values
+    t_ir = ir["time"].values.astype(float)
+    _check_sensor(calibration, u, v)
+    pr = project_points(camera, dic, u, v)
+    n_t, M, _ = pr.x.shape
+    masks, facing = masks_and_facing(
+        pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
+        np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],
+        max_angle=p["max_view_angle_deg"])
+    seen = pr.in_frame & facing
+    theta, gu, gv, rate, edge, in_span, extrap = _interpolate(ir, dic["time"].values.astype(float), pr, masks,
+                                                               seen, p)
+    status = _status(pr, facing, seen, in_span, extrap, theta)
+    visible = status <= Status.EXTRAPOLATED_FROM_EDGE
+    for a in (theta, gu, gv, rate, edge):
+        a[~visible] = np.nan
+    counts = {s.name.lower(): int((status == s).sum()) for s in Status}
+    log.info("couple: %d DIC times x %d points in %.1f s; %s", n_t, M, _time.perf_counter() - started,
+             ", ".join(f"{k} {v}" for k, v in counts.items() if v))
+    fields = dict(theta=theta, gu=gu, gv=gv, rate=rate, edge=edge, status=status, visible=visible, masks=masks)
+    return _points_dataset(dic, calibration, camera, pr, t_ir, counts, **fields)
+
+
+def _check_sensor(calibration: xr.Dataset, u: np.ndarray, v: np.ndarray) -> None:
+    """DataError when the IR frames reach beyond the sensor the calibration image came from."""
+    sw, sh = calibration.attrs.get("sensor_width"), calibration.attrs.get("sensor_height")
+    if sw is not None and sh is not None and (u.max() >= int(sw) or v.max() >= int(sh) or u.min() < 0 or v.min() < 0):
+        raise DataError(
+            f"the IR frames cover pixels u {u.min()}..{u.max()}, v {v.min()}..{v.max()}, but the calibration "
+            f"image was {sw} x {sh} px: the IR exports do not come from the calibrated camera set-up"
+        )
+
+
+def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.ndarray, seen: np.ndarray, p: dict):
+    """Temperature, pixel gradient (u, v), local rate and edge distance at the seen points, each (n_t, M).
+
+    Points that project just outside the mask are extrapolated from samples
+    of the interpolant inside it. The samples are evaluated in the same pass
+    as the points: a second pass would factorise every edge tile of every
+    mask again. Also returns which DIC times lie in the IR time span (n_t,)
+    and which values were extrapolated (n_t, M).
+    """
+    u, v = ir["u"].values, ir["v"].values
+    t_ir = ir["time"].values.astype(float)
+    M = pr.x.shape[1]
+    query = np.where(seen[..., None], pr.local, np.nan)
+    outside = seen & ~in_mask(masks, pr.local)
+    samples, cols = extrapolation_samples(pr.local, masks, outside, p["max_extrapolation_px"])
+    res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
+                          method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
+                          R0_time=p["R0_time"], halo=p["halo"], u=u, v=v, name="ir: frames")
+    theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
+                                 (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
+    in_span = np.asarray(res.in_span)
+    if not in_span.any():
+        raise DataError(
+            f"no DIC time ({t_dic[0]:g}..{t_dic[-1]:g} s) lies inside the IR time span "
+            f"({t_ir[0]:g}..{t_ir[-1]:g} s): check time_offset/time_origin of the experiment"
+        )
+    extrap = extrapolate(res, M, cols, samples, pr.local, theta, gu, gv, rate, edge)
+    return theta, gu, gv, rate, edge, in_span, extrap
+
+
+def _status(pr: Projection, facing, seen, in_span, extrap, theta) -> np.ndarray:
+    """``points.status`` (n_t, M) int8; a later rule overrides an earlier one."""
+    S = Status
+    status = np.full(pr.valid.shape, S.INTERPOLATED, dtype=np.int8)
+    status[extrap] = S.EXTRAPOLATED_FROM_EDGE
+    status[seen & in_span[:, None] & ~np.isfinite(theta)] = S.OUTSIDE_SPECIMEN_MASK
+    status[~facing & pr.in_frame] = S.FACING_AWAY
+    status[pr.valid & ~pr.in_frame] = S.OUTSIDE_IR_FRAME
+    status[~pr.valid] = S.DIC_POINT_MISSING
+    status[~in_span[:, None] & (status <= S.EXTRAPOLATED_FROM_EDGE)] = S.TIME_OUTSIDE_IR_SPAN
+    return status
+
+
+def _pixel_uncertainty(camera, pr: Projection, pix_out: np.ndarray) -> np.ndarray:
+    """The calibration's share of the position error (px, (n_t, M)), for the uncertainty budget downstream."""
+    n_t, M = pr.valid.shape
+    pix_std = np.full(n_t * M, np.nan)
+    if camera.covariance is not None and pr.front.any():
+        pix_std[pr.front] = camera.projection_uncertainty(pr.flat_x[pr.front])
+    return np.where(np.isfinite(pix_out[..., 0]), pix_std.reshape(n_t, M), np.nan)
+
+
+def _points_dataset(dic, calibration, camera, pr: Projection, t_ir, counts, *, theta, gu, gv, rate, edge, status,
+                    visible, masks) -> xr.Dataset:
+    """The content of ``points.zarr``: variables with their CF attributes, calibration summary in ``attrs``."""
+    pix_out = np.where(pr.valid[..., None] & np.isfinite(pr.pix), pr.pix, np.nan)
+    geo = camera.decompose()
+    a = lambda name: cf_attrs("points", name)  # noqa: E731
+    tp, tpa = ("time", "point"), ("time", "point", "axis")
+    return xr.Dataset(
+        {
+            "temperature": (tp, theta.astype(np.float32), a("temperature")),
+            "pixel": (tpa, pix_out, a("pixel")),
+            "pixel_std": (tp, _pixel_uncertainty(camera, pr, pix_out), a("pixel_std")),
+            "temperature_pixel_gradient": (tpa, np.stack([gu, gv], axis=-1), a("temperature_pixel_gradient")),
+            "temperature_local_rate": (tp, rate, a("temperature_local_rate")),
+            "visible": (tp, visible, a("visible")),
+            "edge_distance": (tp, edge, a("edge_distance")),
+            "status": (tp, status, status_attrs()),
+            "x": (("time", "point", "component"), pr.x, a("x")),
+            "mask_pixels": (("time",), masks.sum(axis=(1, 2)).astype(np.int64), a("mask_pixels")),
+        },
+        coords={"time": ("time", dic["time"].values.astype(float), a("time")),
+                "point": dic["point"].values, "component": np.array(COMPONENTS, dtype=object),
+                "axis": np.array(PIXEL_AXES, dtype=object)},
+        attrs={
+            "calibration_rms_px": float(calibration["rms_px"]) if "rms_px" in calibration else np.nan,
+            "calibration_projection_matrix": np.asarray(camera.M).ravel().tolist(),
+            "calibration_camera_centre_mm": np.asarray(geo.C).tolist(),
+            "calibration_focal_length_px": float(geo.focal_length_px),
+            "ir_time_span_s": [float(t_ir[0]), float(t_ir[-1])],
+            "ir_frames": int(t_ir.size),
+            **{f"count_{k}": v for k, v in counts.items()},
+        },
+    )
+
+
+def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.PathLike], *,
+        log: str | os.PathLike | None = None, threads: int | None = None, **params) -> None:
+    """Stage entry: ``inputs`` dic, ir, calibration (stores) -> ``outputs["store"]`` (points.zarr).
+
+    ``params``: the ``interpolation`` section of the configuration (see
+    :func:`couple`); ``log`` a log file (Snakemake), ``threads`` the CPU
+    threads of the stage (default all cores).
+    """
+    i = paths(inputs, "couple", "inputs", ("dic", "ir", "calibration"))
+    o = paths(outputs, "couple", "outputs", ("store",))
+    with stage_context("couple", log, threads):
+        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), **params)
+        write_dataset(ds, o["store"], stage="couple", params=params,
+                      inputs=[os.fspath(i[k]) for k in ("dic", "ir", "calibration")],
+                      encoding={"temperature": {"chunks": (1, ds.sizes["point"])}})

@@ -1,0 +1,250 @@
+"""Fields stage: in-plane temperature gradient, temperature rate and strain on the surface.
+
+Input: ``points.zarr`` (temperatures, pixel gradients and local rates at the
+DIC points, plus their coordinates) and the setup's ``calibration.zarr``.
+The surface ``x(Ψ, t)`` is interpolated from the DIC points
+(:func:`irdic.surface.fit_surface`: IMQ RBF in the surface parameters Ψ,
+tensor product with time). With the tangents ``a_α`` and the projection
+Jacobian ``J`` (px/mm) the paper's relations give
+
+- ``grad Θ = (∂Θ/∂Ψ^α) a^α`` with ``∂Θ/∂Ψ^α = ∇_pix Θ · J a_α`` (eq. tempGrad),
+- ``Θ̇ = ∂Θ/∂t + (Jᵀ ∇_pix Θ) · ∂x/∂t`` (eq. tempVeloc), local and convective
+  parts stored separately,
+- the in-plane Green-Lagrange strain on the reference tangent plane, its
+  principal values and directions, and an equivalent strain.
+
+Beyond the paper (its own outlook for noisy IR data): with
+``temperature_smoothing`` ("gcv" or a number) the material rate is the time
+derivative of each point's temperature series after IMQ regression in time
+(the series is Lagrangian, so this is the material rate without pixel
+derivatives); the local part is then the difference of that rate and the
+convective part. ``surface_smoothing``/``surface_smoothing_time`` do the same
+for the coordinates. Interpolation (None) stays the default.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time as _time
+from typing import Mapping
+
+import numpy as np
+import xarray as xr
+
+from ..camera import load_camera
+from ..errors import ConfigError, DataError
+from ..store import open_store, write_dataset
+from ..strain import strain
+from ..surface import fit_surface, surface_geometry
+from ..gradient import material_rate, rate_from_series, surface_gradient
+from ..vocabulary import COMPONENTS, cf_attrs
+from .common import optional_path, paths, stage_context
+from .parameters import settings
+
+__all__ = ["run", "fields"]
+
+log = logging.getLogger(__name__)
+
+_SMOOTHING = ("surface_smoothing", "surface_smoothing_time", "temperature_smoothing", "temperature_smoothing_space")
+
+
+def _smoothing(name, value):
+    if value is None or value == "gcv":
+        return value
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 1:
+        return float(value)
+    raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv' or a number >= 1, got {value!r}")
+
+
+def _method_of(info) -> str:
+    return str(info.get("method")) if isinstance(info, dict) else str(info)
+
+
+def fields(points: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
+    """Gradient, rate and strain fields at the DIC points.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        ``points.zarr`` of the experiment.
+    calibration : xarray.Dataset
+        ``calibration.zarr`` of its setup.
+    **params
+        The ``fields`` section of the configuration; absent keys take the
+        schema's defaults:
+
+        - ``c_space``, ``R0_space`` (mm): IMQ shape factor and distance
+          normalisation in the surface parameters (the paper: 0.969 /
+          0.9328, 1 mm);
+        - ``c_time``, ``R0_time`` (s): the same in time (the paper: 1, 1 s);
+        - ``parametrisation`` {"auto", "plane", "cylinder"}: best-fit plane
+          (the paper) or cylindrical unwrapping; "auto" takes the cylinder
+          where the plane would fold;
+        - ``solver`` {"auto", "global", "local"}: spatial solver of the
+          surface interpolation;
+        - ``surface_smoothing``, ``surface_smoothing_time`` (None, "gcv" or
+          float >= 1): regression instead of interpolation for the
+          coordinates;
+        - ``temperature_smoothing`` (same values): regression in time of the
+          point temperatures for the material rate;
+        - ``temperature_smoothing_space`` (same values): regression in space
+          (surface parameters) of the point temperatures of each time for
+          the in-plane gradient, ``grad Θ = (∂Θ/∂Ψ^α) a^α`` with
+          ``∂Θ/∂Ψ^α`` from the regressed field instead of the pixel gradients.
+
+    Returns
+    -------
+    xarray.Dataset
+        The content of ``fields.zarr`` (see README).
+    """
+    p = settings("fields", params)
+    for name in _SMOOTHING:
+        _smoothing(name, p[name])
+    missing = [v for v in ("x", "temperature", "temperature_pixel_gradient", "temperature_local_rate")
+               if v not in points]
+    if missing:
+        raise DataError(f"points store lacks {missing}: is it the output of the couple stage?")
+    started = _time.perf_counter()
+    t = points["time"].values.astype(float)
+    x = points["x"].transpose("time", "point", "component").values.astype(float)
+    sf = fit_surface(x, t, c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"],
+                     smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"], solver=p["solver"],
+                     parametrisation=p["parametrisation"])
+    T, N = sf.x.shape[:2]
+    geo = surface_geometry(sf.tangents)
+    grad, total, loc, convective = _temperature_fields(points, calibration, sf, geo, t, p)
+    st = strain(sf.tangents, sf.ref_tangents, tensors=False)
+    log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
+             _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
+    return _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, p["temperature_smoothing"])
+
+
+def _temperature_fields(points, calibration, sf, geo, t, p):
+    """In-plane gradient (T, N, 3) K/mm and material rate with its local and convective parts (T, N) K/s.
+
+    The projection Jacobian of the calibrated camera at the surface points
+    turns pixel gradients into surface ones (see the module docstring).
+    """
+    T, N = sf.x.shape[:2]
+    camera = load_camera(calibration)
+    flat = sf.x.reshape(-1, 3)
+    ok = np.isfinite(flat).all(axis=1)
+    J = np.full((T * N, 2, 3), np.nan)
+    J[ok] = camera.jacobian(flat[ok])
+    J = J.reshape(T, N, 2, 3)
+    g_pix = points["temperature_pixel_gradient"].transpose("time", "point", "axis").values.astype(float)
+    local = points["temperature_local_rate"].values.astype(float)
+    theta = points["temperature"].values.astype(float)
+    grad = surface_gradient(g_pix, J, sf.tangents)
+    rate = material_rate(local, g_pix, J, sf.velocity)
+    total, loc = rate.rate, rate.local
+    if p["temperature_smoothing"] is not None:
+        smoothed_rate, _ = rate_from_series(theta, t, smoothing=p["temperature_smoothing"], c=p["c_time"],
+                                            R0=p["R0_time"])
+        visible = np.isfinite(theta)
+        total = np.where(visible, smoothed_rate, np.nan)
+        loc = total - rate.convective
+    if p["temperature_smoothing_space"] is not None:
+        grad = _regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], c=p["c_space"],
+                                   R0=p["R0_space"])
+    return grad, total, loc, rate.convective
+
+
+def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, temperature_smoothing) -> xr.Dataset:
+    """The content of ``fields.zarr``: variables with their CF attributes (:mod:`irdic.vocabulary`)."""
+    a = lambda name: cf_attrs("fields", name)  # noqa: E731
+    tp, tpc = ("time", "point"), ("time", "point", "component")
+    tppc = ("time", "point", "principal", "component")
+    theta = points["temperature"].values.astype(float)
+    return xr.Dataset(
+        {
+            "temperature_gradient": (tpc, grad, a("temperature_gradient")),
+            "temperature_rate": (tp, total, a("temperature_rate")),
+            "temperature_rate_local": (tp, loc, a("temperature_rate_local")),
+            "temperature_rate_convective": (tp, convective, a("temperature_rate_convective")),
+            "temperature": (tp, theta, a("temperature")),
+            "x": (tpc, sf.x, a("x")),
+            "velocity": (tpc, sf.velocity, a("velocity")),
+            "normal": (tpc, geo.normal, a("normal")),
+            "strain": (("time", "point", "i", "j"), st.E2, a("strain")),
+            "reference_basis": (("point", "i", "component"), st.basis, a("reference_basis")),
+            "max_principal_strain": (tp, st.e_max, a("max_principal_strain")),
+            "min_principal_strain": (tp, st.e_min, a("min_principal_strain")),
+            "principal_direction": (tppc, np.stack([st.direction_max, st.direction_min], axis=2),
+                                    a("principal_direction")),
+            "principal_direction_current": (tppc, np.stack([st.direction_max_current, st.direction_min_current],
+                                                           axis=2), a("principal_direction_current")),
+            "equivalent_strain": (tp, st.equivalent, a("equivalent_strain")),
+            "surface_parameter": (("point", "param"), sf.psi, a("surface_parameter")),
+            "surface_edge_distance": (("point",), sf.edge_distance, a("surface_edge_distance")),
+            "filled": (tp, sf.filled, a("filled")),
+        },
+        coords={"time": ("time", t, a("time")), "point": points["point"].values,
+                "component": np.array(COMPONENTS, dtype=object),
+                "i": np.array(["1", "2"], dtype=object), "j": np.array(["1", "2"], dtype=object),
+                "principal": np.array(["max", "min"], dtype=object), "param": np.array(["psi1", "psi2"], dtype=object)},
+        attrs={"parametrisation": _method_of(sf.info.get("parametrisation")), "surface_solver": str(sf.info.get("solver")),
+               "temperature_smoothing": str(temperature_smoothing)},
+    )
+
+
+def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
+    """In-plane gradient from a spatial regression of the point temperatures of each time.
+
+    Missing values of a time are filled from that time's visible points first;
+    times with fewer than 6 visible points stay NaN.
+    """
+    from ..surface import SpatialInterpolant, gcv_spatial
+
+    T, N = theta.shape
+    grad = np.full((T, N, 3), np.nan)
+    have = np.isfinite(psi).all(axis=1)
+    visible = np.isfinite(theta) & have
+    times = np.flatnonzero(visible.sum(axis=1) >= 6)
+    if times.size == 0:
+        log.warning("temperature_smoothing_space: no time with 6 or more visible points; gradient left NaN")
+        return grad
+    p = psi[have]
+    filled, _ = SpatialInterpolant(p, c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
+    if smoothing == "gcv":
+        sample = filled[np.linspace(0, times.size - 1, min(times.size, 8)).astype(int)].T
+        k, _ = gcv_spatial(p, sample, c=c, R0=R0)
+        log.info("temperature_smoothing_space: GCV chose a centre spacing of %.1f point spacings", k)
+    else:
+        k = float(smoothing)
+    _, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=False)
+    g = d1.T[..., None] * dual[np.ix_(times, have)][:, :, 0] + d2.T[..., None] * dual[np.ix_(times, have)][:, :, 1]
+    out = np.full((times.size, N, 3), np.nan)
+    out[:, have] = g
+    grad[times] = out
+    grad[~visible] = np.nan
+    return grad
+
+
+def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.PathLike], *,
+        log: str | os.PathLike | None = None, threads: int | None = None, **params) -> None:
+    """Stage entry: ``inputs`` points, calibration (and dic, machine) -> ``outputs["store"]`` (fields.zarr).
+
+    ``dic`` (``dic.zarr``) and ``machine`` (``machine.zarr``), when given,
+    add the testing machine signals at the DIC times:
+    ``signal_value(time, signal)`` with the signal coordinates (see
+    :func:`irdic.signals.signals_at`; machine signals prefixed ``machine_``).
+    ``params``: the ``fields`` section of the configuration (see
+    :func:`fields`); ``log`` a log file (Snakemake), ``threads`` the CPU
+    threads of the stage (default all cores).
+    """
+    from ..signals import signals_at
+
+    i = paths(inputs, "fields", "inputs", ("points", "calibration"), ("dic", "machine"))
+    o = paths(outputs, "fields", "outputs", ("store",))
+    dic, machine = optional_path(i, "dic"), optional_path(i, "machine")
+    with stage_context("fields", log, threads):
+        ds = fields(open_store(i["points"]), open_store(i["calibration"]), **params)
+        sig = signals_at(ds["time"].values, dic=open_store(dic) if dic is not None else None,
+                         machine=open_store(machine) if machine is not None else None)
+        if sig is not None:
+            ds = ds.merge(sig.drop_vars("time"))
+        inputs_used = [os.fspath(i["points"]), os.fspath(i["calibration"])]
+        inputs_used += [os.fspath(q) for q in (dic, machine) if q is not None]
+        write_dataset(ds, o["store"], stage="fields", params=params, inputs=inputs_used)

@@ -1,0 +1,151 @@
+"""Which DIC points the IR camera sees, and which pixels are specimen, per DIC time.
+
+Points behind the camera or outside the IR frame, and points on surface
+facing away from it, are not visible. Only pixels on the specimen feed the
+interpolant: a mask per time from the projected point cloud
+(:func:`irdic.footprint.specimen_mask`), also intersected with the masks of
+the neighbouring DIC times so that pixels the moving edge crosses are left
+out.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from ..errors import CalibrationError, DataError
+from ..footprint import facing_camera, point_normals, specimen_mask
+
+__all__ = ["Projection", "project_points", "fill_in_time", "masks_and_facing", "MASK_REUSE_PX"]
+
+log = logging.getLogger(__name__)
+
+#: pixel motion (px) below which the mask and normals of the previous time are reused
+MASK_REUSE_PX = 0.2
+
+
+def fill_in_time(a: np.ndarray) -> np.ndarray:
+    """Fill NaN rows of ``a`` (n_t, M, d) per point from the nearest earlier, else later, valid time."""
+    ok = np.isfinite(a).all(axis=2)
+    n_t = a.shape[0]
+    idx = np.where(ok, np.arange(n_t)[:, None], -1)
+    fwd = np.maximum.accumulate(idx, axis=0)
+    idx_b = np.where(ok, np.arange(n_t)[:, None], n_t)
+    bwd = np.minimum.accumulate(idx_b[::-1], axis=0)[::-1]
+    src = np.where(fwd >= 0, fwd, bwd)
+    src = np.clip(src, 0, n_t - 1)
+    return np.take_along_axis(a, src[..., None], axis=0)
+
+
+def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle):
+    """Per DIC time: specimen mask (H, W) and facing flags (M,).
+
+    A point that failed correlation in one stage does not open a hole in the
+    specimen: masks and normals are built from positions filled in time from
+    the point's nearest valid stage. While the points move less than
+    ``MASK_REUSE_PX`` the previous mask is reused, so a static specimen has
+    one mask and the interpolant is set up once.
+    """
+    n_t, M, _ = x.shape
+    xf = fill_in_time(x)
+    pf = fill_in_time(pix)
+    masks = np.zeros((n_t, v.size, u.size), dtype=bool)
+    facing = np.zeros((n_t, M), dtype=bool)
+    last = None
+    rebuilt = 0
+    for k in range(n_t):
+        ok = np.isfinite(pf[k]).all(axis=1)
+        if ok.sum() < 3:
+            continue
+        if last is not None:
+            both = ok & np.isfinite(pf[last]).all(axis=1)
+            moved = np.abs(pf[k][both] - pf[last][both]).max() if both.any() else np.inf
+            if moved < MASK_REUSE_PX:
+                masks[k] = masks[last]
+                facing[k] = facing[last]
+                continue
+        n = point_normals(xf[k], towards=centre)
+        facing[k] = facing_camera(xf[k], n, centre, max_angle_deg=max_angle)
+        keep = ok & facing[k]
+        masks[k] = specimen_mask(pf[k][keep], u, v, erosion_px=erosion, max_edge_factor=edge_factor)
+        last = k
+        rebuilt += 1
+    # a pixel the moving edge crosses between neighbouring times carries mixed
+    # specimen/background values after temporal interpolation: leave it out
+    both = masks.copy()
+    both[1:] &= masks[:-1]
+    both[:-1] &= masks[1:]
+    log.info("specimen masks: %d built for %d DIC times, %d to %d px", rebuilt, n_t,
+             int(both.sum(axis=(1, 2)).min()), int(both.sum(axis=(1, 2)).max()))
+    return both, facing
+
+
+@dataclass
+class Projection:
+    """The DIC points of every time in the IR image.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n_t, M, 3)
+        DIC coordinates, mm (NaN: point missing).
+    flat_x : ndarray, shape (n_t * M, 3)
+        ``x`` flattened.
+    valid : ndarray of bool, shape (n_t, M)
+        The DIC point has coordinates.
+    front : ndarray of bool, shape (n_t * M,)
+        Valid and in front of the camera.
+    pix : ndarray, shape (n_t, M, 2)
+        Projected position, full-sensor px (NaN: missing or behind the camera).
+    in_frame : ndarray of bool, shape (n_t, M)
+        Projected inside the IR frame (half a pixel beyond the outer centres).
+    local : ndarray, shape (n_t, M, 2)
+        ``pix`` in frame-array coordinates (pixel (0, 0) = the crop corner).
+    """
+
+    x: np.ndarray
+    flat_x: np.ndarray
+    valid: np.ndarray
+    front: np.ndarray
+    pix: np.ndarray
+    in_frame: np.ndarray
+    local: np.ndarray
+
+
+def project_points(camera, dic: xr.Dataset, u: np.ndarray, v: np.ndarray) -> Projection:
+    """Project the DIC points of every time into the IR frame (full-sensor pixels ``u``, ``v``).
+
+    Raises
+    ------
+    DataError
+        No DIC point has coordinates at any time.
+    CalibrationError
+        Fewer than half of the valid points project into the IR frame (the
+        calibration of another setup, or DIC coordinates in another frame).
+    """
+    x = dic["x"].transpose("time", "point", "component").values.astype(float)
+    n_t, M, _ = x.shape
+    flat = x.reshape(-1, 3)
+    pix = np.full((n_t * M, 2), np.nan)
+    ok = np.isfinite(flat).all(axis=1)
+    if not ok.any():
+        raise DataError("dic: no valid DIC point at any time")
+    depth = np.full(n_t * M, np.nan)
+    depth[ok] = camera.depth(flat[ok])
+    front = ok & (depth > 0)
+    pix[front] = camera.project(flat[front])
+    pix = pix.reshape(n_t, M, 2)
+    in_frame = (np.isfinite(pix).all(axis=2) & (pix[..., 0] >= u[0] - 0.5) & (pix[..., 0] <= u[-1] + 0.5)
+                & (pix[..., 1] >= v[0] - 0.5) & (pix[..., 1] <= v[-1] + 0.5))
+    valid = ok.reshape(n_t, M)
+    frac = in_frame.sum() / max(valid.sum(), 1)
+    if frac < 0.5:
+        raise CalibrationError(
+            f"only {100 * frac:.0f} % of the DIC points project into the IR frames (u {u[0]}..{u[-1]}, "
+            f"v {v[0]}..{v[-1]}): is the calibration from another setup, or are the DIC coordinates "
+            "not in the frame the calibration markers were measured in (rigid body motion compensation)?"
+        )
+    local = pix - np.array([u[0], v[0]], dtype=float)
+    return Projection(x, flat, valid, front, pix, in_frame, local)
