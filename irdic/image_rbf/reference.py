@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ConfigError
-from ..numerics.imq import imq_matrix
+from ..numerics.imq import imq_matrix, imq_scaled_inverse
 from ..numerics.saddle import SaddleFactor
 from ..validation import as_int, float_array
 from .interpolant import Evaluation, MaskedGridInterpolant
@@ -66,7 +66,7 @@ def exact_global_interpolant(mask, fields, points, *, c=2.0, R0=1.0, max_pixels=
         qb = q[b0:b0 + 256]
         du_ = qb[:, None, 0] - cen[None, :, 0]
         dv_ = qb[:, None, 1] - cen[None, :, 1]
-        s = 1.0 / np.sqrt(ce * ce + du_ * du_ + dv_ * dv_)
+        s = imq_scaled_inverse(du_ * du_ + dv_ * dv_, ce)
         s3 = s**3
         o = out[b0:b0 + 256]
         val[:, o] = (ce * s @ alpha + beta[0] + qb[:, :1] * beta[1] + qb[:, 1:] * beta[2]).T

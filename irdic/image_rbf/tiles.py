@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import DataError
-from ..numerics.imq import imq_matrix
+from ..numerics.imq import imq_matrix, imq_scaled_inverse
 from ..numerics.saddle import SaddleFactor
 
 __all__ = ["EDGE_BLOCK", "Tile", "TileCache", "check_unisolvent", "build_tile", "eval_tile_block"]
@@ -162,9 +162,7 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
     dv_ = xv[:, None] - tile.cv[None, :]
     s = du_ * du_
     s += dv_ * dv_
-    s += ce * ce
-    np.sqrt(s, out=s)
-    np.divide(1.0, s, out=s)
+    imq_scaled_inverse(s, ce, out=s)
     s3 = None
     if want.any():
         s3 = s * s

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.distance import cdist
 
-__all__ = ["imq", "imq_dr", "imq_matrix", "imq_planar", "REGRESSION_RATIO", "regression_R0"]
+__all__ = ["imq", "imq_dr", "imq_matrix", "imq_scaled_inverse", "imq_planar", "REGRESSION_RATIO", "regression_R0"]
 
 # Kernel width of a regression relative to its centre spacing, c R0_eff / H.
 # Flat kernels approximate smooth fields well with few centres: tangents of a
@@ -121,3 +121,33 @@ def imq_planar(dx, dy, c, R0, derivatives):
 def regression_R0(c, H):
     """Distance normalisation of regression centres spaced ``H``: ``c R0_eff = 6 H``."""
     return REGRESSION_RATIO * H / c
+
+
+def imq_scaled_inverse(d2, ce, out=None):
+    """``1 / sqrt(ce^2 + d2)``: the IMQ kernel divided by ``ce``, from squared distances.
+
+    The form the image interpolant evaluates in its hot loops: the kernel is
+    ``ce * s`` and its gradient ``-ce * s**3 * (x - x_j)``.
+
+    Parameters
+    ----------
+    d2 : ndarray
+        Squared distances (px^2); overwritten when ``out is d2``.
+    ce : float
+        ``c * R0`` (px).
+    out : ndarray, optional
+        Where to write the result (may be ``d2`` itself, to save memory).
+
+    Returns
+    -------
+    ndarray
+        Same shape as ``d2`` (1/px).
+    """
+    if out is None:
+        out = np.array(d2, dtype=float, copy=True)
+    elif out is not d2:
+        np.copyto(out, d2)
+    out += ce * ce
+    np.sqrt(out, out=out)
+    np.divide(1.0, out, out=out)
+    return out
