@@ -119,7 +119,7 @@ def _ingest(config, paths, threads):
         ingest_ir.run(src, {"store": p["ir"]}, threads=threads, **rest)
         if e.get("machine"):  # optional: no schema default
             src, rest = _source(e["machine"])
-            ingest_machine.run(src, {"store": p["machine"]}, threads=threads, **rest)
+            ingest_machine.run({**src, "ir": p["ir"]}, {"store": p["machine"]}, threads=threads, **rest)
 
 
 def _couple(config, paths, threads):

@@ -179,8 +179,16 @@ def _machine_times(rows, header, jt: int, p: Path) -> np.ndarray:
 
 def ingest_machine(path: str | os.PathLike, out: str | os.PathLike, *, columns: Mapping[str, str],
                    format: str = "csv", sep: str | None = None, decimal: str | None = None,
-                   time_origin: str = "file", time_offset: float = 0.0) -> Path:
+                   time_origin: str = "file", time_offset: float = 0.0, ir_times=None) -> Path:
     """Read a testing machine record (:func:`read_machine`) and write ``machine.zarr``.
+
+    Parameters
+    ----------
+    ir_times : array_like, shape (F,), optional
+        The IR frame times (s, ``ir.zarr`` ``time``): the store then also
+        holds the signals interpolated onto them, ``signal_value_ir(ir_time,
+        signal)``, so that every IR frame has its load. (The signals at the
+        DIC times are in ``fields.zarr``, :func:`signals_at`.)
 
     Returns
     -------
@@ -190,8 +198,33 @@ def ingest_machine(path: str | os.PathLike, out: str | os.PathLike, *, columns: 
     params = dict(format=format, columns=dict(columns), sep=sep, decimal=decimal, time_origin=time_origin,
                   time_offset=time_offset)
     ds = read_machine(path, **params)
+    if ir_times is not None:
+        t = np.asarray(ir_times, dtype=float)
+        v = ds["signal_value"].transpose("time", "signal").values.astype(float)
+        ds["signal_value_ir"] = (("ir_time", "signal"), _interpolate(ds["time"].values.astype(float), v, t,
+                                                                     "IR frame times"),
+                                 {"long_name": "machine signal at the IR frame time (linear interpolation)"})
+        ds = ds.assign_coords(ir_time=("ir_time", t, {"units": "s", "long_name": "IR frame time"}))
     write_dataset(ds, out, stage="ingest-machine", params=params, inputs=[os.fspath(path)])
     return Path(out)
+
+
+def _interpolate(src_t: np.ndarray, v: np.ndarray, t: np.ndarray, what: str) -> np.ndarray:
+    """Machine samples ``v`` (S, n) at times ``src_t`` linearly at ``t``; NaN and a warning outside the record."""
+    out = np.full((t.size, v.shape[1]), np.nan)
+    for j in range(v.shape[1]):
+        ok = np.isfinite(v[:, j])
+        if ok.sum() >= 2:
+            out[:, j] = np.interp(t, src_t[ok], v[ok, j], left=np.nan, right=np.nan)
+    outside = (t < src_t[0]) | (t > src_t[-1])
+    if outside.any():
+        msg = (f"{int(outside.sum())} of {t.size} {what} ({t[outside][0]:.6g} s first) lie outside the "
+               f"machine record's span {src_t[0]:.6g}..{src_t[-1]:.6g} s (DIC clock, after time_offset); "
+               "their machine signals are NaN. If the record covers the test, check machine.time_offset "
+               "(seconds added to the machine times)")
+        log.warning(msg)
+        warnings.warn(msg, IrdicWarning, stacklevel=3)
+    return out
 
 
 def _coords_of(ds: xr.Dataset, prefix: str = "") -> tuple[list, list, list, list]:
@@ -240,22 +273,8 @@ def signals_at(times, *, dic: xr.Dataset | None = None, machine: xr.Dataset | No
         for m, c in zip(meta, _coords_of(dic)):
             m.extend(c)
     if machine is not None and "signal_value" in machine:
-        src_t = machine["time"].values.astype(float)
         v = machine["signal_value"].transpose("time", "signal").values.astype(float)
-        out = np.full((t.size, v.shape[1]), np.nan)
-        for j in range(v.shape[1]):
-            ok = np.isfinite(v[:, j])
-            if ok.sum() >= 2:
-                out[:, j] = np.interp(t, src_t[ok], v[ok, j], left=np.nan, right=np.nan)
-        outside = (t < src_t[0]) | (t > src_t[-1])
-        if outside.any():
-            msg = (f"{int(outside.sum())} of {t.size} DIC times ({t[outside][0]:.6g} s first) lie outside the "
-                   f"machine record's span {src_t[0]:.6g}..{src_t[-1]:.6g} s (DIC clock, after time_offset); "
-                   "their machine signals are NaN. If the record covers the test, check machine.time_offset "
-                   "(seconds added to the machine times)")
-            log.warning(msg)
-            warnings.warn(msg, IrdicWarning, stacklevel=2)
-        blocks.append(out)
+        blocks.append(_interpolate(machine["time"].values.astype(float), v, t, "DIC times"))
         for m, c in zip(meta, _coords_of(machine, MACHINE_PREFIX)):
             m.extend(c)
     if not blocks:

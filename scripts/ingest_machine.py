@@ -2,8 +2,10 @@
 
 Inputs
 ------
-- the machine record (or the demo manifest), for Snakemake's bookkeeping only;
-  the file read is ``params.path``.
+- ``raw``: the machine record (or the demo manifest), for Snakemake's
+  bookkeeping only; the file read is ``params.path``;
+- ``ir``: the experiment's ``ir.zarr`` (its frame times: the store also holds
+  the signals at every IR frame).
 
 Outputs
 -------
@@ -17,5 +19,6 @@ Params
 
 from irdic.stages import ingest_machine
 
-ingest_machine.run({"source": snakemake.params.path}, snakemake.output, log=snakemake.log[0],  # noqa: F821
-                   threads=snakemake.threads, **snakemake.params.settings)  # noqa: F821
+ingest_machine.run({"source": snakemake.params.path, "ir": snakemake.input.ir},  # noqa: F821
+                   snakemake.output, log=snakemake.log[0], threads=snakemake.threads,  # noqa: F821
+                   **snakemake.params.settings)  # noqa: F821

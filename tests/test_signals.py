@@ -7,7 +7,7 @@ import xarray as xr
 from irdic.config import validate_config
 from irdic.errors import ConfigError, DataError, FormatError, IrdicWarning
 from irdic.signals import ingest_machine, read_machine, signals_at
-from irdic.store import open_store
+from irdic.store import open_store, write_dataset
 
 COLS = {"time": "Zeit [ms]", "force": "Kraft [kN]", "angle": "Winkel [deg]"}
 
@@ -99,3 +99,24 @@ def test_signals_at_dic_times_interpolates_machine_and_warns_outside(tmp_path):
     expected[(t < 0.5) | (t > 2.5)] = np.nan
     np.testing.assert_allclose(v[:, 1], expected, rtol=1e-12, atol=1e-9)
     assert signals_at(t) is None
+
+
+def test_machine_signals_at_the_ir_frame_times(tmp_path):
+    """Every IR frame gets its load: the record interpolated onto the IR times, offset applied."""
+    from irdic.stages import ingest_machine as stage
+
+    p = _csv(tmp_path, [f"{t};{2.0 * t / 1000};{t / 1000}" for t in range(0, 2001, 20)])
+    t_ir = np.array([0.25, 0.5, 0.51, 1.3, 2.5, 2.75])  # 50 Hz-ish frames, two outside the record
+    ir = xr.Dataset({"temperature": (("time", "v", "u"), np.zeros((t_ir.size, 2, 2), np.float32))},
+                    coords={"time": t_ir, "v": [0, 1], "u": [0, 1]})
+    write_dataset(ir, tmp_path / "ir.zarr", stage="test")
+    with pytest.warns(IrdicWarning, match=r"2 of 6 IR frame times \(0.25 s first\) lie outside"):
+        stage.run({"source": p, "ir": tmp_path / "ir.zarr"}, {"store": tmp_path / "machine.zarr"}, columns=COLS,
+                  time_offset=0.5)
+    m = open_store(tmp_path / "machine.zarr")
+    np.testing.assert_array_equal(m.ir_time.values, t_ir)
+    force = m.signal_value_ir.sel(signal="force").values
+    expected = 2.0 * (t_ir - 0.5)  # the record's time + 0.5 s = the cameras' time
+    expected[(t_ir < 0.5) | (t_ir > 2.5)] = np.nan
+    np.testing.assert_allclose(force, expected, rtol=1e-12, atol=1e-9)
+    assert m.signal_value_ir.attrs["long_name"].startswith("machine signal at the IR frame time")

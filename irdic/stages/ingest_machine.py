@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 from typing import Mapping
 
-from .common import paths, stage_context
+from .common import optional_path, paths, stage_context
 from .parameters import settings
 
 __all__ = ["run"]
@@ -20,13 +20,21 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
         log: str | os.PathLike | None = None, threads: int | None = None, **params) -> None:
     """Stage entry: ``inputs["source"]`` (machine record) -> ``outputs["store"]`` (machine.zarr).
 
+    With ``inputs["ir"]`` (the experiment's ``ir.zarr``) the store also holds
+    the signals at the IR frame times (``signal_value_ir``).
+
     ``params`` as ``experiments.<name>.machine`` of the configuration without
     ``path`` (``columns`` required); ``log`` a log file (Snakemake),
     ``threads`` the CPU threads of the stage (default all cores).
     """
     from ..signals import ingest_machine
 
-    i = paths(inputs, "ingest_machine", "inputs", ("source",))
+    from ..store import open_store
+
+    i = paths(inputs, "ingest_machine", "inputs", ("source",), optional=("ir",))
     o = paths(outputs, "ingest_machine", "outputs", ("store",))
     with stage_context("ingest-machine", log, threads):
-        ingest_machine(i["source"], o["store"], **settings("machine_source", params, drop=("path",)))
+        ir = optional_path(i, "ir")
+        ir_times = open_store(ir)["time"].values if ir is not None else None
+        ingest_machine(i["source"], o["store"], ir_times=ir_times,
+                       **settings("machine_source", params, drop=("path",)))

@@ -48,7 +48,8 @@ rule ingest_dic:
 # Only requested for experiments with a `machine:` record (all_outputs, fields_inputs in common.smk).
 rule ingest_machine:
     input:
-        lambda wc: raw_files(config["experiments"][wc.experiment]["machine"]["path"]),
+        raw=lambda wc: raw_files(config["experiments"][wc.experiment]["machine"]["path"]),
+        ir=f"{RESULTS}/{{experiment}}/ir.zarr",
     output:
         store=directory(f"{RESULTS}/{{experiment}}/machine.zarr"),
     params:
