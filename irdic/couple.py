@@ -45,6 +45,7 @@ from .camera import load_camera
 from .errors import CalibrationError, ConfigError, DataError
 from .footprint import facing_camera, point_normals, specimen_mask
 from .image_rbf import evaluate_series
+from .noise import ir_noise as estimate_ir_noise
 from .store import open_store, write_dataset
 
 __all__ = ["couple", "couple_stores", "STATUS_MEANINGS"]
@@ -260,6 +261,12 @@ def couple(
         pix_std[front] = camera.projection_uncertainty(flat[front])
     pix_std = np.where(np.isfinite(pix_out[..., 0]), pix_std.reshape(n_t, M), np.nan)
 
+    # --- issue 15: noise of the IR data at the specimen pixels (feeds the fields stage's auto rule)
+    noise = estimate_ir_noise(ir["temperature"], t_ir, np.logical_and.reduce(masks, axis=0))
+    log.info("couple: IR noise %.3g K temporal, %.3g K spatial, quantisation %.3g K (%d specimen pixels)",
+             noise.temporal, noise.spatial, noise.quantisation, noise.pixels)
+    # --- end issue 15
+
     counts = {name: int((status == i).sum()) for i, name in enumerate(STATUS_MEANINGS.split())}
     log.info("couple: %d DIC times x %d points in %.1f s; %s", n_t, M, _time.perf_counter() - started,
              ", ".join(f"{k} {v}" for k, v in counts.items() if v))
@@ -300,6 +307,8 @@ def couple(
             "ir_time_span_s": [float(t_ir[0]), float(t_ir[-1])],
             "ir_frames": int(t_ir.size),
             **{f"count_{k}": v for k, v in counts.items()},
+            "ir_noise_k": float(noise.level), "ir_noise_temporal_k": float(noise.temporal),
+            "ir_noise_spatial_k": float(noise.spatial), "ir_quantisation_k": float(noise.quantisation),
         },
     )
     return ds
