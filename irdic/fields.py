@@ -37,6 +37,7 @@ from .errors import ConfigError, DataError
 from .store import open_store, write_dataset
 from .strain import strain
 from .surface import fit_surface, surface_geometry
+from .noise import auto_smoothing
 from .gradient import material_rate, rate_from_series, surface_gradient
 
 __all__ = ["fields", "fields_stores"]
@@ -45,11 +46,11 @@ log = logging.getLogger(__name__)
 
 
 def _smoothing(name, value):
-    if value is None or value == "gcv":
+    if value is None or value == "gcv" or value == "auto":
         return value
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 1:
         return float(value)
-    raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv' or a number >= 1, got {value!r}")
+    raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv', 'auto' or a number >= 1, got {value!r}")
 
 
 def _method_of(info) -> str:
@@ -66,10 +67,10 @@ def fields(
     R0_time: float = 1.0,
     parametrisation: str = "auto",
     solver: str = "auto",
-    surface_smoothing=None,
+    surface_smoothing="auto",
     surface_smoothing_time=None,
-    temperature_smoothing=None,
-    temperature_smoothing_space=None,
+    temperature_smoothing="auto",
+    temperature_smoothing_space="auto",
 ) -> xr.Dataset:
     """Gradient, rate and strain fields at the DIC points.
 
@@ -89,11 +90,13 @@ def fields(
         unwrapping; "auto" takes the cylinder where the plane would fold.
     solver : {"auto", "global", "local"}
         Spatial solver of the surface interpolation.
-    surface_smoothing, surface_smoothing_time : None, "gcv" or float >= 1
-        Regression instead of interpolation for the coordinates.
-    temperature_smoothing : None, "gcv" or float >= 1
+    surface_smoothing, surface_smoothing_time : None, "gcv", "auto" or float >= 1
+        Regression instead of interpolation for the coordinates ("auto",
+        only in space: :func:`irdic.noise.auto_smoothing` decides from the
+        estimated DIC noise).
+    temperature_smoothing : None, "gcv", "auto" or float >= 1
         Regression in time of the point temperatures for the material rate.
-    temperature_smoothing_space : None, "gcv" or float >= 1
+    temperature_smoothing_space : None, "gcv", "auto" or float >= 1
         Regression in space (surface parameters) of the point temperatures of
         each time for the in-plane gradient, ``grad Θ = (∂Θ/∂Ψ^α) a^α`` with
         ``∂Θ/∂Ψ^α`` from the regressed field instead of the pixel gradients.
@@ -114,6 +117,14 @@ def fields(
     started = _time.perf_counter()
     t = points["time"].values.astype(float)
     x = points["x"].transpose("time", "point", "component").values.astype(float)
+    # --- issue 15: "auto" -> regression where the estimated noise matters, else the paper's interpolation
+    chosen, noise_attrs = auto_smoothing(points, x, {"surface_smoothing": surface_smoothing,
+                                                     "temperature_smoothing": temperature_smoothing,
+                                                     "temperature_smoothing_space": temperature_smoothing_space})
+    surface_smoothing = chosen["surface_smoothing"]
+    temperature_smoothing = chosen["temperature_smoothing"]
+    temperature_smoothing_space = chosen["temperature_smoothing_space"]
+    # --- end issue 15
     sf = fit_surface(x, t, c=c_space, R0=R0_space, c_t=c_time, R0_t=R0_time, smoothing=surface_smoothing,
                      smoothing_t=surface_smoothing_time, solver=solver, parametrisation=parametrisation)
     T, N = sf.x.shape[:2]
@@ -130,13 +141,19 @@ def fields(
     grad = surface_gradient(g_pix, J, sf.tangents)
     rate = material_rate(local, g_pix, J, sf.velocity)
     total, loc = rate.rate, rate.local
+    visible = np.isfinite(theta)
+    best = theta  # issue 15: the best estimate of the temperature, denoised where smoothing is on
     if temperature_smoothing is not None:
-        smoothed_rate, _ = rate_from_series(theta, t, smoothing=temperature_smoothing, c=c_time, R0=R0_time)
-        visible = np.isfinite(theta)
+        smoothed_rate, smoothed = rate_from_series(theta, t, smoothing=temperature_smoothing, c=c_time, R0=R0_time)
         total = np.where(visible, smoothed_rate, np.nan)
         loc = total - rate.convective
+        best = np.where(visible, smoothed, np.nan)
     if temperature_smoothing_space is not None:
-        grad = _regressed_gradient(theta, sf.psi, geo.dual, temperature_smoothing_space, c=c_space, R0=R0_space)
+        grad, value = _regressed_gradient(theta, sf.psi, geo.dual, temperature_smoothing_space, c=c_space, R0=R0_space)
+        if temperature_smoothing is not None:
+            # space-time regression: the spatial regression of the temporally regressed series
+            _, value = _regressed_gradient(best, sf.psi, geo.dual, temperature_smoothing_space, c=c_space, R0=R0_space)
+        best = value
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
              _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
@@ -152,7 +169,9 @@ def fields(
                                        {"units": "K/s", "long_name": "local part of the temperature rate (at the fixed pixel)"}),
             "temperature_rate_convective": (("time", "point"), rate.convective,
                                             {"units": "K/s", "long_name": "convective part of the temperature rate (motion of the point)"}),
-            "temperature": (("time", "point"), theta, {"units": "degC", "long_name": "temperature (from points.zarr)"}),
+            "temperature": (("time", "point"), best,
+                            {"units": "degC", "long_name": "temperature at the material point, regressed in time and/or "
+                             "space where the smoothing options are on (points.zarr keeps the interpolated value)"}),
             "x": (("time", "point", "component"), sf.x, {"units": "mm", "long_name": "position on the interpolated surface"}),
             "velocity": (("time", "point", "component"), sf.velocity, {"units": "mm/s", "long_name": "velocity of the material point"}),
             "normal": (("time", "point", "component"), geo.normal, {"units": "1", "long_name": "unit surface normal"}),
@@ -180,27 +199,29 @@ def fields(
                 "i": np.array(["1", "2"], dtype=object), "j": np.array(["1", "2"], dtype=object),
                 "principal": np.array(["max", "min"], dtype=object), "param": np.array(["psi1", "psi2"], dtype=object)},
         attrs={"parametrisation": _method_of(sf.info.get("parametrisation")), "surface_solver": str(sf.info.get("solver")),
-               "temperature_smoothing": str(temperature_smoothing)},
+               "temperature_smoothing": str(temperature_smoothing), **noise_attrs},
     )
     return ds
 
 
 def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
-    """In-plane gradient from a spatial regression of the point temperatures of each time.
+    """In-plane gradient and value from a spatial regression of the point temperatures of each time.
 
     Missing values of a time are filled from that time's visible points first;
-    times with fewer than 6 visible points stay NaN.
+    times with fewer than 6 visible points stay NaN. Returns ``(grad (T, N, 3)
+    K/mm, value (T, N) degC)``.
     """
     from .surface import SpatialInterpolant, gcv_spatial
 
     T, N = theta.shape
     grad = np.full((T, N, 3), np.nan)
+    val = np.full((T, N), np.nan)
     have = np.isfinite(psi).all(axis=1)
     visible = np.isfinite(theta) & have
     times = np.flatnonzero(visible.sum(axis=1) >= 6)
     if times.size == 0:
         log.warning("temperature_smoothing_space: no time with 6 or more visible points; gradient left NaN")
-        return grad
+        return grad, val
     p = psi[have]
     filled, _ = SpatialInterpolant(p, c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
     if smoothing == "gcv":
@@ -209,13 +230,17 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
         log.info("temperature_smoothing_space: GCV chose a centre spacing of %.1f point spacings", k)
     else:
         k = float(smoothing)
-    _, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=False)
+    v0, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=True)
     g = d1.T[..., None] * dual[np.ix_(times, have)][:, :, 0] + d2.T[..., None] * dual[np.ix_(times, have)][:, :, 1]
     out = np.full((times.size, N, 3), np.nan)
     out[:, have] = g
     grad[times] = out
     grad[~visible] = np.nan
-    return grad
+    vt = np.full((times.size, N), np.nan)
+    vt[:, have] = v0.T
+    val[times] = vt
+    val[~visible] = np.nan
+    return grad, val
 
 
 def fields_stores(points_path, calibration_path, out, *, dic=None, machine=None, **params) -> Path:

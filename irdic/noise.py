@@ -37,12 +37,12 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 __all__ = ["IRNoise", "ir_noise", "quantisation_step", "dic_noise", "choose_smoothing", "mad_std",
-           "NOISE_TO_SIGNAL", "STRAIN_NOISE_FLOOR"]
+           "NOISE_TO_SIGNAL", "STRAIN_NOISE_FLOOR", "auto_smoothing"]
 
 log = logging.getLogger(__name__)
 
 #: relative noise of a derivative above which ``auto`` regresses instead of interpolating
-NOISE_TO_SIGNAL = 0.01
+NOISE_TO_SIGNAL = 0.02
 #: strain noise (interpolated coordinates) above which ``auto`` regresses the surface
 STRAIN_NOISE_FLOOR = 1e-4
 _MAD = 1.482602218505602  # 1 / Phi^-1(3/4): MAD -> standard deviation for Gaussian data
@@ -277,3 +277,66 @@ def choose_smoothing(option, *, noise: float, gain: float, signal: float, what: 
     if ratio > limit:
         return "gcv", f"auto: {lhs} > {limit:g}: regression (GCV)"
     return None, f"auto: {lhs} <= {limit:g}: exact interpolation (the paper)"
+
+
+def auto_smoothing(points, x, options: dict) -> tuple[dict, dict]:
+    """Resolve the ``auto`` smoothing options of the fields stage from the data's noise.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        ``points.zarr`` (its ``ir_noise_*``/``ir_quantisation_k`` attributes,
+        pixel gradients and local rates).
+    x : ndarray, shape (n_t, N, 3)
+        DIC coordinates (mm).
+    options : dict
+        ``surface_smoothing``, ``temperature_smoothing``,
+        ``temperature_smoothing_space`` as configured.
+
+    Returns
+    -------
+    chosen : dict
+        The same keys, ``auto`` replaced by ``"gcv"`` or None.
+    attrs : dict
+        ``dic_noise_mm``, ``ir_noise_k`` and ``<option>_chosen``/``<option>_reason``
+        for the store.
+
+    Notes
+    -----
+    Effective IR noise ``σ = sqrt(σ_n² + q²/12)`` (``σ_n``: the frame-to-frame
+    noise, ``q``: export step; the
+    rounding error is noise to a derivative even on noise-free data). Gains
+    of exact interpolation: ``sqrt(2)/Δt`` for the rate (``Δt``: frame
+    spacing), ``sqrt(2)`` px⁻¹ for the pixel gradient, ``sqrt(2)/h`` for the
+    strain (``h``: median DIC point spacing); signals: RMS of the local rate
+    and of the pixel gradient magnitude; strain against the absolute floor
+    :data:`STRAIN_NOISE_FLOOR`.
+    """
+    a = points.attrs
+    q = float(a.get("ir_quantisation_k", 0.0) or 0.0)
+    sig_t = float(a.get("ir_noise_temporal_k", a.get("ir_noise_k", np.nan)))
+    # the spatial residual also holds the field's own curvature (on noise-free renderings of the tube
+    # it reads 2 mK), so both rules use the frame-to-frame noise
+    eff_t = eff_s = np.hypot(sig_t, q / np.sqrt(12))
+    span, frames = a.get("ir_time_span_s"), a.get("ir_frames")
+    dt = (float(span[1]) - float(span[0])) / (int(frames) - 1) if span is not None and frames and int(frames) > 1 else np.nan
+    rate = np.asarray(points["temperature_local_rate"].values, dtype=float)
+    g = np.linalg.norm(np.asarray(points["temperature_pixel_gradient"].values, dtype=float), axis=-1)
+    rms_rate = float(np.sqrt(np.nanmean(rate ** 2))) if np.isfinite(rate).any() else np.nan
+    rms_grad = float(np.sqrt(np.nanmean(g ** 2))) if np.isfinite(g).any() else np.nan
+    sx = dic_noise(x)
+    x0 = x[0][np.isfinite(x[0]).all(axis=1)]
+    h = float(np.median(cKDTree(x0).query(x0, k=2)[0][:, 1])) if x0.shape[0] > 2 else np.nan
+    chosen, attrs = {}, {"dic_noise_mm": float(sx), "ir_noise_k": float(eff_t)}
+    rules = {
+        "temperature_smoothing": dict(noise=eff_t, gain=np.sqrt(2) / dt, signal=rms_rate, what="rate (K/s)"),
+        "temperature_smoothing_space": dict(noise=eff_s, gain=np.sqrt(2), signal=rms_grad, what="pixel gradient (K/px)"),
+        "surface_smoothing": dict(noise=sx, gain=np.sqrt(2) / h, signal=None, what="strain"),
+    }
+    for name, rule in rules.items():
+        c, why = choose_smoothing(options.get(name), **rule)
+        chosen[name] = c
+        attrs[f"{name}_chosen"] = str(c)
+        attrs[f"{name}_reason"] = why
+        log.info("fields.%s = %s: %s", name, c, why)
+    return chosen, attrs
