@@ -36,7 +36,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-__all__ = ["IRNoise", "ir_noise", "quantisation_step", "dic_noise", "choose_smoothing", "mad_std",
+__all__ = ["IRNoise", "NoiseGains", "interpolation_noise_gains", "ir_noise", "quantisation_step", "dic_noise", "choose_smoothing", "mad_std",
            "NOISE_TO_SIGNAL", "STRAIN_NOISE_FLOOR", "auto_smoothing"]
 
 log = logging.getLogger(__name__)
@@ -340,3 +340,67 @@ def auto_smoothing(points, x, options: dict) -> tuple[dict, dict]:
         attrs[f"{name}_reason"] = why
         log.info("fields.%s = %s: %s", name, c, why)
     return chosen, attrs
+
+
+@dataclass(frozen=True)
+class NoiseGains:
+    """Standard deviations at a point for unit white pixel noise (1 K per pixel and frame)."""
+
+    temperature: float
+    """of the interpolated temperature (1)."""
+    gradient: float
+    """of each component of the pixel gradient (1/px)."""
+    rate: float
+    """of the local rate (1/s)."""
+
+
+def interpolation_noise_gains(frame_times, *, method="rbf", c=2.0, R0=1.0, c_time=1.0, R0_time=1.0, halo=12,
+                              size=32, points=192, seed=0) -> NoiseGains:
+    """Noise gains of the couple stage's pixel interpolation, measured on a probe.
+
+    Parameters
+    ----------
+    frame_times : array_like, shape (n_frames,)
+        IR frame times (s); the first (at most 6) set the temporal spacing.
+    method, c, R0, c_time, R0_time, halo
+        The interpolation settings of the couple stage
+        (:func:`irdic.image_rbf.evaluate_series`).
+    size : int
+        Side of the probe image (px).
+    points : int
+        Probe points, at random sub-pixel positions in 16 random times, away
+        from the probe's edge.
+    seed : int
+        Seed of the probe (the gains are a property of the operator, not of
+        the data, so a fixed seed keeps the stores reproducible).
+
+    Returns
+    -------
+    NoiseGains
+
+    Notes
+    -----
+    The interpolation is linear in the pixel values, so for white pixel noise
+    of standard deviation σ the point temperature, each pixel-gradient
+    component and the local rate carry ``σ g`` with the gains ``g`` measured
+    here as the standard deviations of the outputs for a probe movie of unit
+    white noise (``points`` samples each: about 5 % relative precision).
+    Values near the mask edge (extrapolated points) have other gains; the
+    fields stage flags them as bias-dominated instead.
+    """
+    from .image_rbf import evaluate_series
+
+    t = np.asarray(frame_times, dtype=float)[:6]
+    if t.size < 2:
+        return NoiseGains(np.nan, np.nan, np.nan)
+    rng = np.random.default_rng(seed)
+    frames = rng.standard_normal((t.size, size, size))
+    margin = min(halo, size // 4)
+    n_t, per = 16, max(1, points // 16)
+    te = np.sort(rng.uniform(t[0], t[-1], n_t))
+    pts = rng.uniform(margin, size - 1 - margin, (n_t, per, 2))
+    res = evaluate_series(frames, t, te, pts, np.ones((size, size), bool), method=method, c=c, R0=R0,
+                          c_time=c_time, R0_time=R0_time, halo=halo, name="noise probe")
+    th, gu, gv, r = (np.asarray(a) for a in (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt))
+    rms = lambda a: float(np.sqrt(np.nanmean(np.square(a))))  # noqa: E731  (zero-mean noise: RMS = std)
+    return NoiseGains(rms(th), rms(np.concatenate([gu, gv])), rms(r))

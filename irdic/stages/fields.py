@@ -37,11 +37,13 @@ from ..errors import ConfigError, DataError
 from ..store import open_store, write_dataset
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry
-from ..gradient import material_rate, rate_from_series, surface_gradient
+from ..gradient import material_rate, surface_gradient
+from ..numerics.temporal import smooth_series
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
 from .parameters import settings
+from .uncertainty import uncertainties
 
 __all__ = ["run", "fields"]
 
@@ -120,17 +122,19 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
                      parametrisation=p["parametrisation"])
     T, N = sf.x.shape[:2]
     geo = surface_geometry(sf.tangents)
-    grad, total, loc, convective, best = _temperature_fields(points, calibration, sf, geo, t, p)
+    grad, total, loc, convective, best, unc = _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs)
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
              _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
-    return _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, p["temperature_smoothing"],
-                           noise_attrs)
+    ds = _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, p["temperature_smoothing"],
+                         noise_attrs)
+    return _with_uncertainty(ds, unc)
 
 
-def _temperature_fields(points, calibration, sf, geo, t, p):
+def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs):
     """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
-    and the best estimate of the temperature (T, N) degC (denoised where smoothing is on).
+    and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
+    uncertainties of :func:`irdic.stages.uncertainty.uncertainties`.
 
     The projection Jacobian of the calibrated camera at the surface points
     turns pixel gradients into surface ones (see the module docstring).
@@ -150,21 +154,29 @@ def _temperature_fields(points, calibration, sf, geo, t, p):
     total, loc = rate.rate, rate.local
     visible = np.isfinite(theta)
     best = theta
+    chosen_k = {"temperature_smoothing": None, "temperature_smoothing_space": None}
     if p["temperature_smoothing"] is not None:
-        smoothed_rate, smoothed = rate_from_series(theta, t, smoothing=p["temperature_smoothing"], c=p["c_time"],
-                                                   R0=p["R0_time"])
+        fit = smooth_series(theta, t, smoothing=p["temperature_smoothing"], c=p["c_time"], R0=p["R0_time"])
+        smoothed_rate, smoothed = fit.rate, fit.value
+        chosen_k["temperature_smoothing"] = fit.smoothing
         total = np.where(visible, smoothed_rate, np.nan)
         loc = total - rate.convective
         best = np.where(visible, smoothed, np.nan)
     if p["temperature_smoothing_space"] is not None:
-        grad, value = _regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], c=p["c_space"],
-                                          R0=p["R0_space"])
+        grad, value, ks = _regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"],
+                                              c=p["c_space"], R0=p["R0_space"])
+        chosen_k["temperature_smoothing_space"] = ks
         if p["temperature_smoothing"] is not None:
             # space-time regression: the spatial regression of the temporally regressed series
-            _, value = _regressed_gradient(best, sf.psi, geo.dual, p["temperature_smoothing_space"], c=p["c_space"],
-                                           R0=p["R0_space"])
+            _, value, _ = _regressed_gradient(best, sf.psi, geo.dual, ks, c=p["c_space"], R0=p["R0_space"])
         best = value
-    return grad, total, loc, rate.convective, best
+
+    def regress_space(th, dual, k):
+        return _regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"])[:2]
+
+    unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
+                        g_pix, t, p, chosen_k, regress_space)
+    return grad, total, loc, rate.convective, best, unc
 
 
 def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, temperature_smoothing,
@@ -205,12 +217,27 @@ def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, 
     )
 
 
+def _with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
+    """``<field>_std`` and ``<field>_bias_dominated`` beside each field (see :mod:`irdic.stages.uncertainty`)."""
+    for name in ("temperature", "temperature_gradient", "temperature_rate", "max_principal_strain"):
+        std, bias = unc[name]
+        dims = ds[name].dims
+        units = ds[name].attrs.get("units", "1")
+        ds[f"{name}_std"] = (dims, std, {"units": units, "long_name": f"standard uncertainty of {name} (IR and DIC "
+                                         "noise and calibration, propagated; see docs/method.md, Uncertainty)"})
+        ds[f"{name}_bias_dominated"] = (dims, np.asarray(bias, dtype=bool),
+                                        {"long_name": f"the method's bias (mask edge, extrapolation, series end, "
+                                         f"export rounding) dominates the noise: {name}_std does not bound the error"})
+    ds.attrs["uncertainty_notes"] = unc["notes"]
+    return ds
+
+
 def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
     """In-plane gradient and value from a spatial regression of the point temperatures of each time.
 
     Missing values of a time are filled from that time's visible points first;
     times with fewer than 6 visible points stay NaN. Returns ``(grad (T, N, 3)
-    K/mm, value (T, N) degC)``.
+    K/mm, value (T, N) degC, the centre spacing factor used)``.
     """
     from ..surface import SpatialInterpolant, gcv_spatial
 
@@ -222,7 +249,7 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
     times = np.flatnonzero(visible.sum(axis=1) >= 6)
     if times.size == 0:
         log.warning("temperature_smoothing_space: no time with 6 or more visible points; gradient left NaN")
-        return grad, val
+        return grad, val, smoothing
     p = psi[have]
     filled, _ = SpatialInterpolant(p, c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
     if smoothing == "gcv":
@@ -241,7 +268,7 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
     vt[:, have] = v0.T
     val[times] = vt
     val[~visible] = np.nan
-    return grad, val
+    return grad, val, k
 
 
 def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.PathLike], *,
