@@ -79,7 +79,8 @@ FIELDS_ATTRS: dict[str, dict[str, str]] = {
     "temperature_rate_local": {"units": "K/s", "long_name": "local part of the temperature rate (at the fixed pixel)"},
     "temperature_rate_convective": {"units": "K/s",
                                     "long_name": "convective part of the temperature rate (motion of the point)"},
-    "temperature": {"units": "degC", "long_name": "temperature (from points.zarr)"},
+    "temperature": {"units": "degC", "long_name": "temperature at the material point, regressed in time and/or "
+                    "space where the smoothing options are on (points.zarr keeps the interpolated value)"},
     "x": {"units": "mm", "long_name": "position on the interpolated surface"},
     "velocity": {"units": "mm/s", "long_name": "velocity of the material point"},
     "normal": {"units": "1", "long_name": "unit surface normal"},

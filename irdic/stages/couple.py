@@ -43,6 +43,7 @@ import xarray as xr
 from ..camera import load_camera
 from ..errors import ConfigError, DataError
 from ..image_rbf import evaluate_series
+from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..store import open_store, write_dataset
 from ..vocabulary import COMPONENTS, PIXEL_AXES, Status, cf_attrs, status_attrs
 from .common import paths, stage_context
@@ -121,11 +122,17 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, **params) -
     visible = status <= Status.EXTRAPOLATED_FROM_EDGE
     for a in (theta, gu, gv, rate, edge):
         a[~visible] = np.nan
+    # noise of the IR data at the specimen pixels: the fields stage's auto rule and uncertainties use it
+    noise = estimate_ir_noise(ir["temperature"], t_ir, np.logical_and.reduce(masks, axis=0))
+    log.info("couple: IR noise %.3g K temporal, %.3g K spatial, quantisation %.3g K (%d specimen pixels)",
+             noise.temporal, noise.spatial, noise.quantisation, noise.pixels)
+    gains = interpolation_noise_gains(t_ir, method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
+                                      R0_time=p["R0_time"], halo=p["halo"])
     counts = {s.name.lower(): int((status == s).sum()) for s in Status}
     log.info("couple: %d DIC times x %d points in %.1f s; %s", n_t, M, _time.perf_counter() - started,
              ", ".join(f"{k} {v}" for k, v in counts.items() if v))
     fields = dict(theta=theta, gu=gu, gv=gv, rate=rate, edge=edge, status=status, visible=visible, masks=masks)
-    return _points_dataset(dic, calibration, camera, pr, t_ir, counts, **fields)
+    return _points_dataset(dic, calibration, camera, pr, t_ir, counts, noise, gains, **fields)
 
 
 def _check_sensor(calibration: xr.Dataset, u: np.ndarray, v: np.ndarray) -> None:
@@ -190,8 +197,8 @@ def _pixel_uncertainty(camera, pr: Projection, pix_out: np.ndarray) -> np.ndarra
     return np.where(np.isfinite(pix_out[..., 0]), pix_std.reshape(n_t, M), np.nan)
 
 
-def _points_dataset(dic, calibration, camera, pr: Projection, t_ir, counts, *, theta, gu, gv, rate, edge, status,
-                    visible, masks) -> xr.Dataset:
+def _points_dataset(dic, calibration, camera, pr: Projection, t_ir, counts, noise, gains, *, theta, gu, gv, rate, edge,
+                    status, visible, masks) -> xr.Dataset:
     """The content of ``points.zarr``: variables with their CF attributes, calibration summary in ``attrs``."""
     pix_out = np.where(pr.valid[..., None] & np.isfinite(pr.pix), pr.pix, np.nan)
     geo = camera.decompose()
@@ -221,6 +228,11 @@ def _points_dataset(dic, calibration, camera, pr: Projection, t_ir, counts, *, t
             "ir_time_span_s": [float(t_ir[0]), float(t_ir[-1])],
             "ir_frames": int(t_ir.size),
             **{f"count_{k}": v for k, v in counts.items()},
+            "ir_noise_k": float(noise.level), "ir_noise_temporal_k": float(noise.temporal),
+            "ir_noise_spatial_k": float(noise.spatial), "ir_quantisation_k": float(noise.quantisation),
+            # white pixel noise sigma -> sigma * gain at the point (irdic.noise.interpolation_noise_gains)
+            "ir_noise_gain_temperature": float(gains.temperature),
+            "ir_noise_gain_gradient_per_px": float(gains.gradient), "ir_noise_gain_rate_per_s": float(gains.rate),
         },
     )
 

@@ -37,10 +37,13 @@ from ..errors import ConfigError, DataError
 from ..store import open_store, write_dataset
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry
-from ..gradient import material_rate, rate_from_series, surface_gradient
+from ..gradient import material_rate, surface_gradient
+from ..numerics.temporal import smooth_series
+from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
 from .parameters import settings
+from .uncertainty import uncertainties
 
 __all__ = ["run", "fields"]
 
@@ -50,11 +53,11 @@ _SMOOTHING = ("surface_smoothing", "surface_smoothing_time", "temperature_smooth
 
 
 def _smoothing(name, value):
-    if value is None or value == "gcv":
+    if value is None or value == "gcv" or value == "auto":
         return value
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 1:
         return float(value)
-    raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv' or a number >= 1, got {value!r}")
+    raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv', 'auto' or a number >= 1, got {value!r}")
 
 
 def _method_of(info) -> str:
@@ -83,9 +86,10 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
           where the plane would fold;
         - ``solver`` {"auto", "global", "local"}: spatial solver of the
           surface interpolation;
-        - ``surface_smoothing``, ``surface_smoothing_time`` (None, "gcv" or
-          float >= 1): regression instead of interpolation for the
-          coordinates;
+        - ``surface_smoothing``, ``surface_smoothing_time`` (None, "gcv",
+          "auto" or float >= 1): regression instead of interpolation for the
+          coordinates ("auto", only in space: :func:`irdic.noise.auto_smoothing`
+          decides from the estimated DIC noise);
         - ``temperature_smoothing`` (same values): regression in time of the
           point temperatures for the material rate;
         - ``temperature_smoothing_space`` (same values): regression in space
@@ -108,20 +112,29 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
     started = _time.perf_counter()
     t = points["time"].values.astype(float)
     x = points["x"].transpose("time", "point", "component").values.astype(float)
+    # "auto": regression where the estimated noise matters, else the paper's interpolation
+    chosen, noise_attrs = auto_smoothing(points, x, {k: p[k] for k in
+                                                     ("surface_smoothing", "temperature_smoothing",
+                                                      "temperature_smoothing_space")})
+    p.update(chosen)
     sf = fit_surface(x, t, c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"],
                      smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"], solver=p["solver"],
                      parametrisation=p["parametrisation"])
     T, N = sf.x.shape[:2]
     geo = surface_geometry(sf.tangents)
-    grad, total, loc, convective = _temperature_fields(points, calibration, sf, geo, t, p)
+    grad, total, loc, convective, best, unc = _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs)
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
              _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
-    return _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, p["temperature_smoothing"])
+    ds = _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, p["temperature_smoothing"],
+                         noise_attrs)
+    return _with_uncertainty(ds, unc)
 
 
-def _temperature_fields(points, calibration, sf, geo, t, p):
-    """In-plane gradient (T, N, 3) K/mm and material rate with its local and convective parts (T, N) K/s.
+def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs):
+    """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
+    and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
+    uncertainties of :func:`irdic.stages.uncertainty.uncertainties`.
 
     The projection Jacobian of the calibrated camera at the surface points
     turns pixel gradients into surface ones (see the module docstring).
@@ -139,31 +152,46 @@ def _temperature_fields(points, calibration, sf, geo, t, p):
     grad = surface_gradient(g_pix, J, sf.tangents)
     rate = material_rate(local, g_pix, J, sf.velocity)
     total, loc = rate.rate, rate.local
+    visible = np.isfinite(theta)
+    best = theta
+    chosen_k = {"temperature_smoothing": None, "temperature_smoothing_space": None}
     if p["temperature_smoothing"] is not None:
-        smoothed_rate, _ = rate_from_series(theta, t, smoothing=p["temperature_smoothing"], c=p["c_time"],
-                                            R0=p["R0_time"])
-        visible = np.isfinite(theta)
+        fit = smooth_series(theta, t, smoothing=p["temperature_smoothing"], c=p["c_time"], R0=p["R0_time"])
+        smoothed_rate, smoothed = fit.rate, fit.value
+        chosen_k["temperature_smoothing"] = fit.smoothing
         total = np.where(visible, smoothed_rate, np.nan)
         loc = total - rate.convective
+        best = np.where(visible, smoothed, np.nan)
     if p["temperature_smoothing_space"] is not None:
-        grad = _regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], c=p["c_space"],
-                                   R0=p["R0_space"])
-    return grad, total, loc, rate.convective
+        grad, value, ks = _regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"],
+                                              c=p["c_space"], R0=p["R0_space"])
+        chosen_k["temperature_smoothing_space"] = ks
+        if p["temperature_smoothing"] is not None:
+            # space-time regression: the spatial regression of the temporally regressed series
+            _, value, _ = _regressed_gradient(best, sf.psi, geo.dual, ks, c=p["c_space"], R0=p["R0_space"])
+        best = value
+
+    def regress_space(th, dual, k):
+        return _regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"])[:2]
+
+    unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
+                        g_pix, t, p, chosen_k, regress_space)
+    return grad, total, loc, rate.convective, best, unc
 
 
-def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, temperature_smoothing) -> xr.Dataset:
+def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, temperature_smoothing,
+                    noise_attrs) -> xr.Dataset:
     """The content of ``fields.zarr``: variables with their CF attributes (:mod:`irdic.vocabulary`)."""
     a = lambda name: cf_attrs("fields", name)  # noqa: E731
     tp, tpc = ("time", "point"), ("time", "point", "component")
     tppc = ("time", "point", "principal", "component")
-    theta = points["temperature"].values.astype(float)
     return xr.Dataset(
         {
             "temperature_gradient": (tpc, grad, a("temperature_gradient")),
             "temperature_rate": (tp, total, a("temperature_rate")),
             "temperature_rate_local": (tp, loc, a("temperature_rate_local")),
             "temperature_rate_convective": (tp, convective, a("temperature_rate_convective")),
-            "temperature": (tp, theta, a("temperature")),
+            "temperature": (tp, best, a("temperature")),
             "x": (tpc, sf.x, a("x")),
             "velocity": (tpc, sf.velocity, a("velocity")),
             "normal": (tpc, geo.normal, a("normal")),
@@ -185,26 +213,43 @@ def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, temper
                 "i": np.array(["1", "2"], dtype=object), "j": np.array(["1", "2"], dtype=object),
                 "principal": np.array(["max", "min"], dtype=object), "param": np.array(["psi1", "psi2"], dtype=object)},
         attrs={"parametrisation": _method_of(sf.info.get("parametrisation")), "surface_solver": str(sf.info.get("solver")),
-               "temperature_smoothing": str(temperature_smoothing)},
+               "temperature_smoothing": str(temperature_smoothing), **noise_attrs},
     )
 
 
+def _with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
+    """``<field>_std`` and ``<field>_bias_dominated`` beside each field (see :mod:`irdic.stages.uncertainty`)."""
+    for name in ("temperature", "temperature_gradient", "temperature_rate", "max_principal_strain"):
+        std, bias = unc[name]
+        dims = ds[name].dims
+        units = ds[name].attrs.get("units", "1")
+        ds[f"{name}_std"] = (dims, std, {"units": units, "long_name": f"standard uncertainty of {name} (IR and DIC "
+                                         "noise and calibration, propagated; see docs/method.md, Uncertainty)"})
+        ds[f"{name}_bias_dominated"] = (dims, np.asarray(bias, dtype=bool),
+                                        {"long_name": f"the method's bias (mask edge, extrapolation, series end, "
+                                         f"export rounding) dominates the noise: {name}_std does not bound the error"})
+    ds.attrs["uncertainty_notes"] = unc["notes"]
+    return ds
+
+
 def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
-    """In-plane gradient from a spatial regression of the point temperatures of each time.
+    """In-plane gradient and value from a spatial regression of the point temperatures of each time.
 
     Missing values of a time are filled from that time's visible points first;
-    times with fewer than 6 visible points stay NaN.
+    times with fewer than 6 visible points stay NaN. Returns ``(grad (T, N, 3)
+    K/mm, value (T, N) degC, the centre spacing factor used)``.
     """
     from ..surface import SpatialInterpolant, gcv_spatial
 
     T, N = theta.shape
     grad = np.full((T, N, 3), np.nan)
+    val = np.full((T, N), np.nan)
     have = np.isfinite(psi).all(axis=1)
     visible = np.isfinite(theta) & have
     times = np.flatnonzero(visible.sum(axis=1) >= 6)
     if times.size == 0:
         log.warning("temperature_smoothing_space: no time with 6 or more visible points; gradient left NaN")
-        return grad
+        return grad, val, smoothing
     p = psi[have]
     filled, _ = SpatialInterpolant(p, c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
     if smoothing == "gcv":
@@ -213,13 +258,17 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
         log.info("temperature_smoothing_space: GCV chose a centre spacing of %.1f point spacings", k)
     else:
         k = float(smoothing)
-    _, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=False)
+    v0, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=True)
     g = d1.T[..., None] * dual[np.ix_(times, have)][:, :, 0] + d2.T[..., None] * dual[np.ix_(times, have)][:, :, 1]
     out = np.full((times.size, N, 3), np.nan)
     out[:, have] = g
     grad[times] = out
     grad[~visible] = np.nan
-    return grad
+    vt = np.full((times.size, N), np.nan)
+    vt[:, have] = v0.T
+    val[times] = vt
+    val[~visible] = np.nan
+    return grad, val, k
 
 
 def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.PathLike], *,

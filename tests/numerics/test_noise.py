@@ -1,0 +1,72 @@
+"""Noise levels estimated from the data (irdic.noise) against the noise that was added."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from irdic.noise import choose_smoothing, dic_noise, ir_noise, quantisation_step
+
+
+def _frames(sigma, decimals=None, seed=1):
+    """A smooth, heating field on an elliptic specimen plus white noise sigma (K)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(40) * 0.04
+    v, u = np.mgrid[0:60, 0:80]
+    f = 25 + 0.05 * u + 0.002 * (v - 30) ** 2 + 3 * np.sin(t)[:, None, None] * np.exp(-((u - 40) ** 2 + (v - 30) ** 2) / 800)
+    f = f + rng.normal(0, sigma, f.shape)
+    if decimals is not None:
+        f = np.round(f, decimals)
+    mask = (u - 40) ** 2 / 35 ** 2 + (v - 30) ** 2 / 25 ** 2 < 1
+    # the background is 5 K colder: pixels outside the mask must not count
+    f = np.where(mask, f, 20.0)
+    return f.astype(np.float32), t, mask
+
+
+@pytest.mark.parametrize("sigma", [0.02, 0.05, 0.1])
+@pytest.mark.parametrize("decimals", [None, 2])
+def test_ir_noise_recovered(sigma, decimals):
+    f, t, mask = _frames(sigma, decimals)
+    n = ir_noise(f, t, mask)
+    # rounding to q adds q^2/12 to the variance: that is the noise the data carry
+    true = np.hypot(sigma, 0.01 / np.sqrt(12)) if decimals == 2 else sigma
+    assert n.temporal == pytest.approx(true, rel=0.15)
+    assert n.spatial == pytest.approx(true, rel=0.15)
+    assert n.quantisation == (0.01 if decimals == 2 else 0.0)
+
+
+def test_ir_noise_unequal_frame_spacing():
+    f, t, mask = _frames(0.05)
+    t = t + 0.01 * np.sin(np.arange(t.size))  # jittered frame times
+    assert ir_noise(f, t, mask).temporal == pytest.approx(0.05, rel=0.15)
+
+
+def test_quantisation_step():
+    rng = np.random.default_rng(0)
+    x = 20 + 5 * rng.random(5000)
+    assert quantisation_step(np.round(x, 2).astype(np.float32)) == 0.01
+    assert quantisation_step(np.round(x, 3).astype(np.float32)) == 0.001
+    assert quantisation_step(np.round(x / 0.05) * 0.05) == pytest.approx(0.05)
+    assert quantisation_step(x.astype(np.float32)) == 0.0
+    assert quantisation_step(x) == 0.0
+
+
+@pytest.mark.parametrize("name", ["tube", "halfshell"])
+def test_dic_noise_recovered(name):
+    from irdic.synthetic.experiments import experiment
+
+    ex = experiment(name, "demo", ir_noise=0.0, dic_noise=0.003, seed=3)
+    assert dic_noise(ex.x_dic) == pytest.approx(0.003, rel=0.2)
+    clean = experiment(name, "demo", ir_noise=0.0, dic_noise=0.0, seed=3)
+    # curvature beyond the local quadric leaves well under a tenth of that
+    assert dic_noise(clean.x_dic) < 3e-4
+
+
+def test_choose_smoothing_rule():
+    assert choose_smoothing(None, noise=1.0, gain=1.0, signal=1.0, what="x") == (None, "set in the configuration")
+    c, why = choose_smoothing("auto", noise=0.05, gain=np.sqrt(2), signal=0.5, what="gradient")
+    assert c == "gcv" and "regression" in why
+    c, why = choose_smoothing("auto", noise=0.001 / np.sqrt(12), gain=np.sqrt(2), signal=0.5, what="gradient")
+    assert c is None and "interpolation" in why
+    assert choose_smoothing("auto", noise=0.003, gain=np.sqrt(2), signal=None, what="strain")[0] == "gcv"
+    assert choose_smoothing("auto", noise=np.nan, gain=1.0, signal=1.0, what="x")[0] is None
