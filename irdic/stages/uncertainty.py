@@ -96,17 +96,50 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     rng = np.random.default_rng(seed)
     a = points.attrs
     T, N = sf.x.shape[:2]
-    theta = points["temperature"].values.astype(float)
-    visible = np.isfinite(theta)
+    visible = np.isfinite(points["temperature"].values.astype(float))
+    sig_n, q, sigma, (s_T, s_g, s_r) = _ir_noise(a)
+    notes = []
+    temp_std, grad_std, rate_std = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
+                                           s_T, s_g, s_r)
+    # calibration: the projected position's uncertainty moves the sample along the pixel gradient
+    pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
+    cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
+    temp_std = np.sqrt(temp_std ** 2 + cal ** 2)
+    s_x = float(a.get("dic_noise_mm", np.nan))
+    strain_std = _strain_std(points, sf, t, p, s_x, rng)
+    if not np.isfinite(s_x):
+        notes.append("max_principal_strain_std: the DIC noise could not be estimated")
+    ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes)
+    for arr in (temp_std, rate_std):
+        arr[~visible] = np.nan
+    grad_std[~visible] = np.nan
+    log.info("fields: uncertainty from IR noise %.3g K (point %.3g K) and DIC noise %.3g mm; median std: temperature "
+             "%.3g K, rate %.3g K/s, max principal strain %.3g", sigma, s_T, s_x, _median(temp_std),
+             _median(rate_std), _median(strain_std))
+    return {
+        "temperature": (temp_std, ir_bias),
+        "temperature_gradient": (grad_std, np.repeat(ir_bias[..., None], 3, axis=-1)),
+        "temperature_rate": (rate_std, rate_bias),
+        "max_principal_strain": (strain_std, np.array(strain_bias)),
+        "notes": "; ".join(notes) if notes else "none",
+    }
+
+
+def _ir_noise(a):
+    """Pixel noise (K) of points.zarr's attrs: temporal noise, quantisation step, their sum, and the
+    point-level noise of temperature, pixel gradient and local rate (via the interpolation's noise gains)."""
     sig_n = float(a.get("ir_noise_temporal_k", a.get("ir_noise_k", np.nan)))
     q = float(a.get("ir_quantisation_k", 0.0) or 0.0)
     sigma = float(np.hypot(sig_n, q / np.sqrt(12)))
-    s_T = sigma * float(a.get("ir_noise_gain_temperature", np.nan))
-    s_g = sigma * float(a.get("ir_noise_gain_gradient_per_px", np.nan))
-    s_r = sigma * float(a.get("ir_noise_gain_rate_per_s", np.nan))
-    notes = []
+    gains = (sigma * float(a.get(f"ir_noise_gain_{g}", np.nan))
+             for g in ("temperature", "gradient_per_px", "rate_per_s"))
+    return sig_n, q, sigma, tuple(gains)
 
-    # --- IR, the paper's relations: exact propagation of the per-point linear maps
+
+def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r):
+    """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise."""
+    T, N = sf.x.shape[:2]
+    # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
     e[..., 0] = 1
     Lu = surface_gradient(e, J, sf.tangents)
@@ -137,30 +170,30 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
             smoothed[:, ~visible] = np.nan
             _, v_pr = regress_space(smoothed.reshape(PROBES * T, N), dual, ks)
         temp_std = _probe_std(v_pr.reshape(PROBES, T, N), 0.0)
+    return temp_std, grad_std, rate_std
 
-    # --- calibration: the projected position's uncertainty moves the sample along the pixel gradient
-    pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
-    cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
-    temp_std = np.sqrt(temp_std ** 2 + cal ** 2)
 
-    # --- DIC: probes of the coordinates through the surface fit (smoothing frozen) and the strain
+def _strain_std(points, sf, t, p, s_x, rng):
+    """Standard uncertainty of the max principal strain: DIC noise probes through the surface fit
+    (smoothing frozen) and the strain; NaN when the DIC noise is unknown or zero."""
+    T, N = sf.x.shape[:2]
+    if not (np.isfinite(s_x) and s_x > 0):
+        return np.full((T, N), np.nan)
     x = points["x"].transpose("time", "point", "component").values.astype(float)
-    s_x = float(a.get("dic_noise_mm", np.nan))
-    strain_std = np.full((T, N), np.nan)
-    if np.isfinite(s_x) and s_x > 0:
-        base = strain(sf.tangents, sf.ref_tangents, tensors=False).e_max
-        kw = dict(c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"], solver=p["solver"],
-                  smoothing=sf.info.get("smoothing", None), smoothing_t=sf.info.get("smoothing_t", None))
-        kw = {k: (None if k.startswith("smoothing") and v is not None and v <= 1.0 else v) for k, v in kw.items()}
-        samples = []
-        for _ in range(PROBES):
-            pf = fit_surface(x + rng.standard_normal(x.shape) * s_x, t, psi=sf.psi, **kw)
-            samples.append(strain(pf.tangents, pf.ref_tangents, tensors=False).e_max)
-        strain_std = _probe_std(np.array(samples), base)
-    elif not np.isfinite(s_x):
-        notes.append("max_principal_strain_std: the DIC noise could not be estimated")
+    base = strain(sf.tangents, sf.ref_tangents, tensors=False).e_max
+    kw = dict(c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"], solver=p["solver"],
+              smoothing=sf.info.get("smoothing", None), smoothing_t=sf.info.get("smoothing_t", None))
+    kw = {k: (None if k.startswith("smoothing") and v is not None and v <= 1.0 else v) for k, v in kw.items()}
+    samples = []
+    for _ in range(PROBES):
+        pf = fit_surface(x + rng.standard_normal(x.shape) * s_x, t, psi=sf.psi, **kw)
+        samples.append(strain(pf.tangents, pf.ref_tangents, tensors=False).e_max)
+    return _probe_std(np.array(samples), base)
 
-    # --- where bias, not noise, dominates
+
+def _bias_flags(points, sf, visible, q, sig_n, notes):
+    """Where the method's bias, not the noise, dominates: IR fields, rates, strain (appends to ``notes``)."""
+    T, N = sf.x.shape[:2]
     status = points["status"].values
     edge = points["edge_distance"].values.astype(float)
     near_edge = visible & ((status == Status.EXTRAPOLATED_FROM_EDGE) | ~(edge >= EDGE_PX))
@@ -174,19 +207,7 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     h = _spacing(sf.psi)
     strain_bias = np.broadcast_to(~(sf.edge_distance >= 2 * h), (T, N)) | sf.filled
     strain_bias = strain_bias & np.isfinite(sf.x).all(axis=-1)
-    for arr, vis in ((temp_std, visible), (rate_std, visible)):
-        arr[~vis] = np.nan
-    grad_std[~visible] = np.nan
-    log.info("fields: uncertainty from IR noise %.3g K (point %.3g K) and DIC noise %.3g mm; median std: temperature "
-             "%.3g K, rate %.3g K/s, max principal strain %.3g", sigma, s_T, s_x, _median(temp_std),
-             _median(rate_std), _median(strain_std))
-    return {
-        "temperature": (temp_std, ir_bias),
-        "temperature_gradient": (grad_std, np.repeat(ir_bias[..., None], 3, axis=-1)),
-        "temperature_rate": (rate_std, rate_bias),
-        "max_principal_strain": (strain_std, np.array(strain_bias)),
-        "notes": "; ".join(notes) if notes else "none",
-    }
+    return ir_bias, rate_bias, strain_bias
 
 
 def _median(a):
