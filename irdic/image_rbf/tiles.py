@@ -18,6 +18,7 @@ from collections import OrderedDict
 from typing import NamedTuple
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from ..errors import DataError
 from ..numerics.imq import imq_matrix
@@ -185,40 +186,34 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
     (xu - cu_j) + beta_u``.
     """
     val, du, dv = out
-    want = np.array(derivs, bool)
+    want = np.flatnonzero(np.array(derivs, bool))
     xu = u[sel] - tile.ou
     xv = v[sel] - tile.ov
-    du_ = xu[:, None] - tile.cu[None, :]
-    dv_ = xv[:, None] - tile.cv[None, :]
-    s = du_ * du_
-    s += dv_ * dv_
+    s = cdist(np.c_[xu, xv], np.c_[tile.cu, tile.cv], "sqeuclidean")
     s += ce * ce
     np.sqrt(s, out=s)
     np.divide(1.0, s, out=s)
     s3 = None
-    if want.any():
+    if want.size:
         s3 = s * s
         s3 *= s
+    # Points come sorted by group (time) within a tile: one matrix product per
+    # run of a group instead of a gather of coefficient rows per point.
     if gb is None:
-        A = alpha.T  # (n_t, g)
-        B = beta  # (g, 3)
-        val[sel] = ce * (s @ A) + B[:, 0] + xu[:, None] * B[:, 1] + xv[:, None] * B[:, 2]
-        if want.any():
-            T = s3 @ A
-            Tu = (s3 * tile.cu) @ A
-            Tv = (s3 * tile.cv) @ A
-            gu = -ce * (xu[:, None] * T - Tu) + B[:, 1]
-            gv = -ce * (xv[:, None] * T - Tv) + B[:, 2]
-            du[sel[:, None], np.flatnonzero(want)] = gu[:, want]
-            dv[sel[:, None], np.flatnonzero(want)] = gv[:, want]
-        return
-    for f in range(g):
-        rows = gb * g + f
-        a = alpha[rows]  # (blk, n_t)
-        B = beta[rows]  # (blk, 3)
-        val[sel, f] = ce * np.einsum("ij,ij->i", s, a) + B[:, 0] + xu * B[:, 1] + xv * B[:, 2]
-        if derivs[f]:
-            a *= s3
-            T = a.sum(axis=1)
-            du[sel, f] = -ce * (xu * T - a @ tile.cu) + B[:, 1]
-            dv[sel, f] = -ce * (xv * T - a @ tile.cv) + B[:, 2]
+        runs = [(0, sel.size, 0)]
+    else:
+        cut = np.flatnonzero(np.r_[True, gb[1:] != gb[:-1], True])
+        runs = [(a, b, int(gb[a])) for a, b in zip(cut[:-1], cut[1:])]
+    for r0, r1, q in runs:
+        A = alpha[q * g:(q + 1) * g].T  # (n_t, g)
+        B = beta[q * g:(q + 1) * g]  # (g, 3)
+        rows = sel[r0:r1]
+        x1, x2 = xu[r0:r1, None], xv[r0:r1, None]
+        val[rows] = ce * (s[r0:r1] @ A) + B[:, 0] + x1 * B[:, 1] + x2 * B[:, 2]
+        if want.size:
+            Aw = A[:, want]
+            # sum_j alpha_j s_j^3 (1, cu_j, cv_j) for the wanted slots at once
+            T = s3[r0:r1] @ np.concatenate([Aw, tile.cu[:, None] * Aw, tile.cv[:, None] * Aw], axis=1)
+            k = want.size
+            du[rows[:, None], want] = -ce * (x1 * T[:, :k] - T[:, k:2 * k]) + B[want, 1]
+            dv[rows[:, None], want] = -ce * (x2 * T[:, :k] - T[:, 2 * k:]) + B[want, 2]
