@@ -63,8 +63,8 @@ determined, to ~1e-5 of the local data variation, by the masked pixels within
   the monomials enter through a 3 x 3 Schur complement) serves every field
   and time while the mask is unchanged; points are evaluated directly from
   the tile's RBF coefficients. Factorisations are cached by the tile's local
-  mask pattern, so a moving edge refactorises only the tiles whose pattern
-  changed.
+  mask pattern alone (relative pixel positions), shared by all tile positions,
+  masks and times, so a moving edge factorises only patterns not seen before.
 
 *Accuracy* against :func:`exact_global_interpolant` (tests, benchmark), fields
 of tens of K with 0.05 K noise: ~3e-5 K and ~6e-5 K/px from ``halo`` px off the

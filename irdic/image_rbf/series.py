@@ -172,8 +172,8 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
         points give NaN.
     mask : array_like of bool, shape (H, W) or (n_times, H, W)
         Pixels on the specimen, fixed or per evaluation time. Consecutive
-        identical masks share all setup; a change refactorises the edge tiles
-        whose local pattern changed, so prefer masks fixed over runs of times.
+        identical masks share all setup; a change factorises only the edge
+        tiles whose local pattern (anywhere in any earlier mask) is new.
         Every masked pixel (of any time) needs finite values in every frame.
     method : {"rbf", "bilinear", "cubic"}
         Spatial method; in time always the IMQ interpolant.
@@ -263,7 +263,8 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
         done += ch.size
         progress.update(done)
     log.info(
-        "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised",
-        te.size, pts.shape[1], F.shape[0], len(masks), cache.built,
+        "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised, "
+        "%d reused (hit rate %.0f %%)",
+        te.size, pts.shape[1], F.shape[0], len(masks), cache.built, cache.hits, 100 * cache.hit_rate,
     )
     return out
