@@ -19,6 +19,7 @@ from .. import io as _io
 from ..errors import DataError
 from ..logs import Progress
 from ..store import FrameStore, provenance
+from ..vocabulary import series_attrs
 from .common import paths, stage_context
 from .inputs import as_files, frame_times, log_gaps
 from .parameters import settings
@@ -134,8 +135,8 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         frame_times(times0, numbers0, labels=labels0, what="IR frame", **p)
     it = _iter_ir_frames(files, fmt)
     label0, first = next(it)
-    attrs = {k: v for k, v in first.attrs.items() if isinstance(v, (str, int, float, bool))}
-    attrs.pop("source", None)
+    # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
+    attrs = series_attrs("ir", first.attrs)
     attrs.update(provenance("ingest-ir", dict(format=fmt, **p), [str(f) for f in files[:1000]]))
     attrs["n_source_files"] = len(files)
     with FrameStore(
