@@ -153,7 +153,7 @@ DATASET_ATTRS: frozenset[str] = frozenset(
     + ["source_columns", "experiment", "method", "correspondence", "settings", "n_markers", "n_detections",
        "n_used", "n_not_detected", "n_outside_image", "n_not_measured", "n_outliers", "n_unassigned",
        "not_detected_ids", "outlier_ids", "outside_image_ids", "not_measured_ids", "polarity", "noise_k",
-       "marker_radius_mm", "dlt_rms_px", "sigma_px"])
+       "marker_radius_mm", "dlt_rms_px", "sigma_px", "parametrisation", "surface_solver", "temperature_smoothing"])
 
 
 def series_attrs(kind: str, first: dict) -> dict:
