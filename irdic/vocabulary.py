@@ -147,13 +147,17 @@ SERIES_ATTRS: dict[str, tuple[str, ...]] = {
 }
 
 #: dataset attributes a store may hold besides provenance (``irdic_*``): the series settings above,
-#: the machine record's columns and the calibration's summary
+#: the machine record's columns, the calibration's summary, the coupling's summary (points.status counts)
+#: and the fields stage's choices
 DATASET_ATTRS: frozenset[str] = frozenset(
     [a for v in SERIES_ATTRS.values() for a in v]
     + ["source_columns", "experiment", "method", "correspondence", "settings", "n_markers", "n_detections",
        "n_used", "n_not_detected", "n_outside_image", "n_not_measured", "n_outliers", "n_unassigned",
        "not_detected_ids", "outlier_ids", "outside_image_ids", "not_measured_ids", "polarity", "noise_k",
-       "marker_radius_mm", "dlt_rms_px", "sigma_px", "parametrisation", "surface_solver", "temperature_smoothing"])
+       "marker_radius_mm", "dlt_rms_px", "sigma_px", "parametrisation", "surface_solver", "temperature_smoothing",
+       "n_source_files", "calibration_rms_px", "calibration_projection_matrix", "calibration_camera_centre_mm",
+       "calibration_focal_length_px", "ir_time_span_s", "ir_frames"]
+    + [f"count_{s.name.lower()}" for s in Status])
 
 
 def series_attrs(kind: str, first: dict) -> dict:

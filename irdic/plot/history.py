@@ -284,7 +284,7 @@ def _no_load_figure(fields, name, path):
            "the DIC exports carry no testing machine signals (nodemap SIGNALS) and no machine record "
            "is configured (experiments.<name>.machine)")
     ax.text(0.5, 0.5, f"{name}: no load figure\n{why}", ha="center", va="center", wrap=True, fontsize=10)
-    return save_figure(fig, path)
+    return save_figure(fig, path, caption=f"No load figure for {name}: {why}.")
 
 
 def _region_statistics(points, fields):
