@@ -261,10 +261,15 @@ def test_set_reaches_the_stage(demo, pipelined, monkeypatch):
 
 def test_run_set_changes_the_configuration(tmp_path, capsys):
     cfg = tmp_path / "config.yaml"
-    cfg.write_text("setups: {}\nexperiments: {}\n")
+    cfg.write_text("setups: {lab: {markers: {path: m.txt}, target_image: {path: t.txt}}}\n"
+                   "experiments: {s07: {setup: lab, dic: {path: dic/}, ir: {path: ir/}}}\n")
     assert main(["run", "--config", str(cfg), "--set", "interpolation.method=spline"]) == 2
     err = capsys.readouterr().err
     assert "with --set: invalid configuration: interpolation.method: 'spline' is not one of" in err
+    # a valid --set passes; then the missing inputs are named by their keys, all at once
+    assert main(["run", "--config", str(cfg), "--set", "interpolation.c_space=2.5"]) == 2
+    err = capsys.readouterr().err
+    assert "4 configured input(s) not found" in err and "experiments.s07.dic.path: dic/" in err
 
 
 def test_figures_export_report_and_info_commands(demo, pipelined, monkeypatch, capsys):
@@ -274,8 +279,10 @@ def test_figures_export_report_and_info_commands(demo, pipelined, monkeypatch, c
     r = "results/tube"
     assert main(["figures", "--points", f"{r}/points.zarr", "--fields", f"{r}/fields.zarr", "--out", "figs",
                  "--experiment", "tube", "--times", "2", "--point-ids", "1"]) == 0
-    assert figure_caption("figs/temperature.png").startswith(
-        "Temperature (°C) at the DIC points of experiment tube at t = 2 s (DIC times), drawn on the current")
+    caption = figure_caption("figs/temperature.png")
+    assert "Temperature (°C) at the DIC points of experiment tube at t = 2 s (DIC times), drawn on the current" in caption
+    # at 2 s the true temperature spans 0.14 K (5-95 %), the demo's IR noise is 0.05 K: rightly flagged
+    assert caption.startswith("Noise-dominated at t = 2 s")
     history = figure_caption("figs/history.png")
     assert "x = (" not in history and "extrapolated from the specimen mask edge" in history
     assert main(["export", "--points", f"{r}/points.zarr", "--out", "exp", "--set", "export.csv_points=all"]) == 0
