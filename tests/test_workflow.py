@@ -118,23 +118,23 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["calibration"]["distortion"] = "k1"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"calibrate", "couple", "fields", "all", "figures", "export"}
+    assert _planned(res) == {"calibrate", "couple", "fields", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["ir"]["time_offset"] = 0.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"ingest_ir", "couple", "fields", "all", "figures", "export"}
+    assert _planned(res) == {"ingest_ir", "couple", "fields", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["interpolation"]["c_space"] = 1.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"couple", "fields", "all", "figures", "export"}
+    assert _planned(res) == {"couple", "fields", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["fields"]["temperature_smoothing"] = "gcv"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"fields", "all", "figures", "export"}
+    assert _planned(res) == {"fields", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["report"] = {"times": [1.0], "points": []}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"figures", "all"}
+    assert _planned(res) == {"figures", "report_html", "all"}  # the page shows the new figures
     changed = copy.deepcopy(cfg)
     changed["export"] = {"paraview_every": 2}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
