@@ -154,6 +154,13 @@ def _parser() -> argparse.ArgumentParser:
         s.add_argument("--time-origin", choices=["first", "file"])
         s.add_argument("--time-offset", type=float, help="s")
 
+    _stage_parsers(add_parser)
+    _output_parsers(add_parser)
+    return p
+
+
+def _stage_parsers(add_parser) -> None:
+    """The sub-commands of the stages that write stores."""
     s = add_parser("calibrate", "calibrate the IR camera from one target image")
     s.add_argument("--markers", required=True, help="marker centres export (ID, x, y, z in mm)")
     s.add_argument("--target", required=True, help="IR image of the reference object")
@@ -177,6 +184,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--dic", default=None, help="dic.zarr: its testing machine signals at the DIC times")
     s.add_argument("--machine", default=None, help="machine.zarr: the machine record at the DIC times")
 
+
+def _output_parsers(add_parser) -> None:
+    """The sub-commands that present results: figures, export, report, and run."""
     for name, what in (("figures", "the PNG figures of one experiment -> OUTDIR/<figure>.png"),
                        ("export", "ParaView time series and CSV table of one experiment -> OUTDIR/paraview, "
                         "OUTDIR/points.csv")):
@@ -206,7 +216,6 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--config", default="config/config.yaml", help="configuration file (default: config/config.yaml)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
                    help=_SET_HELP.format(example="interpolation.c_space=2.5 or experiments.s07.ir.time_offset=0.2"))
-    return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:

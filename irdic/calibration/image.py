@@ -7,9 +7,9 @@ Pixel convention: ``u`` = column, ``v`` = row, full-sensor coordinates,
 from __future__ import annotations
 
 import numpy as np
-import xarray as xr
 
-from ..errors import CalibrationError, ConfigError
+from ..errors import CalibrationError
+from ..io.stack import image_array  # noqa: F401 - public here too: the calibration reads its target through it
 
 __all__ = ["image_array", "noise_sigma", "check_image", "saturation_error", "MAX_INVALID_FRACTION"]
 
@@ -20,47 +20,6 @@ __all__ = ["image_array", "noise_sigma", "check_image", "saturation_error", "MAX
 MAX_INVALID_FRACTION = 0.05
 
 # ----------------------------------------------------------------------------- image
-
-
-def image_array(image) -> tuple[np.ndarray, int, int]:
-    """A single IR frame as a 2-D float64 array plus its sensor offset.
-
-    Parameters
-    ----------
-    image : xarray.DataArray or array_like
-        Dims ``("v", "u")`` (°C) with integer, consecutive full-sensor pixel
-        coordinates; a plain 2-D array is taken as a full frame at (0, 0).
-        A ``time`` dimension of length 1 is dropped.
-
-    Returns
-    -------
-    values : ndarray (H, W)
-    u0, v0 : int
-        Sensor column and row of ``values[0, 0]``.
-    """
-    if isinstance(image, xr.DataArray):
-        da = image
-        if "time" in da.dims:
-            if da.sizes["time"] != 1:
-                raise ConfigError(f"target image has {da.sizes['time']} frames; give one frame (or their mean)")
-            da = da.isel(time=0)
-        if set(da.dims) != {"u", "v"}:
-            raise ConfigError(f"target image must have dims ('v', 'u'), got {da.dims}")
-        da = da.transpose("v", "u")
-        offs = []
-        for d in ("u", "v"):
-            c = np.asarray(da[d].values) if d in da.coords else np.arange(da.sizes[d])
-            if len(c) > 1 and not np.all(np.diff(c) == 1):
-                raise ConfigError(f"target image coordinate {d!r} must be consecutive integer pixels")
-            if len(c) and c[0] != np.round(c[0]):
-                raise ConfigError(f"target image coordinate {d!r} must be integer (pixel centres), got {c[0]}")
-            offs.append(int(c[0]) if len(c) else 0)
-        values = np.asarray(da.values, dtype=np.float64)
-        return values, offs[0], offs[1]
-    values = np.asarray(image, dtype=np.float64)
-    if values.ndim != 2:
-        raise ConfigError(f"target image must be 2-D (v, u), got shape {values.shape}")
-    return values, 0, 0
 
 
 def noise_sigma(img: np.ndarray) -> float:

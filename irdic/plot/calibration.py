@@ -16,7 +16,7 @@ def _figure(image, title: str):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from ..calibration.image import image_array
+    from ..io.stack import image_array
 
     img, u0, v0 = image_array(image)
     h, w = img.shape
