@@ -57,9 +57,9 @@ def figures(monkeypatch):
 
     saved = []
 
-    def keep(fig, path):
+    def keep(fig, path, caption=None):
         saved.append(fig)
-        return save_figure(fig, path)
+        return save_figure(fig, path, caption=caption)
 
     for mod in (irdic.plot.fields, irdic.plot.history, irdic.plot.calibration):
         monkeypatch.setattr(mod, "save_figure", keep)
