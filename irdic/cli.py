@@ -11,8 +11,16 @@ Examples
         --target resources/demo/setup/target.txt --out results/setups/lab/calibration.zarr
     irdic couple --dic results/tube/dic.zarr --ir results/tube/ir.zarr \\
         --calibration results/setups/lab/calibration.zarr --out results/tube/points.zarr
-    irdic run --config config/config.yaml
+    irdic fields --points results/tube/points.zarr \\
+        --calibration results/setups/lab/calibration.zarr --out results/tube/fields.zarr \\
+        --set fields.c_space=1.2 --set fields.temperature_smoothing=gcv
+    irdic figures --points results/tube/points.zarr --fields results/tube/fields.zarr \\
+        --out results/tube/figures --experiment tube
+    irdic export --points results/tube/points.zarr --fields results/tube/fields.zarr --out results/tube
+    irdic report results
+    irdic run --config config/config.yaml --set interpolation.c_space=2.5
     irdic info results/tube/ir.zarr
+    irdic --version
 """
 
 from __future__ import annotations
@@ -24,24 +32,58 @@ import traceback
 from pathlib import Path
 from typing import Sequence
 
-from .errors import IrdicError
+from .errors import ConfigError, IrdicError
 
 __all__ = ["main", "describe_store"]
 
 
+def _table(rows: Sequence[Sequence[str]], indent: str = "    ") -> list[str]:
+    """Rows of text cells with every column as wide as its widest cell (the last one left ragged)."""
+    if not rows:
+        return []
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]) - 1)]
+    return [(indent + "  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[-1]).rstrip() for r in rows]
+
+
+def _span(c) -> str:
+    """The range of a coordinate: ``first .. last`` of numbers, the first labels of text."""
+    import numpy as np
+
+    v = np.asarray(c.values)
+    if v.size == 0:
+        return "(empty)"
+    if v.dtype.kind in "iuf":
+        finite = v[np.isfinite(v)] if v.dtype.kind == "f" else v
+        if finite.size == 0:
+            return "(all NaN)"
+        return f"{finite.min():.6g} .. {finite.max():.6g}"
+    labels = [str(x) for x in v.ravel()[:6]]
+    return ", ".join(labels) + (", ..." if v.size > 6 else "")
+
+
 def describe_store(path) -> str:
-    """A readable summary of an irdic zarr store: dims, variables with units, provenance."""
+    """A readable summary of an irdic zarr store.
+
+    Dimensions; coordinates with their units and ranges; variables with
+    dimensions, units and ``long_name``; the meaning of each value of a
+    flag variable (``flag_values``/``flag_meanings``, e.g. ``points.status``);
+    provenance and the other dataset attributes. Columns are aligned.
+    """
     from .store import open_store
 
     ds = open_store(path)
     lines = [f"{path}", "  dimensions: " + ", ".join(f"{k}={v}" for k, v in ds.sizes.items())]
     lines.append("  coordinates:")
-    for name, c in ds.coords.items():
-        lines.append(f"    {name:<28} {str(c.dims):<28} {c.attrs.get('units', '')}")
+    lines += _table([(name, str(c.dims), c.attrs.get("units", ""), _span(c), c.attrs.get("long_name", ""))
+                     for name, c in ds.coords.items()])
     lines.append("  variables:")
-    for name, v in ds.data_vars.items():
-        desc = v.attrs.get("long_name", "")
-        lines.append(f"    {name:<28} {str(v.dims):<28} {v.attrs.get('units', ''):<8} {desc}")
+    lines += _table([(name, str(v.dims), str(v.attrs.get("units", "")), v.attrs.get("long_name", ""))
+                     for name, v in ds.data_vars.items()])
+    for name, v in {**ds.coords, **ds.data_vars}.items():
+        values, meanings = v.attrs.get("flag_values"), v.attrs.get("flag_meanings")
+        if values is not None and meanings:
+            lines.append(f"  meaning of {name}:")
+            lines += _table([(str(k), m.replace("_", " ")) for k, m in zip(values, str(meanings).split())])
     a = ds.attrs
     lines.append(f"  stage: {a.get('irdic_stage', '?')}  irdic {a.get('irdic_version', '?')}  created {a.get('irdic_created', '?')}")
     params = a.get("irdic_parameters")
@@ -51,13 +93,28 @@ def describe_store(path) -> str:
         except ValueError:
             lines.append(f"  parameters: {params}")
     other = {k: v for k, v in a.items() if not k.startswith("irdic_")}
-    for k, v in list(other.items())[:20]:
-        lines.append(f"  {k}: {v}")
+    if other:
+        lines.append("  attributes:")
+        lines += _table([(k, str(v)) for k, v in list(other.items())[:30]])
     return "\n".join(lines)
 
 
+#: the configuration section whose keys ``--set`` may change, per command (schema node, when it differs)
+SECTIONS = {"demo": ("demo", None), "ingest-ir": ("ir", "ir_source"), "ingest-dic": ("dic", "dic_source"),
+            "calibrate": ("calibration", None), "couple": ("interpolation", None), "fields": ("fields", None),
+            "export": ("export", None)}
+
+_SET_HELP = ("set a parameter as in config.yaml, e.g. {example}; repeatable; checked by the configuration "
+             "schema (irdic/schemas/config.schema.yaml lists every key, its default and unit)")
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="irdic", description="Couple stereo DIC and infrared thermography.")
+    from . import __version__
+
+    p = argparse.ArgumentParser(prog="irdic", description="Couple stereo DIC and infrared thermography.",
+                                epilog="Each stage command reads stores or exports and writes one output; "
+                                "'irdic COMMAND --help' describes it.")
+    p.add_argument("--version", action="version", version=f"irdic {__version__}")
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     # --debug is also accepted after the command; SUPPRESS keeps a top-level --debug from being reset
     common = argparse.ArgumentParser(add_help=False)
@@ -68,13 +125,19 @@ def _parser() -> argparse.ArgumentParser:
                         help="CPU threads for BLAS/OpenMP (default: all cores this process may use)")
     sub = p.add_subparsers(dest="command", required=True)
 
-    def add_parser(name, **kw):
-        return sub.add_parser(name, parents=[common], **kw)
+    def add_parser(name, help, **kw):
+        s = sub.add_parser(name, parents=[common], help=help, description=kw.pop("description", help), **kw)
+        if name in SECTIONS:
+            section = SECTIONS[name][0]
+            s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
+                           help=_SET_HELP.format(example=f"{section}.KEY=VALUE"))
+        return s
 
-    s = add_parser("info", help="summarise an irdic zarr store")
+    s = add_parser("info", "summarise an irdic zarr store: dimensions, coordinate ranges, variables, "
+                   "flag meanings, provenance")
     s.add_argument("store")
 
-    s = add_parser("demo", help="write the synthetic demo experiment")
+    s = add_parser("demo", "write the synthetic demo experiment")
     s.add_argument("outdir")
     s.add_argument("--scale", choices=["tiny", "demo", "paper"], help="default: the schema's demo.scale")
     s.add_argument("--ir-noise", type=float, help="K")
@@ -82,7 +145,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int)
 
     for kind in ("ir", "dic"):
-        s = add_parser(f"ingest-{kind}", help=f"{kind.upper()} exports -> {kind}.zarr")
+        s = add_parser(f"ingest-{kind}", f"{kind.upper()} exports -> {kind}.zarr")
         s.add_argument("source", help="folder, glob or file")
         s.add_argument("out", help="store to write")
         s.add_argument("--format")
@@ -91,7 +154,14 @@ def _parser() -> argparse.ArgumentParser:
         s.add_argument("--time-origin", choices=["first", "file"])
         s.add_argument("--time-offset", type=float, help="s")
 
-    s = add_parser("calibrate", help="calibrate the IR camera from one target image")
+    _stage_parsers(add_parser)
+    _output_parsers(add_parser)
+    return p
+
+
+def _stage_parsers(add_parser) -> None:
+    """The sub-commands of the stages that write stores."""
+    s = add_parser("calibrate", "calibrate the IR camera from one target image")
     s.add_argument("--markers", required=True, help="marker centres export (ID, x, y, z in mm)")
     s.add_argument("--target", required=True, help="IR image of the reference object")
     s.add_argument("--out", required=True, help="calibration.zarr to write")
@@ -99,14 +169,14 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--distortion", choices=["none", "k1", "k1k2"])
     s.add_argument("--polarity", choices=["auto", "dark", "bright"])
 
-    s = add_parser("couple", help="temperatures at the DIC points -> points.zarr")
+    s = add_parser("couple", "temperatures at the DIC points -> points.zarr")
     s.add_argument("--dic", required=True, help="dic.zarr")
     s.add_argument("--ir", required=True, help="ir.zarr")
     s.add_argument("--calibration", required=True, help="calibration.zarr")
     s.add_argument("--out", required=True, help="points.zarr to write")
     s.add_argument("--method", choices=["rbf", "bilinear", "cubic"])
 
-    s = add_parser("fields", help="gradient, rate and strain fields -> fields.zarr")
+    s = add_parser("fields", "gradient, rate and strain fields -> fields.zarr")
     s.add_argument("--points", required=True, help="points.zarr")
     s.add_argument("--calibration", required=True, help="calibration.zarr")
     s.add_argument("--out", required=True, help="fields.zarr to write")
@@ -114,9 +184,38 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--dic", default=None, help="dic.zarr: its testing machine signals at the DIC times")
     s.add_argument("--machine", default=None, help="machine.zarr: the machine record at the DIC times")
 
-    s = add_parser("run", help="run all stages of a configuration without Snakemake")
-    s.add_argument("--config", default="config/config.yaml")
-    return p
+
+def _output_parsers(add_parser) -> None:
+    """The sub-commands that present results: figures, export, report, and run."""
+    for name, what in (("figures", "the PNG figures of one experiment -> OUTDIR/<figure>.png"),
+                       ("export", "ParaView time series and CSV table of one experiment -> OUTDIR/paraview, "
+                        "OUTDIR/points.csv")):
+        s = add_parser(name, what)
+        s.add_argument("--points", required=True, help="points.zarr")
+        s.add_argument("--fields", default=None, help="fields.zarr (gradients, rates, strains, signals)")
+        s.add_argument("--out", required=True, metavar="OUTDIR", help="folder to write")
+        s.add_argument("--experiment", default="experiment", help="name of the experiment (titles, messages)")
+        s.add_argument("--point-ids", type=int, nargs="+", default=[], metavar="ID",
+                       help="DIC point IDs to show (default: the point nearest the centre)")
+        if name == "figures":
+            s.add_argument("--times", type=float, nargs="+", default=[], metavar="T",
+                           help="times (s) of the maps (default: the middle and the last DIC time)")
+
+    s = add_parser("report", "an HTML page of every figure under a results folder, each with its caption",
+                   description="Collect the figures (calibration.png and <experiment>/figures/*.png) under RESULTS "
+                   "into one self-contained HTML page, each with the caption the figure carries. "
+                   "'snakemake --report' gives Snakemake's richer report of the same figures.")
+    s.add_argument("results", nargs="?", default="results", help="results folder (default: results)")
+    s.add_argument("--out", default=None, help="HTML file to write (default: RESULTS/report.html)")
+
+    s = add_parser("run", "run all stages of a configuration without Snakemake",
+                   description="Run every stage (demo, ingest, calibrate, couple, fields, figures, export, "
+                   "report) for every setup and experiment of a configuration, in order, without Snakemake. "
+                   "Unlike Snakemake it re-runs every stage. Outputs go to the configuration's results folder; "
+                   "the output paths are printed as JSON.")
+    s.add_argument("--config", default="config/config.yaml", help="configuration file (default: config/config.yaml)")
+    s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
+                   help=_SET_HELP.format(example="interpolation.c_space=2.5 or experiments.s07.ir.time_offset=0.2"))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -159,8 +258,6 @@ def _run(args: argparse.Namespace) -> None:
 
     configure(None)
     if args.threads is not None and args.threads < 1:  # checked for every command, info included
-        from .errors import ConfigError
-
         raise ConfigError(f"--threads must be a whole number of CPU threads >= 1, got {args.threads}")
     # each stage entry (and pipeline.run) applies --threads once
     _dispatch(args)
@@ -180,9 +277,41 @@ def _smoothing(text: str):
     try:
         return float(text)
     except ValueError:
-        from .errors import ConfigError
-
         raise ConfigError(f"--temperature-smoothing must be none, gcv or a number >= 1, got {text!r}") from None
+
+
+def _section(args, flags: dict) -> dict:
+    """The parameters of a stage command: its section from ``--set``, the flags on top, checked by the schema."""
+    from .config import parse_setting, validate_section
+
+    section, node = SECTIONS[args.command]
+    values: dict = {}
+    for text in args.settings:
+        keys, value = parse_setting(text)
+        if keys[0] != section or len(keys) != 2:
+            raise ConfigError(f"--set {text!r}: irdic {args.command} takes {section}.KEY=VALUE "
+                              f"(its keys: irdic/schemas/config.schema.yaml, section {node or section})")
+        values[keys[1]] = value
+    values.update(flags)
+    if node in ("ir_source", "dic_source"):
+        values["path"] = args.source  # required by the schema; the stage takes it as its input
+        return {k: v for k, v in validate_section(section, values, schema_node=node).items() if k != "path"}
+    return validate_section(section, values, schema_node=node)
+
+
+def _with_settings(config: dict, settings: Sequence[str]) -> dict:
+    """``config`` with each ``--set a.b.c=value`` applied, validated again as a whole."""
+    from .config import parse_setting, validate_config
+
+    for text in settings:
+        keys, value = parse_setting(text)
+        node = config
+        for k in keys[:-1]:
+            if not isinstance(node.get(k), dict):
+                node[k] = {}
+            node = node[k]
+        node[keys[-1]] = value
+    return validate_config(config)
 
 
 def _dispatch(args) -> None:
@@ -194,40 +323,77 @@ def _dispatch(args) -> None:
         from .config import load_config
         from .pipeline import run
 
-        paths = run(load_config(args.config), threads=args.threads)
+        config = load_config(args.config)
+        if args.settings:
+            try:
+                config = _with_settings(config, args.settings)
+            except ConfigError as exc:
+                raise ConfigError(f"{args.config} with --set: {exc}") from None
+        paths = run(config, threads=args.threads)
         print(json.dumps(paths, default=str, indent=2))
+        return
+    if args.command == "report":
+        from .stages import report
+
+        out = Path(args.out) if args.out else Path(args.results) / "report.html"
+        report.run({"results": args.results}, {"html": out}, threads=args.threads)
+        print(out)
         return
     if args.command == "demo":
         from .stages import demo
 
-        demo.run({}, {"manifest": Path(args.outdir) / "manifest.yaml"}, threads=args.threads,
-                 **_given(args, "scale", "ir_noise", "dic_noise", "seed"))
+        params = _section(args, _given(args, "scale", "ir_noise", "dic_noise", "seed"))
+        params.pop("enabled", None)
+        params.pop("outdir", None)
+        demo.run({}, {"manifest": Path(args.outdir) / "manifest.yaml"}, threads=args.threads, **params)
+        return
+    if args.command in ("figures", "export"):
+        _present(args)
         return
     if args.command in ("ingest-ir", "ingest-dic"):
         from .stages import ingest_dic, ingest_ir
 
         stage = ingest_ir if args.command == "ingest-ir" else ingest_dic
         stage.run({"source": args.source}, {"store": args.out}, threads=args.threads,
-                  **_given(args, "format", "frame_rate", "time_source", "time_origin", "time_offset"))
+                  **_section(args, _given(args, "format", "frame_rate", "time_source", "time_origin", "time_offset")))
     elif args.command == "calibrate":
         from .stages import calibrate
 
         calibrate.run({"markers": args.markers, "target": args.target}, {"store": args.out, "figure": args.figure},
-                      threads=args.threads, **_given(args, "distortion", "polarity"))
+                      threads=args.threads, **_section(args, _given(args, "distortion", "polarity")))
     elif args.command == "couple":
         from .stages import couple
 
         couple.run({"dic": args.dic, "ir": args.ir, "calibration": args.calibration}, {"store": args.out},
-                   threads=args.threads, **_given(args, "method"))
+                   threads=args.threads, **_section(args, _given(args, "method")))
     elif args.command == "fields":
         from .stages import fields
 
-        params = {}
+        flags = {}
         if args.temperature_smoothing is not None:
-            params["temperature_smoothing"] = _smoothing(args.temperature_smoothing)
+            flags["temperature_smoothing"] = _smoothing(args.temperature_smoothing)
         fields.run({"points": args.points, "calibration": args.calibration, "dic": args.dic,
-                    "machine": args.machine}, {"store": args.out}, threads=args.threads, **params)
+                    "machine": args.machine}, {"store": args.out}, threads=args.threads, **_section(args, flags))
     print(describe_store(args.out))
+
+
+def _present(args) -> None:
+    """``irdic figures`` / ``irdic export``: the figures or the export of one experiment into ``args.out``."""
+    from .plot import FIGURES
+    from .stages import export, figures
+
+    out = Path(args.out)
+    inputs = {"points": args.points, "fields": args.fields}
+    if args.command == "figures":
+        names = [n for n in FIGURES if n not in ("strain", "load") or args.fields]
+        outputs = {n: out / f"{n}.png" for n in names}
+        figures.run(inputs, outputs, threads=args.threads, experiment=args.experiment, times=args.times,
+                    points=args.point_ids)
+        print("\n".join(str(p) for p in outputs.values()))
+    else:
+        export.run(inputs, {"paraview": out / "paraview", "csv": out / "points.csv"}, threads=args.threads,
+                   experiment=args.experiment, points=args.point_ids, **_section(args, {}))
+        print(f"{out / 'paraview'}\n{out / 'points.csv'}")
 
 
 if __name__ == "__main__":  # pragma: no cover

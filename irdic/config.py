@@ -250,6 +250,68 @@ def load_config(path: str | os.PathLike) -> dict:
         raise ConfigError(f"{p}: {exc}") from None
 
 
+def parse_setting(text: str) -> tuple[list[str], Any]:
+    """``"section.key=value"`` (``irdic --set``) as ``(["section", "key"], value)``.
+
+    The value is read as YAML, as it would be in ``config.yaml``: ``2.5`` is
+    a number, ``gcv`` a string, ``[1, 2]`` a list, ``null`` None.
+
+    Raises
+    ------
+    ConfigError
+        No ``=``, or no dotted key before it.
+    """
+    key, sep, value = text.partition("=")
+    parts = [p for p in key.strip().split(".")]
+    if not sep or len(parts) < 2 or not all(parts):
+        raise ConfigError(f"--set {text!r}: expected section.key=value, such as interpolation.c_space=2.5")
+    try:
+        parsed = yaml.safe_load(value) if value.strip() else None
+    except yaml.YAMLError:
+        parsed = value  # free text (a path with a colon, a quote): the schema checks it as a string
+    return parts, parsed
+
+
+def validate_section(section: str, values: dict, *, schema_node: str | None = None) -> dict:
+    """Check the keys of one configuration section against the schema, with defaults filled in.
+
+    Parameters
+    ----------
+    section : str
+        Name used in the messages (``"interpolation"``, ``"ir"``).
+    values : dict
+        The section's keys as the user gave them.
+    schema_node : str, optional
+        The schema property or definition that describes the section
+        (default ``section``; ``"ir_source"`` for an experiment's ``ir``).
+
+    Returns
+    -------
+    dict
+        A completed copy of ``values``.
+
+    Raises
+    ------
+    ConfigError
+        The messages of :func:`validate_config`, each naming ``section.key``.
+    """
+    schema = load_schema()
+    name = schema_node or section
+    node = schema["properties"].get(name) or schema["$defs"].get(name)
+    if node is None:
+        raise KeyError(name)
+    cls = _fill_defaults(jsonschema.Draft202012Validator)
+    data = copy.deepcopy(values)
+    errors = list(cls({"$defs": schema["$defs"], **node}).iter_errors(data))
+    if errors:
+        msgs = []
+        for e in sorted(errors, key=lambda e: list(map(str, e.absolute_path)))[:5]:
+            e.path.appendleft(section)
+            msgs.append(_message(e))
+        raise ConfigError("invalid configuration: " + "; ".join(msgs))
+    return data
+
+
 def get(config: dict, dotted: str, default: Any = None) -> Any:
     """``config["a"]["b"]`` for ``"a.b"``, or ``default``."""
     cur: Any = config

@@ -8,13 +8,14 @@ no caching (use the workflow for that).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Mapping
 
 from .errors import ConfigError
 from .threads import stage_threads
 
-__all__ = ["run", "stage_paths", "STAGES"]
+__all__ = ["run", "stage_paths", "check_inputs", "STAGES"]
 
 
 def stage_paths(config: Mapping) -> dict:
@@ -49,7 +50,51 @@ def stage_paths(config: Mapping) -> dict:
     return out
 
 
-STAGES = ("demo", "ingest", "calibrate", "couple", "fields", "figures", "export")
+STAGES = ("demo", "ingest", "calibrate", "couple", "fields", "figures", "export", "report")
+
+
+def _in_demo(config: Mapping, path) -> bool:
+    """True when ``path`` lies in the demo folder that the demo stage writes (it need not exist yet)."""
+    d = config.get("demo", {})
+    if not d.get("enabled"):
+        return False
+    demo, p = os.path.normpath(d["outdir"]), os.path.normpath(path)
+    return p == demo or p.startswith(demo + os.sep)
+
+
+def check_inputs(config: Mapping) -> None:
+    """Check that every configured input (folder, glob or file) holds files, before any stage runs.
+
+    Inputs inside the demo folder are skipped when the demo is enabled (the
+    demo stage writes them).
+
+    Raises
+    ------
+    ConfigError
+        Naming the configuration key of every missing or empty input at once
+        (``experiments.<name>.dic.path: ...``).
+    """
+    from .errors import DataError
+    from .stages.inputs import list_inputs
+
+    keys = []
+    for name, s in config.get("setups", {}).items():
+        keys += [(f"setups.{name}.markers.path", s["markers"]["path"]),
+                 (f"setups.{name}.target_image.path", s["target_image"]["path"])]
+    for name, e in config.get("experiments", {}).items():
+        keys += [(f"experiments.{name}.{kind}.path", e[kind]["path"]) for kind in ("dic", "ir", "machine")
+                 if e.get(kind)]
+    problems = []
+    for key, path in keys:
+        if _in_demo(config, path):
+            continue
+        try:
+            list_inputs(path)
+        except DataError as exc:
+            problems.append(f"{key}: {exc}")
+    if problems:
+        raise ConfigError(f"{len(problems)} configured input(s) not found (paths are relative to the working "
+                          f"directory {os.getcwd()}): " + "; ".join(problems))
 
 
 def run(config: Mapping, *, stages: tuple[str, ...] = STAGES, threads: int | None = None) -> dict:
@@ -74,6 +119,7 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES, threads: int | Non
     unknown = set(stages) - set(STAGES)
     if unknown:
         raise ConfigError(f"unknown stage(s) {sorted(unknown)}; expected {', '.join(STAGES)}")
+    check_inputs(config)
     with stage_threads(threads) as n:
         paths = stage_paths(config)
         for stage in STAGES:
@@ -169,5 +215,12 @@ def _export(config, paths, threads):
                    experiment=name, points=e["report"]["points"], **config["export"])
 
 
+def _report(config, paths, threads):
+    from .stages import report
+
+    results = Path(config["results"])
+    report.run({"results": results}, {"html": results / "report.html"}, threads=threads)
+
+
 _RUNNERS = {"demo": _demo, "ingest": _ingest, "calibrate": _calibrate, "couple": _couple, "fields": _fields,
-            "figures": _figures, "export": _export}
+            "figures": _figures, "export": _export, "report": _report}

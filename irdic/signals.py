@@ -136,7 +136,7 @@ def read_machine(path: str | os.PathLike, *, columns: Mapping[str, str], format:
     std = [standard_name(r) or standard_name(split_unit(header.names[idx[r]])[0]) for r in names]
     log.info("machine record %s: %d samples, %.6g..%.6g s (DIC clock), %s", p, t.size, t[0], t[-1], ", ".join(names))
     return xr.Dataset(
-        {"signal_value": (("time", "signal"), values, {"long_name": "testing machine signal"})},
+        {"signal_value": (("time", "signal"), values, {"long_name": "testing machine signal (unit of each signal: coordinate signal_unit)"})},
         coords={"time": ("time", t, {"units": "s", "long_name": "time on the DIC clock"}),
                 **signal_coords(names, ["machine"] * len(names), units, std)},
         attrs={"source_columns": ", ".join(header.names[idx[r]] for r in names)},
@@ -286,6 +286,6 @@ def signals_at(times, *, dic: xr.Dataset | None = None, machine: xr.Dataset | No
                         "record after prefixing; rename the machine.columns keys")
     return xr.Dataset(
         {"signal_value": (("time", "signal"), np.concatenate(blocks, axis=1),
-                          {"long_name": "testing machine signal at the DIC time (DIC export or machine record)"})},
+                          {"long_name": "testing machine signal at the DIC time (DIC export or machine record; unit of each signal: coordinate signal_unit)"})},
         coords={"time": ("time", t, {"units": "s"}), **signal_coords(*meta)},
     )

@@ -40,6 +40,7 @@ import zarr
 
 from .errors import DataError, IrdicError
 from .outputs import COMPLETE_ATTR, atomic_directory, zarr_group_attrs
+from .vocabulary import COORD_ATTRS
 
 __all__ = [
     "jsonable",
@@ -196,6 +197,10 @@ def write_dataset(
     for name in list(ds.variables):
         if ds[name].dtype.kind == "U":
             ds[name] = ds[name].astype(object)
+    for name, c in ds.coords.items():
+        # a coordinate without a long_name gets the shared one, so every store describes its indices alike
+        if "long_name" not in c.attrs and name in COORD_ATTRS:
+            ds.variables[name].attrs.update({**COORD_ATTRS[name], **c.attrs})
     ds.attrs.update(provenance(stage, params, inputs))
     ds.attrs.pop(COMPLETE_ATTR, None)
     ds.attrs.pop(CHUNKS_ATTR, None)

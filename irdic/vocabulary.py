@@ -10,7 +10,8 @@ from __future__ import annotations
 import enum
 
 __all__ = ["TIME", "POINT", "COMPONENT", "AXIS", "I", "J", "PRINCIPAL", "PARAM", "COMPONENTS", "PIXEL_AXES",
-           "Status", "STATUS_MEANINGS", "status_attrs", "POINTS_ATTRS", "FIELDS_ATTRS", "cf_attrs"]
+           "Status", "STATUS_MEANINGS", "status_attrs", "POINTS_ATTRS", "FIELDS_ATTRS", "cf_attrs",
+           "COORD_ATTRS", "SERIES_ATTRS", "DATASET_ATTRS", "series_attrs", "allowed_dataset_attr"]
 
 #: dimension names of the stores
 TIME, POINT, COMPONENT, AXIS = "time", "point", "component", "axis"
@@ -106,3 +107,69 @@ _STORES = {"points": POINTS_ATTRS, "fields": FIELDS_ATTRS}
 def cf_attrs(store: str, name: str) -> dict:
     """A copy of the CF attributes of variable ``name`` of ``store`` (``"points"`` or ``"fields"``)."""
     return dict(_STORES[store][name])
+
+
+#: CF attributes of the coordinates of every store; :func:`irdic.store.write_dataset` adds them to a
+#: coordinate that has none, so ``irdic info`` and xarray users see what each index means
+COORD_ATTRS: dict[str, dict[str, str]] = {
+    TIME: {"units": "s", "long_name": "time"},
+    POINT: {"long_name": "point ID of the DIC software"},
+    COMPONENT: {"long_name": "Cartesian component in the DIC frame (x, y, z)"},
+    AXIS: {"long_name": "IR image axis (u = column, v = row)"},
+    I: {"long_name": "first index of the strain tensor in the reference tangent basis (E_1, E_2)"},
+    J: {"long_name": "second index of the strain tensor in the reference tangent basis (E_1, E_2)"},
+    PRINCIPAL: {"long_name": "principal strain (max, min)"},
+    PARAM: {"long_name": "surface parameter (Psi_1, Psi_2)"},
+    "u": {"units": "px", "long_name": "pixel column (full-sensor, 0-based)"},
+    "v": {"units": "px", "long_name": "pixel row (full-sensor, 0-based)"},
+    "signal": {"long_name": "testing machine signal name as written in the export"},
+    "signal_kind": {"long_name": "kind of signal (value_element, analog_input, machine)"},
+    "signal_unit": {"long_name": "unit of the signal ('' if unknown)"},
+    "signal_standard_name": {"long_name": "standard name of the signal (force, displacement, torque, angle, "
+                             "cycles, time or '')"},
+    "marker": {"long_name": "marker ID of the calibration target"},
+    "row": {"long_name": "row of the 3 x 4 projection matrix"},
+    "col": {"long_name": "column of the 3 x 4 projection matrix"},
+    "row3": {"long_name": "row of a 3 x 3 matrix"},
+    "col3": {"long_name": "column of a 3 x 3 matrix"},
+    "coefficient": {"long_name": "lens distortion coefficient"},
+    "parameter": {"long_name": "parameter of the refined camera model"},
+    "parameter_2": {"long_name": "parameter of the refined camera model (second covariance index)"},
+    "unassigned": {"long_name": "detection without a marker"},
+    "detection_unassigned": {"long_name": "index of a detection without a marker"},
+}
+
+#: dataset attributes an ingest stage keeps from the first file: settings of the whole series (camera,
+#: export, DIC project); per-file values (frame or stage index, stage name and date, counts) are not kept
+SERIES_ATTRS: dict[str, tuple[str, ...]] = {
+    "ir": ("sensor_width", "sensor_height", "emissivity", "distance", "transmission", "env_temp", "path_temp",
+           "recording_file", "irbis_version", "source_unit", "camera", "lens"),
+    "dic": ("point_id_source", "point_key", "reference_stage_index", "rbm_compensation"),
+}
+
+#: dataset attributes a store may hold besides provenance (``irdic_*``): the series settings above,
+#: the machine record's columns, the calibration's summary, the coupling's summary (points.status counts)
+#: and the fields stage's choices
+DATASET_ATTRS: frozenset[str] = frozenset(
+    [a for v in SERIES_ATTRS.values() for a in v]
+    + ["source_columns", "experiment", "method", "correspondence", "settings", "n_markers", "n_detections",
+       "n_used", "n_not_detected", "n_outside_image", "n_not_measured", "n_outliers", "n_unassigned",
+       "not_detected_ids", "outlier_ids", "outside_image_ids", "not_measured_ids", "polarity", "noise_k",
+       "marker_radius_mm", "dlt_rms_px", "sigma_px", "parametrisation", "surface_solver", "temperature_smoothing",
+       "n_source_files", "calibration_rms_px", "calibration_projection_matrix", "calibration_camera_centre_mm",
+       "calibration_focal_length_px", "ir_time_span_s", "ir_frames"]
+    + [f"count_{s.name.lower()}" for s in Status])
+
+
+def series_attrs(kind: str, first: dict) -> dict:
+    """The series-level attributes of ``kind`` (``"ir"``, ``"dic"``) among a first file's ``attrs``.
+
+    Only scalars and strings are kept (zarr attributes); a value of the first
+    file stands for the series, which is why per-file values are left out.
+    """
+    return {k: v for k, v in first.items() if k in SERIES_ATTRS[kind] and isinstance(v, (str, int, float, bool))}
+
+
+def allowed_dataset_attr(name: str) -> bool:
+    """Whether a dataset attribute ``name`` belongs in a store (provenance ``irdic_*`` or :data:`DATASET_ATTRS`)."""
+    return name.startswith("irdic_") or name in DATASET_ATTRS

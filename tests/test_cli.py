@@ -215,3 +215,90 @@ def test_every_error_is_one_line_without_traceback(monkeypatch, capsys, exc, cod
         assert main(argv) == code
         err = capsys.readouterr().err
         assert "Traceback" in err and err.rstrip().splitlines()[-1].startswith(line)
+
+
+def test_version(capsys):
+    from irdic import __version__
+
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.strip() == f"irdic {__version__}"
+
+
+def test_run_help_describes_itself(capsys):
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    out = " ".join(capsys.readouterr().out.split())  # argparse wraps lines at the terminal width
+    assert "without Snakemake" in out and "--set KEY=VALUE" in out and "report" in out
+
+
+def test_set_is_checked_by_the_schema_with_its_messages(demo, capsys):
+    base = ["couple", "--dic", "d.zarr", "--ir", "i.zarr", "--calibration", "c.zarr", "--out", "p.zarr"]
+    assert main(base + ["--set", "interpolation.c_space=wide"]) == 2
+    err = capsys.readouterr().err
+    assert "invalid configuration: interpolation.c_space: 'wide' is not of type 'number'" in err
+    assert main(base + ["--set", "interpolation.c_spce=2"]) == 2
+    assert "interpolation.c_spce: unknown key; allowed here:" in capsys.readouterr().err
+    assert main(base + ["--set", "fields.c_space=2"]) == 2
+    assert "irdic couple takes interpolation.KEY=VALUE" in capsys.readouterr().err
+    assert main(base + ["--set", "interpolation"]) == 2
+    assert "expected section.key=value" in capsys.readouterr().err
+
+
+def test_set_reaches_the_stage(demo, pipelined, monkeypatch):
+    """``--set fields.c_space=...`` is what the fields stage stores as its parameter; the others keep the defaults."""
+    import json
+
+    monkeypatch.chdir(demo)
+    r = "results/tube"
+    assert main(["fields", "--points", f"{r}/points.zarr", "--calibration", "results/setups/lab/calibration.zarr",
+                 "--out", "set/fields.zarr", "--set", "fields.c_space=1.3"]) == 0
+    params = json.loads(open_store("set/fields.zarr").attrs["irdic_parameters"])
+    ref = json.loads(open_store(f"{r}/fields.zarr").attrs["irdic_parameters"])
+    assert params["c_space"] == 1.3 and ref["c_space"] != 1.3
+    assert {k: v for k, v in params.items() if k != "c_space"} == {k: v for k, v in ref.items() if k != "c_space"}
+
+
+def test_run_set_changes_the_configuration(tmp_path, capsys):
+    cfg = tmp_path / "config.yaml"
+    cfg.write_text("setups: {lab: {markers: {path: m.txt}, target_image: {path: t.txt}}}\n"
+                   "experiments: {s07: {setup: lab, dic: {path: dic/}, ir: {path: ir/}}}\n")
+    assert main(["run", "--config", str(cfg), "--set", "interpolation.method=spline"]) == 2
+    err = capsys.readouterr().err
+    assert "with --set: invalid configuration: interpolation.method: 'spline' is not one of" in err
+    # a valid --set passes; then the missing inputs are named by their keys, all at once
+    assert main(["run", "--config", str(cfg), "--set", "interpolation.c_space=2.5"]) == 2
+    err = capsys.readouterr().err
+    assert "4 configured input(s) not found" in err and "experiments.s07.dic.path: dic: no such file or folder" in err
+
+
+def test_figures_export_report_and_info_commands(demo, pipelined, monkeypatch, capsys):
+    from irdic.report import figure_caption
+
+    monkeypatch.chdir(demo)
+    r = "results/tube"
+    assert main(["figures", "--points", f"{r}/points.zarr", "--fields", f"{r}/fields.zarr", "--out", "figs",
+                 "--experiment", "tube", "--times", "2", "--point-ids", "1"]) == 0
+    caption = figure_caption("figs/temperature.png")
+    assert "Temperature (°C) at the DIC points of experiment tube at t = 2 s (DIC times), drawn on the current" in caption
+    # at 2 s the true temperature spans 0.14 K (5-95 %), the demo's IR noise is 0.05 K: rightly flagged
+    assert caption.startswith("Noise-dominated at t = 2 s")
+    history = figure_caption("figs/history.png")
+    assert "x = (" not in history and "extrapolated from the specimen mask edge" in history
+    assert main(["export", "--points", f"{r}/points.zarr", "--out", "exp", "--set", "export.csv_points=all"]) == 0
+    assert (demo / "exp" / "points.csv").stat().st_size > 1000 and (demo / "exp" / "paraview" / "points.pvd").exists()
+    capsys.readouterr()
+    assert main(["report", "results", "--out", "page.html"]) == 0
+    page = (demo / "page.html").read_text(encoding="utf-8")
+    assert "<h2>experiment tube</h2>" in page and "drawn on the current (deformed) surface" in page
+    assert main(["report", "nowhere"]) == 2
+    assert "nowhere: results folder not found" in capsys.readouterr().err
+    assert main(["info", f"{r}/points.zarr"]) == 0
+    out = capsys.readouterr().out
+    assert "meaning of status:" in out and "5  outside specimen mask" in out
+    lines = out.splitlines()
+    coord = [ln for ln in lines if ln.startswith("    time ") or ln.startswith("    point ")]
+    # aligned: the dims column starts at the same place in every row
+    assert len({ln.index("(") for ln in coord}) == 1
+    t = open_store(f"{r}/points.zarr")["time"].values
+    assert f"{t.min():.6g} .. {t.max():.6g}" in out

@@ -57,9 +57,9 @@ def figures(monkeypatch):
 
     saved = []
 
-    def keep(fig, path):
+    def keep(fig, path, caption=None):
         saved.append(fig)
-        return save_figure(fig, path)
+        return save_figure(fig, path, caption=caption)
 
     for mod in (irdic.plot.fields, irdic.plot.history, irdic.plot.calibration):
         monkeypatch.setattr(mod, "save_figure", keep)
@@ -230,3 +230,18 @@ def test_load_figure_prefers_the_complete_signal(stores):
                       kinds=("value_element", "machine", "value_element"), standard=("force", "force", "cycles"))
     # the DIC force misses a stage, the machine's does not; cycles are no load axis
     assert [lab for _, lab in load_signals(f)] == ["machine_force (N)"]
+
+
+def test_noise_dominated_tells_a_smooth_field_from_noise():
+    """Analytic: a linear field on a 20 x 20 grid is smooth; the same with noise of twice its range is not."""
+    from irdic.plot.maps import noise_dominated
+
+    g = np.arange(20.0)
+    x = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    x = np.c_[x, np.zeros(len(x))]
+    smooth = 0.01 * x[:, 0]  # range 0.19
+    rng = np.random.default_rng(1)
+    assert not noise_dominated(x, smooth)
+    assert noise_dominated(x, smooth + rng.normal(0.0, 0.2, smooth.size))
+    assert not noise_dominated(x, smooth + rng.normal(0.0, 0.005, smooth.size))
+    assert not noise_dominated(x[:10], smooth[:10])  # too few points to judge

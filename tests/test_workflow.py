@@ -118,23 +118,23 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["calibration"]["distortion"] = "k1"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"calibrate", "couple", "fields", "all", "figures", "export"}
+    assert _planned(res) == {"calibrate", "couple", "fields", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["ir"]["time_offset"] = 0.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"ingest_ir", "couple", "fields", "all", "figures", "export"}
+    assert _planned(res) == {"ingest_ir", "couple", "fields", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["interpolation"]["c_space"] = 1.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"couple", "fields", "all", "figures", "export"}
+    assert _planned(res) == {"couple", "fields", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["fields"]["temperature_smoothing"] = "gcv"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"fields", "all", "figures", "export"}
+    assert _planned(res) == {"fields", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["report"] = {"times": [1.0], "points": []}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"figures", "all"}
+    assert _planned(res) == {"figures", "report_html", "all"}  # the page shows the new figures
     changed = copy.deepcopy(cfg)
     changed["export"] = {"paraview_every": 2}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
@@ -181,3 +181,71 @@ def test_rules_are_thin_and_logged():
         text = script.read_text()
         assert "from irdic.stages import" in text and ".run(" in text, script.name
         assert "Inputs\n------" in text and "Outputs\n-------" in text, script.name
+
+
+def test_every_store_describes_itself(run):
+    """Every variable and coordinate of every store has a long_name, floats a unit; no per-file dataset leftovers."""
+    import warnings
+
+    import xarray as xr
+
+    from irdic.vocabulary import allowed_dataset_attr
+
+    work, _ = run
+    stores = sorted((work / "results").glob("**/*.zarr"))
+    assert len(stores) >= 10
+    for path in stores:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # plain xarray opens every store without a warning
+            ds = xr.open_zarr(path)
+        for name, v in ds.variables.items():
+            assert v.attrs.get("long_name"), f"{path.name}: {name} has no long_name"
+            # signal_value holds signals of different units: the unit of each is the coordinate signal_unit
+            if v.dtype.kind == "f" and name != "signal_value":
+                assert "units" in v.attrs, f"{path.relative_to(work)}: {name} has no units"
+        extra = [k for k in ds.attrs if not allowed_dataset_attr(k)]
+        assert not extra, f"{path.relative_to(work)}: dataset attributes {extra}"
+        for leftover in ("stage_index", "n_invalid", "stage_name", "frame_index", "units", "long_name"):
+            assert leftover not in ds.attrs, f"{path.relative_to(work)}: {leftover}"
+
+
+def test_default_run_writes_the_html_report_with_captions(run):
+    work, _ = run
+    page = (work / "results" / "report.html").read_text(encoding="utf-8")
+    assert page.count("<img") == 1 + 2 * 6  # the calibration and six figures per experiment
+    assert "Temperature (°C) at the DIC points of experiment tube at t = " in page
+    assert "extrapolated from the specimen mask edge" in page
+
+
+def test_missing_input_folders_are_named_by_their_keys_all_at_once(tmp_path):
+    cfg = _config(tmp_path)
+    cfg["demo"]["enabled"] = False
+    cfg["setups"] = {"bench": {"markers": {"path": "raw/calib/markers.txt"},
+                               "target_image": {"path": "raw/calib/target.txt"}}}
+    cfg["experiments"] = {"s07": {"setup": "bench", "dic": {"path": "raw/s07/aramis/"},
+                                  "ir": {"path": "raw/s07/ir/"}}}
+    (tmp_path / "raw" / "s07" / "ir").mkdir(parents=True)
+    res = _snakemake(tmp_path, "-n", config=cfg)
+    out = res.stderr + res.stdout
+    assert res.returncode != 0
+    assert "4 configured input(s) not found" in out
+    for key in ("setups.bench.markers.path", "setups.bench.target_image.path", "experiments.s07.dic.path: "
+                "raw/s07/aramis: no such file or folder", "experiments.s07.ir.path: raw/s07/ir: folder contains no"):
+        assert key in out, key
+
+
+def test_a_failing_stage_shows_the_irdic_message_without_a_traceback(tmp_path):
+    """A stage that fails on the user's data: its one-line message on stderr and in the rule's log."""
+    cfg = _config(tmp_path)
+    cfg["demo"]["enabled"] = False
+    (tmp_path / "raw" / "ir").mkdir(parents=True)
+    (tmp_path / "raw" / "ir" / "frame_1.csv").write_text("not an IR export\n")
+    cfg["setups"] = {"bench": {"markers": {"path": "raw/ir/frame_1.csv"},
+                               "target_image": {"path": "raw/ir/frame_1.csv"}}}
+    cfg["experiments"] = {"s07": {"setup": "bench", "dic": {"path": "raw/ir"}, "ir": {"path": "raw/ir"}}}
+    res = _snakemake(tmp_path, "--cores", "1", f"results/s07/ir.zarr", config=cfg)
+    assert res.returncode != 0
+    log = (tmp_path / "results" / "logs" / "s07" / "ingest_ir.log").read_text()
+    line = next(ln for ln in res.stderr.splitlines() if ln.startswith("irdic ingest-ir failed: "))
+    assert "frame_1.csv" in line and line.split("failed: ", 1)[1] in log
+    assert "Traceback" not in res.stderr

@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 
 from ..errors import ConfigError, DataError, IrdicWarning
-from .maps import (View, colour_limits, colour_norm, draw_map, experiment_name, grid_sample, map_figure,
+from .maps import (View, colour_limits, map_caption, colour_norm, draw_map, experiment_name, grid_sample, map_figure,
                    no_temperature_note, note, pick_source, point_values, round_scale, save_figure, time_indices,
                    unit_label)
 
@@ -48,9 +48,11 @@ def plot_temperature(points, path, *, times=None, experiment=None):
         m = draw_map(ax, view, x, v, cmap="inferno", norm=norm)
         ax.set_title(f"t = {t[i]:g} s", fontsize=10)
     cb = fig.colorbar(m, ax=list(axes), shrink=0.9, pad=0.02)
-    cb.set_label(f"temperature ({unit_label(points['temperature'], 'degC')})")
+    unit = unit_label(points['temperature'], 'degC')
+    cb.set_label(f"temperature ({unit})")
     no_temperature_note(fig, xs, vals)
-    return save_figure(fig, path)
+    return save_figure(fig, path, caption=map_caption(f"Temperature ({unit}) at the DIC points", name, t[idx], xs,
+                                                      vals))
 
 
 def plot_gradient(points, path, *, fields=None, times=None, experiment=None, arrows: int = 18):
@@ -121,7 +123,11 @@ def plot_gradient(points, path, *, fields=None, times=None, experiment=None, arr
     cb = fig.colorbar(m, ax=list(axes), shrink=0.9, pad=0.02)
     cb.set_label(f"temperature ({unit_label(points['temperature'], 'degC')})")
     no_temperature_note(fig, xs, vals)
-    return save_figure(fig, path)
+    arrows_what = ("in-plane temperature gradient (current configuration), projected on the view plane" if surface
+                   else "temperature gradient in the IR image plane")
+    caption = map_caption(f"Temperature (colours) and {arrows_what} (arrows, {unit})", name, t[idx], xs,
+                          [np.hypot(*vv) for vv in vecs])
+    return save_figure(fig, path, caption=caption)
 
 
 def plot_rate(points, path, *, fields=None, times=None, experiment=None):
@@ -165,9 +171,12 @@ def plot_rate(points, path, *, fields=None, times=None, experiment=None):
         m = draw_map(ax, view, x, v, cmap="RdBu_r", norm=norm)
         ax.set_title(f"t = {t[i]:g} s", fontsize=10)
     cb = fig.colorbar(m, ax=list(axes), shrink=0.9, pad=0.02, extend="both")
-    cb.set_label(f"temperature rate ({unit_label(ds[var], 'K/s')})")
+    unit = unit_label(ds[var], 'K/s')
+    cb.set_label(f"temperature rate ({unit})")
     no_temperature_note(fig, xs, vals)
-    return save_figure(fig, path)
+    what = ("Material temperature rate (following each material point)" if surface
+            else "Local temperature rate at the fixed IR pixel")
+    return save_figure(fig, path, caption=map_caption(f"{what} ({unit})", name, t[idx], xs, vals))
 
 
 def plot_strain(fields, path, *, points=None, times=None, experiment=None, segments: int = 18):
@@ -240,4 +249,6 @@ def plot_strain(fields, path, *, points=None, times=None, experiment=None, segme
     if dname is not None:
         note(fig, "segments: direction of E_max (current configuration)" if dname.endswith("current")
               else "segments: direction of E_max (reference configuration)")
-    return save_figure(fig, path)
+    caption = map_caption("Maximum principal Green-Lagrange strain E_max (%, relative to the reference stage)",
+                          name, t[idx], xs, vals)
+    return save_figure(fig, path, caption=caption)

@@ -69,7 +69,11 @@ def plot_history(points, path, *, fields=None, point_ids=None, experiment=None):
     _history_summary(ax_i, points, ids, sel, theta, status, colors)
     fig.suptitle(f"{name}: temperature history at point{'s' if ids.size > 1 else ''} "
                  f"{', '.join(map(str, ids))}", fontsize=11)
-    return save_figure(fig, path)
+    caption = (f"Temperature (top) and material temperature rate (bottom) of DIC point(s) {', '.join(map(str, ids))} "
+               f"of {name} over t = {t[0]:g} .. {t[-1]:g} s; hollow markers: extrapolated from the specimen mask "
+               "edge. Right: where the points are (IR camera view), their DIC-frame position and how many times "
+               "have a temperature.")
+    return save_figure(fig, path, caption=caption)
 
 
 
@@ -142,9 +146,11 @@ def _history_summary(ax, points, ids, sel, theta, status, colors):
         ref = np.round(x[np.argmax(ok), k], 1) + 0.0 if ok.any() else np.full(3, np.nan)  # + 0.0: no "-0.0"
         has = np.isfinite(theta[:, k])
         rng = (f"{np.nanmin(theta[:, k]):.2f} .. {np.nanmax(theta[:, k]):.2f} °C" if has.any() else "no temperature")
-        lines.append((colors[k], f"point {pid}: x = ({ref[0]:.1f}, {ref[1]:.1f}, {ref[2]:.1f}) mm\n"
-                                 f"  temperature at {int(has.sum())}/{n_t} times, "
-                                 f"extrapolated at {int((status[:, k] == Status.EXTRAPOLATED_FROM_EDGE).sum())}"
+        n_ex = int((status[:, k] == Status.EXTRAPOLATED_FROM_EDGE).sum())
+        lines.append((colors[k], f"point {pid} at ({ref[0]:.1f}, {ref[1]:.1f}, {ref[2]:.1f}) mm\n"
+                                 f"  (DIC frame x, y, z at its first time)\n"
+                                 f"  temperature at {int(has.sum())} of {n_t} times,\n"
+                                 f"  {n_ex} of them extrapolated from the mask edge"
                                  f"\n  {rng}"))
     step = min(0.16, 1.0 / max(len(lines), 1))
     for k, (c, text) in enumerate(lines):
@@ -259,7 +265,10 @@ def plot_load(points, path, *, fields=None, point_ids=None, experiment=None):
     note(fig, "mean, min, max over the points with a temperature (the specimen region seen by the IR camera); "
                "one marker per DIC time")
     fig.suptitle(f"{name}: temperature against load", fontsize=11)
-    return save_figure(fig, path)
+    caption = (f"Mean, minimum and maximum temperature over the points of {name} that have a temperature, and their "
+               f"mean material temperature rate, against the testing machine signals at the {sig.shape[0]} DIC times; "
+               f"the first chosen point ({pid}) for comparison.")
+    return save_figure(fig, path, caption=caption)
 
 
 def _no_load_figure(fields, name, path):
@@ -275,7 +284,7 @@ def _no_load_figure(fields, name, path):
            "the DIC exports carry no testing machine signals (nodemap SIGNALS) and no machine record "
            "is configured (experiments.<name>.machine)")
     ax.text(0.5, 0.5, f"{name}: no load figure\n{why}", ha="center", va="center", wrap=True, fontsize=10)
-    return save_figure(fig, path)
+    return save_figure(fig, path, caption=f"No load figure for {name}: {why}.")
 
 
 def _region_statistics(points, fields):

@@ -23,7 +23,8 @@ from ..selection import select_times
 
 __all__ = ["PANEL_IN", "DPI", "save_figure", "annotate_point", "point_values", "experiment_name", "view_basis",
            "View", "triangulation", "draw_map", "fit_limits", "map_figure", "colour_limits", "colour_norm",
-           "time_indices", "unit_label", "pick_source", "grid_sample", "round_scale", "note", "no_temperature_note"]
+           "time_indices", "unit_label", "pick_source", "grid_sample", "round_scale", "note", "no_temperature_note",
+           "noise_dominated", "map_caption", "NOISE_RATIO", "NOISE_NEIGHBOURS"]
 
 PANEL_IN = 4.2  # width of one map panel, inches
 DPI = 120
@@ -36,11 +37,84 @@ def annotate_point(ax, text, pos, offset, color):
                 path_effects=[pe.withStroke(linewidth=2, foreground="white")])
 
 
-def save_figure(fig, path) -> Path:
+def save_figure(fig, path, caption: str | None = None) -> Path:
+    """Write ``fig`` as PNG; a ``caption`` is drawn under the figure and stored as its ``Description``.
+
+    The stored caption is what ``irdic report`` shows beside the figure, so
+    the page and the image always say the same.
+    """
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(os.fspath(p), bbox_inches="tight")
+    metadata = None
+    if caption:
+        import textwrap
+
+        width = max(60, int(fig.get_figwidth() * 15))  # characters of 7.5 pt text across the figure
+        fig.text(0.01, 0.0, "\n".join(textwrap.wrap(caption, width)), ha="left", va="top", fontsize=7.5,
+                 color="0.15")
+        metadata = {"Description": caption}
+    fig.savefig(os.fspath(p), bbox_inches="tight", metadata=metadata)
     return p
+
+
+#: a map is called noise-dominated when the RMS difference of its values from the mean of their
+#: NOISE_NEIGHBOURS nearest neighbours exceeds NOISE_RATIO times the map's 5-95 % range
+NOISE_NEIGHBOURS, NOISE_RATIO = 6, 0.2
+
+
+def noise_dominated(x, values) -> bool:
+    """Whether a map of ``values`` at the points ``x`` is dominated by point-to-point noise.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, 3)
+        Point positions, mm (NaN rows are ignored).
+    values : ndarray, shape (N,)
+        The mapped quantity (NaN ignored).
+
+    Returns
+    -------
+    bool
+        False with fewer than 20 usable points or a constant map.
+
+    Notes
+    -----
+    A spatial high-pass: with :math:`\\bar v_i` the mean over the
+    :data:`NOISE_NEIGHBOURS` nearest neighbours of point :math:`i`, the
+    roughness :math:`r = \\sqrt{\\langle (v_i - \\bar v_i)^2 \\rangle}` of
+    a smooth field sampled at the DIC spacing is a small fraction of its
+    range :math:`R = v_{95} - v_5`, while for uncorrelated noise of standard
+    deviation :math:`\\sigma` it is :math:`r \\approx 1.08\\,\\sigma` with
+    :math:`R \\approx 3.3\\,\\sigma`, :math:`r/R \\approx 0.33`. The map is
+    flagged when :math:`r > 0.2\\,R`, i.e. roughly when the signal's range is
+    below about twice the noise's standard deviation.
+    """
+    from scipy.spatial import cKDTree
+
+    x = np.asarray(x, dtype=float)
+    v = np.asarray(values, dtype=float)
+    ok = np.isfinite(x).all(axis=1) & np.isfinite(v)
+    if ok.sum() < 20:
+        return False
+    x, v = x[ok], v[ok]
+    spread = float(np.percentile(v, 95) - np.percentile(v, 5))
+    if not spread > 0:
+        return False
+    _, nb = cKDTree(x).query(x, k=NOISE_NEIGHBOURS + 1)
+    rough = float(np.sqrt(np.mean((v - v[nb[:, 1:]].mean(axis=1)) ** 2)))
+    return rough > NOISE_RATIO * spread
+
+
+def map_caption(what: str, name: str, times, xs, vals) -> str:
+    """Caption of a map figure: what, at which times, in which configuration, and a noise warning."""
+    t = ", ".join(f"{float(v):g}" for v in times)
+    text = (f"{what} of experiment {name} at t = {t} s (DIC times), drawn on the current (deformed) surface as the "
+            "IR camera sees it (orthographic, mm).")
+    noisy = [f"{float(ti):g} s" for ti, x, v in zip(times, xs, vals) if noise_dominated(x, v)]
+    if noisy:
+        text = (f"Noise-dominated at t = {', '.join(noisy)}: the point-to-point scatter exceeds a fifth of the "
+                "map's range, so the pattern shown is mostly noise (smoothing: docs/parameters.md). " + text)
+    return text
 
 
 def point_values(ds, name, time_index=None):

@@ -41,8 +41,8 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
 
     i = paths(inputs, "export", "inputs", ("points",), ("fields",))
     o = paths(outputs, "export", "outputs", ("paraview", "csv"))
-    p = settings("export", params)
     with stage_context("export", log, threads):
+        p = settings("export", params)
         pts = open_store(i["points"])
         fields = open_optional(optional_path(i, "fields"))
         ids = "all" if p["csv_points"] == "all" else select_points(

@@ -20,6 +20,7 @@ from .. import io as _io
 from ..errors import DataError
 from ..logs import Progress
 from ..store import write_dataset
+from ..vocabulary import COORD_ATTRS, series_attrs
 from .common import paths, stage_context
 from .inputs import as_files, frame_times, log_gaps
 from .parameters import settings
@@ -163,17 +164,18 @@ def ingest_dic(source: str | os.PathLike | Sequence[str | os.PathLike], out: str
     if x_ref is not None:
         data_vars["x_ref"] = (("point", "component"), x_ref,
                               {"units": "mm", "long_name": "reference (undeformed) coordinates from the exports"})
-    attrs = {k: v for k, v in stages[0].attrs.items() if isinstance(v, (str, int, float, bool)) and k != "source"}
+    # stage_index, stage_name, n_invalid, ... of the first file would describe the whole store
+    attrs = series_attrs("dic", stages[0].attrs)
     coords_extra = {}
     if signals is not None:
         values, coords_extra = signals
         data_vars["signal_value"] = (("time", "signal"), values,
-                               {"long_name": "testing machine signal recorded with the DIC stage"})
+                               {"long_name": "testing machine signal recorded with the DIC stage (unit of each signal: coordinate signal_unit)"})
     ds = xr.Dataset(
         data_vars,
         coords={"time": ("time", t, {"units": "s", "long_name": "time"}),
                 "point": ("point", ids, {"long_name": "point ID of the DIC software"}),
-                "component": ("component", np.array(["x", "y", "z"])), **coords_extra},
+                "component": ("component", np.array(["x", "y", "z"]), COORD_ATTRS["component"]), **coords_extra},
         attrs=attrs,
     )
     write_dataset(ds, out, stage="ingest-dic", params=dict(format=fmt, columns=columns or {}, **p),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import os
+import warnings
 from pathlib import Path
 from typing import Iterator, Mapping, Sequence
 
@@ -16,9 +17,10 @@ import numpy as np
 import xarray as xr
 
 from .. import io as _io
-from ..errors import DataError
+from ..errors import DataError, IrdicWarning
 from ..logs import Progress
 from ..store import FrameStore, provenance
+from ..vocabulary import series_attrs
 from .common import paths, stage_context
 from .inputs import as_files, frame_times, log_gaps
 from .parameters import settings
@@ -35,6 +37,18 @@ MAX_NAN_FRACTION = 0.5
 WARN_NAN_FRACTION = 0.01
 
 
+def _read_untimed(f: Path, fmt: str) -> xr.DataArray:
+    """One IR file read as it is: a stack's missing time axis is no concern here.
+
+    The stage times every frame itself (:func:`~irdic.stages.inputs.frame_times`,
+    from ``frame_rate`` or a clear error), so the reader's warning that a
+    stack has no time coordinate would only be noise in the log.
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*frames but no frame_rate given", category=IrdicWarning)
+        return _io.read_ir(f, format=fmt)
+
+
 def _iter_ir_frames(files: Sequence[Path], fmt: str) -> Iterator[tuple[str, xr.DataArray]]:
     """Yield (label, frame DataArray with dims (v, u)) for every frame of the series."""
     for f in files:
@@ -45,7 +59,7 @@ def _iter_ir_frames(files: Sequence[Path], fmt: str) -> Iterator[tuple[str, xr.D
             for i, frame in enumerate(irb.iter_irb_dataarrays(f)):
                 yield f"{f.name}[{i}]", frame
             continue
-        da = _io.read_ir(f, format=ffmt)
+        da = _read_untimed(f, ffmt)
         if "time" in da.dims:
             for i in range(da.sizes["time"]):
                 yield f"{f.name}[{i}]", da.isel(time=i)
@@ -75,7 +89,7 @@ def _count_ir_frames(files: Sequence[Path], fmt: str) -> tuple[int, list | None]
         if ffmt == "irbis":
             n += 1
         else:
-            da = _io.read_ir(f, format=ffmt)
+            da = _read_untimed(f, ffmt)
             n += da.sizes.get("time", 1)
     return n, stamps
 
@@ -134,8 +148,8 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         frame_times(times0, numbers0, labels=labels0, what="IR frame", **p)
     it = _iter_ir_frames(files, fmt)
     label0, first = next(it)
-    attrs = {k: v for k, v in first.attrs.items() if isinstance(v, (str, int, float, bool))}
-    attrs.pop("source", None)
+    # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
+    attrs = series_attrs("ir", first.attrs)
     attrs.update(provenance("ingest-ir", dict(format=fmt, **p), [str(f) for f in files[:1000]]))
     attrs["n_source_files"] = len(files)
     with FrameStore(

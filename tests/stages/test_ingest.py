@@ -5,7 +5,7 @@ import datetime as dt
 import numpy as np
 import pytest
 
-from irdic.errors import DataError, FormatError, IrdicError
+from irdic.errors import DataError, FormatError, IrdicError, IrdicWarning
 from irdic.stages.ingest_dic import ingest_dic
 from irdic.stages.ingest_ir import ingest_ir
 from irdic.stages.inputs import frame_times, list_inputs
@@ -80,7 +80,9 @@ def test_ingest_ir_unreadable_file_names_it(tmp_path):
     src = _write_ir_series(tmp_path / "ir", [0, 1, 2])
     text = (src / "spec_00001.txt").read_bytes()
     (src / "spec_00001.txt").write_bytes(text[: len(text) // 2])  # truncated
-    with pytest.raises(FormatError, match=r"spec_00001\.txt"):
+    # the reader first warns that the file ends mid-row, then refuses it
+    with pytest.warns(IrdicWarning, match=r"spec_00001\.txt: the last data row has no line end"), \
+            pytest.raises(FormatError, match=r"spec_00001\.txt"):
         ingest_ir(src, tmp_path / "ir.zarr")
     assert not (tmp_path / "ir.zarr").exists()
 

@@ -12,6 +12,8 @@ from irdic.stages.inputs import list_inputs
 irdic.config.validate_config(config)
 # outputs must stay inside the results folder whatever the names (links included)
 irdic.pipeline.stage_paths(config)
+# every missing input folder at once, named by its key, before Snakemake's input functions meet the first
+irdic.pipeline.check_inputs(config)
 
 RESULTS = config["results"]
 DEMO = config["demo"]
@@ -90,6 +92,14 @@ def fields_inputs(wildcards):
     return out
 
 
+def report_figures():
+    """Every PNG the HTML page (rule report_html) shows: calibrations, then each experiment's figures."""
+    out = [f"{RESULTS}/setups/{s}/calibration.png" for s in SETUPS]
+    for e in EXPERIMENTS:
+        out += [f"{RESULTS}/{e}/figures/{name}.png" for name in figure_names()]
+    return out
+
+
 def all_outputs():
     out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
     for e in EXPERIMENTS:
@@ -98,4 +108,5 @@ def all_outputs():
             out.append(f"{RESULTS}/{e}/machine.zarr")
         out += [f"{RESULTS}/{e}/figures/{name}.png" for name in figure_names()]
         out += [f"{RESULTS}/{e}/paraview", f"{RESULTS}/{e}/points.csv"]
+    out.append(f"{RESULTS}/report.html")
     return out

@@ -55,3 +55,23 @@ rule export:
         "../envs/irdic.yaml"
     script:
         "../../scripts/export.py"
+
+rule report_html:
+    input:
+        figures=report_figures(),
+    output:
+        html=f"{RESULTS}/report.html",
+    params:
+        results=RESULTS,
+        code=code_hash("report"),
+    log:
+        f"{RESULTS}/logs/report.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/report.tsv"
+    threads: 1
+    resources:
+        mem_mb=1000,
+    conda:
+        "../envs/irdic.yaml"
+    script:
+        "../../scripts/report.py"
