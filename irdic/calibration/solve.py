@@ -340,11 +340,10 @@ def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np
 
 
 def _marker_status(table: MarkerTable, sol: Solution, reproj: np.ndarray, sensor: tuple[int, int]):
-    """``(status (M,) of :data:`STATUSES`, detected (M, 2) px, detection index (M,), -1 if none)``."""
+    """``(status (M,) of :data:`STATUSES`, detection index (M,), -1 if none)``."""
     n, vidx = len(table.ids), table.measured
     status = np.array(["not_measured"] * n, dtype=object)
     status[vidx] = "not_detected"
-    detected = np.full((n, 2), np.nan)
     det_index = np.full(n, -1, dtype=np.int64)
     for m, d in zip(sol.marker_index, sol.detection_index):
         g = vidx[m]
