@@ -90,7 +90,8 @@ def gather(parts: Sequence[xr.Dataset]) -> xr.Dataset:
                 f"delete the results' chunks folder and run the workflow again"
             )
     timed = [n for n, v in parts[0].data_vars.items() if "time" in v.dims]
-    static = parts[0].drop_vars(timed)
+    static = parts[0].drop_dims("time")
     out = xr.concat([p[timed] for p in parts], dim="time", data_vars="all", coords="minimal", compat="override",
                     join="override", combine_attrs="override")
-    return xr.merge([out, static], combine_attrs="override", join="exact")
+    merged = xr.merge([out, static], combine_attrs="override", join="exact")
+    return merged[list(parts[0].data_vars)]
