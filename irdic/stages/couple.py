@@ -124,6 +124,11 @@ def _couple_chunk(dic, ir, calibration, chunk, p) -> xr.Dataset:
     a, b = max(sl.start - 1, 0), min(sl.stop + 1, t_dic.size)
     reach = temporal_reach(t_ir, c=p["c_time"], R0=p["R0_time"])
     frames = window(t_ir, t_dic[sl.start], t_dic[sl.stop - 1], reach)
+    if reach >= t_ir.size and chunk[1] > 1:
+        log.warning("couple: the temporal kernel (c_time %g, R0_time %g s) reaches over all %d IR frames "
+                    "(spacing %.3g s): every chunk reads the whole IR record, so chunking does not bound memory; "
+                    "set execution.chunk_frames: 0, or choose c_time * R0_time below 8 frame spacings",
+                    p["c_time"], p["R0_time"], t_ir.size, float(np.median(np.diff(t_ir))))
     log.info("couple: chunk %d of %d, DIC times %d..%d, IR frames %d..%d (kernel reach %d frames)", chunk[0] + 1,
              chunk[1], sl.start, sl.stop - 1, frames.start, frames.stop - 1, reach)
     # the whole record must have a DIC time in the IR span; a chunk outside it is all status 6
