@@ -16,7 +16,7 @@ def _figure(image, title: str):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from ..markers import image_array
+    from ..calibration.image import image_array
 
     img, u0, v0 = image_array(image)
     h, w = img.shape
@@ -65,7 +65,7 @@ def plot_detections(detections, target_image, path) -> Path:
     Parameters
     ----------
     detections : xarray.Dataset
-        :func:`irdic.markers.detect_markers` output.
+        :func:`irdic.calibration.detect_markers` output.
     target_image : xarray.DataArray
         The IR image (``("v", "u")``, °C).
     path : path-like
@@ -98,7 +98,7 @@ def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25
     Parameters
     ----------
     cal_ds : xarray.Dataset
-        :func:`irdic.calibrate.calibrate` output.
+        :func:`irdic.calibration.calibrate` output.
     target_image : xarray.DataArray
         The IR image of the target.
     path : path-like
