@@ -263,7 +263,8 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
         done += ch.size
         progress.update(done)
     log.info(
-        "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised",
-        te.size, pts.shape[1], F.shape[0], len(masks), cache.built,
+        "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised, "
+        "%d reused (hit rate %.0f %%)",
+        te.size, pts.shape[1], F.shape[0], len(masks), cache.built, cache.hits, 100 * cache.hit_rate,
     )
     return out

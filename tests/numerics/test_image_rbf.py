@@ -10,6 +10,7 @@ from scipy import ndimage
 
 from irdic.errors import ConfigError, DataError, IrdicWarning
 from irdic.numerics.temporal import TemporalInterpolant
+from irdic.image_rbf.tiles import TileCache
 from irdic.image_rbf import (
     MaskedGridInterpolant,
     MaskedGridRBF,
@@ -498,6 +499,37 @@ def test_series_moving_mask_matches_per_time_masks():
         np.testing.assert_allclose(r.theta[k], e.value[0], atol=1e-10, equal_nan=True)
         np.testing.assert_allclose(r.edge_distance[k], e.edge_distance)
     assert np.isfinite(r.theta[1]).sum() > np.isfinite(r.theta[2]).sum()
+
+
+def test_edge_tiles_shared_across_positions_and_masks():
+    """A mask shifted by whole tiles reuses every edge factorisation, with the same results.
+
+    Regression (issue 10): the tile cache was keyed by tile position, so a
+    moving outline refactorised every edge tile at every time.
+    """
+    n = 96
+    gv, gu = np.mgrid[0:n, 0:n]
+    m1 = (gu - 40.0) ** 2 + (gv - 38.0) ** 2 <= 14.0**2
+    su, sv = 8, 16  # whole tiles (tile = 8 px)
+    m2 = np.roll(np.roll(m1, sv, axis=0), su, axis=1)
+    f1 = gauss(gu - 10.0, gv - 10.0)
+    f2 = gauss(gu - 10.0 - su, gv - 10.0 - sv)
+    pts = points_in(m1, 300, np.random.default_rng(3))
+    cache = TileCache()
+    a = MaskedGridInterpolant(m1, tile_cache=cache).fit(f1).evaluate(pts)
+    built = cache.built
+    assert built > 0 and cache.hits == 0
+    b = MaskedGridInterpolant(m2, tile_cache=cache).fit(f2).evaluate(pts + [su, sv])
+    assert cache.built == built and cache.hits == built
+    ref = MaskedGridInterpolant(m2).fit(f2).evaluate(pts + [su, sv])
+    for x, y, z in ((a.value, b.value, ref.value), (a.du, b.du, ref.du), (a.dv, b.dv, ref.dv)):
+        np.testing.assert_array_equal(y, z)
+        np.testing.assert_allclose(y, x, rtol=0, atol=1e-9, equal_nan=True)
+    # a cache bounded to one tile evicts the others and still gives the same numbers
+    small = TileCache(max_bytes=1)
+    c = MaskedGridInterpolant(m2, tile_cache=small).fit(f2).evaluate(pts + [su, sv])
+    np.testing.assert_array_equal(c.value, ref.value)
+    assert small.built == built and len(small._d) == 1
 
 
 @pytest.mark.parametrize("method", ["bilinear", "cubic"])
