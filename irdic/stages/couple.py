@@ -83,7 +83,9 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
     chunk : (index, count), optional
         Only the DIC times of this time chunk (:mod:`irdic.chunks`), from
         the IR frames within the temporal kernel's reach of them; the result
-        equals the same times of the whole-record result (to ~1e-4 K).
+        equals the same times of the whole-record result to ~1e-4 K except
+        within that reach of the record's ends (see
+        :func:`irdic.numerics.temporal.temporal_reach`).
     **params
         The ``interpolation`` section of the configuration; absent keys take
         the schema's defaults:

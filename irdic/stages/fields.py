@@ -112,7 +112,8 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
     over its own stages plus the temporal kernel's reach
     (:func:`irdic.numerics.temporal.temporal_reach`) on each side; with
     interpolation in time (the default) that reproduces the whole-record
-    result. Smoothing chosen by GCV is chosen once, on the stages of the
+    result, except within the reach of the record's first and last stage
+    (:func:`irdic.numerics.temporal.temporal_reach`). Smoothing chosen by GCV is chosen once, on the stages of the
     first chunk's window, identically in every chunk, and each chunk then
     regresses its own window: a regression differs from the whole-record
     regression by a small fraction of the noise it removes (centres are
