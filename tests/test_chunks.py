@@ -118,6 +118,15 @@ def _compare(whole: Path, chunked: Path):
         if kind == "points":
             assert {k: v for k, v in a.attrs.items() if k.startswith("count_")} == \
                    {k: v for k, v in b.attrs.items() if k.startswith("count_")}
+            # the noise gains are the operator's: the same whatever the chunking
+            assert {k: v for k, v in a.attrs.items() if k.startswith("ir_noise_gain")} == \
+                   {k: v for k, v in b.attrs.items() if k.startswith("ir_noise_gain")}
+        else:
+            # "auto" is resolved once on the whole record: every chunk and the whole record choose alike
+            assert {k: v for k, v in a.attrs.items() if k.endswith("_chosen")} == \
+                   {k: v for k, v in b.attrs.items() if k.endswith("_chosen")}
+            std = b["temperature_std"].values
+            assert np.isfinite(std[np.isfinite(b["temperature"].values)]).all()
 
 
 @pytest.fixture(scope="module")
