@@ -168,14 +168,35 @@ def _ingest(config, paths, threads):
             ingest_machine.run({**src, "ir": p["ir"]}, {"store": p["machine"]}, threads=threads, **rest)
 
 
+def _chunked(stage, config, inputs, store, n_times, threads, params):
+    """Run ``stage`` in the configured time chunks (then gather them into ``store``), or whole."""
+    from .chunks import chunk_path, n_chunks
+
+    n = n_chunks(n_times, config.get("execution", {}).get("chunk_frames", 0))
+    if n == 1:
+        stage.run(inputs, {"store": store}, threads=threads, **params)
+        return
+    kind = Path(store).stem
+    parts = [chunk_path(Path(store).parent, kind, i) for i in range(n)]
+    for i, part in enumerate(parts):
+        stage.run(inputs, {"store": part}, threads=threads, chunk=(i, n), **params)
+    stage.run_gather({"chunks": parts}, {"store": store}, threads=threads, **params)
+
+
+def _n_times(store) -> int:
+    from .store import open_store
+
+    return int(open_store(store).sizes["time"])
+
+
 def _couple(config, paths, threads):
     from .stages import couple
 
     for name, e in config["experiments"].items():
         p = paths["experiments"][name]
         cal = paths["setups"][e["setup"]]["calibration"]
-        couple.run({"dic": p["dic"], "ir": p["ir"], "calibration": cal}, {"store": p["points"]}, threads=threads,
-                   **config["interpolation"])
+        _chunked(couple, config, {"dic": p["dic"], "ir": p["ir"], "calibration": cal}, p["points"],
+                 _n_times(p["dic"]), threads, config["interpolation"])
 
 
 def _fields(config, paths, threads):
@@ -187,7 +208,7 @@ def _fields(config, paths, threads):
                   "dic": p["dic"]}
         if "machine" in p:
             inputs["machine"] = p["machine"]
-        fields.run(inputs, {"store": p["fields"]}, threads=threads, **config["fields"])
+        _chunked(fields, config, inputs, p["fields"], _n_times(p["points"]), threads, config["fields"])
 
 
 def _figures(config, paths, threads):

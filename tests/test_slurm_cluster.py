@@ -66,6 +66,8 @@ def _config():
     cfg["demo"]["scale"] = "tiny"
     # the half-shell alone runs every rule; the tube's coupling would add minutes on 2 cores
     cfg["experiments"] = {"halfshell": cfg["experiments"]["halfshell"]}
+    # time chunks on: the tiny half-shell's 5 DIC times in 3 couple_chunk and 3 fields_chunk jobs
+    cfg["execution"] = {"chunk_frames": 2}
     return cfg
 
 

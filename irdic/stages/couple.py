@@ -35,15 +35,17 @@ from __future__ import annotations
 import logging
 import os
 import time as _time
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 import xarray as xr
 
 from ..camera import load_camera
+from ..chunks import chunk_slice, gather, window
+from ..numerics.temporal import temporal_reach
 from ..errors import ConfigError, DataError
 from ..image_rbf import evaluate_series
-from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
+from ..noise import IRNoise, interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..store import open_store, write_dataset
 from ..vocabulary import COMPONENTS, PIXEL_AXES, Status, cf_attrs, status_attrs
 from .common import paths, stage_context
@@ -51,7 +53,7 @@ from .extrapolation import extrapolate, extrapolation_samples, in_mask
 from .parameters import settings
 from .visibility import Projection, masks_and_facing, project_points
 
-__all__ = ["run", "couple"]
+__all__ = ["run", "run_gather", "couple", "count_attrs"]
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +69,8 @@ def _check_params(method, mask_erosion_px, max_extrapolation_px, max_view_angle_
         raise ConfigError(f"interpolation.max_view_angle_deg must lie in (0, 90], got {max_view_angle_deg}")
 
 
-def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
+def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int] | None = None,
+           **params) -> xr.Dataset:
     """Temperatures, pixel gradients and local rates at the DIC points.
 
     Parameters
@@ -78,6 +81,12 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, **params) -
         ``ir.zarr``: ``temperature(time, v, u)`` °C with full-sensor ``u``, ``v``.
     calibration : xarray.Dataset
         ``calibration.zarr`` of the setup the experiment was recorded with.
+    chunk : (index, count), optional
+        Only the DIC times of this time chunk (:mod:`irdic.chunks`), from
+        the IR frames within the temporal kernel's reach of them; the result
+        equals the same times of the whole-record result to ~1e-4 K except
+        within that reach of the record's ends (see
+        :func:`irdic.numerics.temporal.temporal_reach`).
     **params
         The ``interpolation`` section of the configuration; absent keys take
         the schema's defaults:
@@ -104,6 +113,42 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, **params) -
     """
     p = settings("interpolation", params)
     _check_params(p["method"], p["mask_erosion_px"], p["max_extrapolation_px"], p["max_view_angle_deg"])
+    if chunk is not None:
+        return _couple_chunk(dic, ir, calibration, chunk, p)
+    return _couple(dic, ir, calibration, p)
+
+
+def _couple_chunk(dic, ir, calibration, chunk, p) -> xr.Dataset:
+    """:func:`couple` of one time chunk: its DIC times with one neighbour each side (the masks) and its IR window."""
+    t_dic = dic["time"].values.astype(float)
+    t_ir = ir["time"].values.astype(float)
+    sl = chunk_slice(t_dic.size, *chunk)
+    # one neighbour each side: a time's mask is intersected with its neighbours'
+    a, b = max(sl.start - 1, 0), min(sl.stop + 1, t_dic.size)
+    reach = temporal_reach(t_ir, c=p["c_time"], R0=p["R0_time"])
+    frames = window(t_ir, t_dic[sl.start], t_dic[sl.stop - 1], reach)
+    if reach >= t_ir.size and chunk[1] > 1:
+        log.warning("couple: the temporal kernel (c_time %g, R0_time %g s) reaches over all %d IR frames "
+                    "(spacing %.3g s): every chunk reads the whole IR record, so chunking does not bound memory; "
+                    "set execution.chunk_frames: 0, or choose c_time * R0_time below 8 frame spacings",
+                    p["c_time"], p["R0_time"], t_ir.size, float(np.median(np.diff(t_ir))))
+    log.info("couple: chunk %d of %d, DIC times %d..%d, IR frames %d..%d (kernel reach %d frames)", chunk[0] + 1,
+             chunk[1], sl.start, sl.stop - 1, frames.start, frames.stop - 1, reach)
+    # the whole record must have a DIC time in the IR span; a chunk outside it is all status 6
+    whole = bool(((t_dic >= t_ir[0]) & (t_dic <= t_ir[-1])).any())
+    # DIC positions of the whole record (small next to the IR frames): gaps are filled from the nearest valid
+    # time and the choice of reused masks runs from the first time
+    ds = _couple(dic, ir.isel(time=frames), calibration, p, require_span=not whole, only=slice(a, b),
+                 record_times=t_ir)
+    ds = ds.isel(time=slice(sl.start - a, sl.stop - a))
+    ds.attrs.update(ir_time_span_s=[float(t_ir[0]), float(t_ir[-1])], ir_frames=int(t_ir.size),
+                    chunk=[int(chunk[0]), int(chunk[1])])
+    return ds
+
+
+def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=None) -> xr.Dataset:
+    """The couple stage on ``ir``'s frames; ``only`` (a slice of DIC times) and ``record_times`` (the whole
+    record's IR frame times, for the noise gains) when ``ir`` is a chunk's window."""
     started = _time.perf_counter()
     camera = load_camera(calibration)
     u, v = ir["u"].values, ir["v"].values
@@ -114,21 +159,26 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, **params) -
     masks, facing = masks_and_facing(
         pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
         np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],
-        max_angle=p["max_view_angle_deg"])
+        max_angle=p["max_view_angle_deg"], only=only)
+    if only is not None:
+        pr, dic = pr.times(only), dic.isel(time=only)
+        n_t = pr.x.shape[0]
     seen = pr.in_frame & facing
     theta, gu, gv, rate, edge, in_span, extrap = _interpolate(ir, dic["time"].values.astype(float), pr, masks,
-                                                               seen, p)
+                                                               seen, p, require_span)
     status = _status(pr, facing, seen, in_span, extrap, theta)
     visible = status <= Status.EXTRAPOLATED_FROM_EDGE
     for a in (theta, gu, gv, rate, edge):
         a[~visible] = np.nan
-    # noise of the IR data at the specimen pixels: the fields stage's auto rule and uncertainties use it
+    # noise of the IR data at the specimen pixels: the fields stage's auto rule and uncertainties use it;
+    # a chunk estimates it on its own IR window and masks (run_gather combines the chunks' estimates)
     noise = estimate_ir_noise(ir["temperature"], t_ir, np.logical_and.reduce(masks, axis=0))
     log.info("couple: IR noise %.3g K temporal, %.3g K spatial, quantisation %.3g K (%d specimen pixels)",
              noise.temporal, noise.spatial, noise.quantisation, noise.pixels)
-    gains = interpolation_noise_gains(t_ir, method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
+    # the gains are a property of the operator and the record's frame spacing: the same in every chunk
+    gains = interpolation_noise_gains(t_ir if record_times is None else record_times, method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
                                       R0_time=p["R0_time"], halo=p["halo"])
-    counts = {s.name.lower(): int((status == s).sum()) for s in Status}
+    counts = {k[len("count_"):]: n for k, n in count_attrs(status).items()}
     log.info("couple: %d DIC times x %d points in %.1f s; %s", n_t, M, _time.perf_counter() - started,
              ", ".join(f"{k} {v}" for k, v in counts.items() if v))
     fields = dict(theta=theta, gu=gu, gv=gv, rate=rate, edge=edge, status=status, visible=visible, masks=masks)
@@ -145,7 +195,8 @@ def _check_sensor(calibration: xr.Dataset, u: np.ndarray, v: np.ndarray) -> None
         )
 
 
-def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.ndarray, seen: np.ndarray, p: dict):
+def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.ndarray, seen: np.ndarray, p: dict,
+                 require_span: bool = True):
     """Temperature, pixel gradient (u, v), local rate and edge distance at the seen points, each (n_t, M).
 
     Points that project just outside the mask are extrapolated from samples
@@ -166,7 +217,7 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
     theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)
-    if not in_span.any():
+    if require_span and not in_span.any():
         raise DataError(
             f"no DIC time ({t_dic[0]:g}..{t_dic[-1]:g} s) lies inside the IR time span "
             f"({t_ir[0]:g}..{t_ir[-1]:g} s): check time_offset/time_origin of the experiment"
@@ -237,18 +288,61 @@ def _points_dataset(dic, calibration, camera, pr: Projection, t_ir, counts, nois
     )
 
 
+def count_attrs(status: np.ndarray) -> dict:
+    """``count_<status>`` attributes of ``points.zarr``: how many (time, point) pairs have each status."""
+    return {f"count_{s.name.lower()}": int((status == s).sum()) for s in Status}
+
+
+def _gathered_noise(attrs: Sequence[Mapping]) -> dict:
+    """The ``ir_noise*`` attributes of the gathered ``points.zarr`` from those of its chunks.
+
+    Each chunk estimated the noise on its own IR window; the record's
+    estimate is the median of the chunks' (finite) estimates, component by
+    component, so one chunk with a hot spot or few specimen pixels does not
+    decide it. ``ir_noise_k`` is then the temporal median, failing that the
+    spatial one (:attr:`irdic.noise.IRNoise.level`). The gains are the same
+    in every chunk (computed from the record's frame times).
+    """
+    def median(key):
+        v = np.array([float(a.get(key, np.nan)) for a in attrs])
+        v = v[np.isfinite(v)]
+        return float(np.median(v)) if v.size else float("nan")
+
+    noise = IRNoise(median("ir_noise_temporal_k"), median("ir_noise_spatial_k"), median("ir_quantisation_k"), 0)
+    return {"ir_noise_k": float(noise.level), "ir_noise_temporal_k": noise.temporal,
+            "ir_noise_spatial_k": noise.spatial, "ir_quantisation_k": noise.quantisation}
+
+
 def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.PathLike], *,
-        log: str | os.PathLike | None = None, threads: int | None = None, **params) -> None:
+        log: str | os.PathLike | None = None, threads: int | None = None, chunk: tuple[int, int] | None = None,
+        **params) -> None:
     """Stage entry: ``inputs`` dic, ir, calibration (stores) -> ``outputs["store"]`` (points.zarr).
 
     ``params``: the ``interpolation`` section of the configuration (see
     :func:`couple`); ``log`` a log file (Snakemake), ``threads`` the CPU
-    threads of the stage (default all cores).
+    threads of the stage (default all cores); ``chunk`` (index, count):
+    write only that time chunk (``results/<experiment>/chunks/points-<i>.zarr``,
+    gathered by :func:`run_gather`).
     """
     i = paths(inputs, "couple", "inputs", ("dic", "ir", "calibration"))
     o = paths(outputs, "couple", "outputs", ("store",))
     with stage_context("couple", log, threads):
-        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), **params)
+        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), chunk=chunk, **params)
         write_dataset(ds, o["store"], stage="couple", params=params,
                       inputs=[os.fspath(i[k]) for k in ("dic", "ir", "calibration")],
+                      encoding={"temperature": {"chunks": (1, ds.sizes["point"])}})
+
+
+def run_gather(inputs: Mapping[str, Sequence[str | os.PathLike]], outputs: Mapping[str, str | os.PathLike], *,
+               log: str | os.PathLike | None = None, threads: int | None = None, **params) -> None:
+    """Gather entry: ``inputs["chunks"]`` (chunk stores in time order) -> ``outputs["store"]`` (points.zarr)."""
+    o = paths(outputs, "couple", "outputs", ("store",))
+    parts = [os.fspath(q) for q in paths(inputs, "couple-gather", "inputs", ("chunks",))["chunks"]]
+    with stage_context("couple-gather", log, threads):
+        stores = [open_store(q) for q in parts]
+        ds = gather(stores)
+        ds.attrs = {k: v for k, v in ds.attrs.items() if not k.startswith("count_") and k != "chunk"}
+        ds.attrs.update(count_attrs(ds["status"].values))
+        ds.attrs.update(_gathered_noise([c.attrs for c in stores]))
+        write_dataset(ds, o["store"], stage="couple", params=params, inputs=parts,
                       encoding={"temperature": {"chunks": (1, ds.sizes["point"])}})

@@ -27,7 +27,7 @@ from __future__ import annotations
 import logging
 import os
 import time as _time
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 import xarray as xr
@@ -36,16 +36,17 @@ from ..camera import load_camera
 from ..errors import ConfigError, DataError
 from ..store import open_store, write_dataset
 from ..strain import strain
-from ..surface import fit_surface, surface_geometry
+from ..surface import fit_surface, surface_geometry, surface_parameters
+from ..chunks import chunk_slice, gather, window
+from ..numerics.temporal import smooth_series, temporal_reach
 from ..gradient import material_rate, surface_gradient
-from ..numerics.temporal import smooth_series
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
 from .parameters import settings
-from .uncertainty import uncertainties
+from .uncertainty import Window, uncertainties
 
-__all__ = ["run", "fields"]
+__all__ = ["run", "run_gather", "fields"]
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +65,8 @@ def _method_of(info) -> str:
     return str(info.get("method")) if isinstance(info, dict) else str(info)
 
 
-def fields(points: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
+def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int] | None = None,
+           **params) -> xr.Dataset:
     """Gradient, rate and strain fields at the DIC points.
 
     Parameters
@@ -73,6 +75,9 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
         ``points.zarr`` of the experiment.
     calibration : xarray.Dataset
         ``calibration.zarr`` of its setup.
+    chunk : (index, count), optional
+        Only the DIC times of this time chunk (:mod:`irdic.chunks`), from the
+        stages within the temporal kernel's reach of them (see Notes).
     **params
         The ``fields`` section of the configuration; absent keys take the
         schema's defaults:
@@ -101,7 +106,48 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
     -------
     xarray.Dataset
         The content of ``fields.zarr`` (see README).
+
+    Notes
+    -----
+    A time chunk reads the coordinates of every stage (the surface
+    parameters come from each point's first valid stage, the strain from the
+    reference stage 0) but fits the surface and the temperature series only
+    over its own stages plus the temporal kernel's reach
+    (:func:`irdic.numerics.temporal.temporal_reach`) on each side; with
+    interpolation in time (the default) that reproduces the whole-record
+    result, except within the reach of the record's first and last stage
+    (:func:`irdic.numerics.temporal.temporal_reach`). Smoothing chosen by GCV is chosen once, on the stages of the
+    first chunk's window, identically in every chunk, and each chunk then
+    regresses its own window: a regression differs from the whole-record
+    regression by a small fraction of the noise it removes (centres are
+    placed per window), not by 1e-4.
     """
+    p = _checked_settings(points, params)
+    started = _time.perf_counter()
+    t = points["time"].values.astype(float)
+    x = points["x"].transpose("time", "point", "component").values.astype(float)
+    # "auto": regression where the estimated noise matters, else the paper's interpolation; resolved once on
+    # the whole record (before chunking), so every chunk makes the same choice
+    chosen, noise_attrs = auto_smoothing(points, x, {k: p[k] for k in
+                                                     ("surface_smoothing", "temperature_smoothing",
+                                                      "temperature_smoothing_space")})
+    p.update(chosen)
+    configured = p["temperature_smoothing"]
+    points, sf, p, series = _surface(points, x, t, chunk, p)
+    t = points["time"].values.astype(float)
+    T, N = sf.x.shape[:2]
+    geo = surface_geometry(sf.tangents)
+    grad, total, loc, convective, best, unc = _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs,
+                                                                  series)
+    st = strain(sf.tangents, sf.ref_tangents, tensors=False)
+    log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
+             _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
+    ds = _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, configured, noise_attrs)
+    return _with_uncertainty(ds, unc)
+
+
+def _checked_settings(points, params) -> dict:
+    """The ``fields`` settings with defaults; ConfigError/DataError for bad smoothing values or a wrong store."""
     p = settings("fields", params)
     for name in _SMOOTHING:
         _smoothing(name, p[name])
@@ -109,35 +155,84 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, **params) -> xr.Dataset:
                if v not in points]
     if missing:
         raise DataError(f"points store lacks {missing}: is it the output of the couple stage?")
-    started = _time.perf_counter()
-    t = points["time"].values.astype(float)
-    x = points["x"].transpose("time", "point", "component").values.astype(float)
-    # "auto": regression where the estimated noise matters, else the paper's interpolation
-    chosen, noise_attrs = auto_smoothing(points, x, {k: p[k] for k in
-                                                     ("surface_smoothing", "temperature_smoothing",
-                                                      "temperature_smoothing_space")})
-    p.update(chosen)
+    return p
+
+
+def _surface(points, x, t, chunk, p):
+    """``(points, surface, p, window)`` of the whole record, or of a time chunk (:func:`_chunk_surface`)."""
+    if chunk is not None:
+        return _chunk_surface(points, x, t, chunk, p)
     sf = fit_surface(x, t, c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"],
-                     smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"], solver=p["solver"],
-                     parametrisation=p["parametrisation"])
-    T, N = sf.x.shape[:2]
-    geo = surface_geometry(sf.tangents)
-    grad, total, loc, convective, best, unc = _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs)
-    st = strain(sf.tangents, sf.ref_tangents, tensors=False)
-    log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
-             _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
-    ds = _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, p["temperature_smoothing"],
-                         noise_attrs)
-    return _with_uncertainty(ds, unc)
+                     smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"],
+                     solver=p["solver"], parametrisation=p["parametrisation"])
+    return points, sf, p, None
 
 
-def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs):
+def _surface_kw(p):
+    return dict(c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"], solver=p["solver"])
+
+
+def _chunk_surface(points, x, t, chunk, p):
+    """Points of the chunk's window, the surface at the chunk's times, and ``p`` with GCV choices resolved."""
+    sl = chunk_slice(t.size, *chunk)
+    reach = temporal_reach(t, c=p["c_time"], R0=p["R0_time"])
+    w = window(t, t[sl.start], t[sl.stop - 1], reach)
+    log.info("fields: chunk %d of %d, DIC times %d..%d, stages %d..%d (kernel reach %d stages)", chunk[0] + 1,
+             chunk[1], sl.start, sl.stop - 1, w.start, w.stop - 1, reach)
+    psi, how = surface_parameters(x, p["parametrisation"])
+    p = _resolve_gcv(points, x, t, psi, chunk[1], reach, p)
+    kw = _surface_kw(p)
+    sf = fit_surface(x[w], t[w], psi, t_eval=t[sl], smoothing=p["surface_smoothing"],
+                     smoothing_t=p["surface_smoothing_time"], **kw)
+    if w.start > 0:
+        # the strain's reference is stage 0 of the record; at a sample time the temporal
+        # operator is the identity, so stages 0 and 1 alone give its tangents
+        ref = fit_surface(x[:2], t[:2], psi, t_eval=t[:1], smoothing=p["surface_smoothing"], smoothing_t=None, **kw)
+        sf = sf._replace(ref_x=ref.ref_x, ref_tangents=ref.ref_tangents)
+    filled = np.asarray(sf.filled)[sl.start - w.start:sl.stop - w.start]
+    sf = sf._replace(filled=filled)
+    sf.info["parametrisation"] = how
+    # the window's temperature series and coordinates: the regression in time and the uncertainty probes need them
+    series = Window(theta=points["temperature"].isel(time=w).values.astype(float), t=t[w], x=x[w], x_ref=x[:2],
+                    t_ref=t[:2], first=sl.start == 0, last=sl.stop == t.size)
+    return points.isel(time=sl), sf, p, series
+
+
+def _resolve_gcv(points, x, t, psi, count, reach, p):
+    """``p`` with every "gcv" smoothing replaced by the number GCV picks on the first chunk's window."""
+    gcv = [k for k in _SMOOTHING if p[k] == "gcv"]
+    if not gcv:
+        return p
+    sl = chunk_slice(t.size, 0, count)
+    w = window(t, t[sl.start], t[sl.stop - 1], reach)
+    p = dict(p)
+    if "surface_smoothing" in gcv or "surface_smoothing_time" in gcv:
+        info = fit_surface(x[w], t[w], psi, smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"],
+                           **_surface_kw(p)).info
+        p["surface_smoothing"] = info["smoothing"] if p["surface_smoothing"] is not None else None
+        p["surface_smoothing_time"] = info["smoothing_t"] if p["surface_smoothing_time"] is not None else None
+    theta = points["temperature"].isel(time=w).values.astype(float)
+    if p["temperature_smoothing"] == "gcv":
+        p["temperature_smoothing"] = smooth_series(theta, t[w], smoothing="gcv", c=p["c_time"],
+                                                   R0=p["R0_time"]).smoothing
+    if p["temperature_smoothing_space"] == "gcv":
+        k = _space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"])
+        if k is not None:  # no time with 6 visible points in that window: each chunk chooses its own
+            p["temperature_smoothing_space"] = k
+    log.info("fields: smoothing chosen once for all chunks on DIC times %d..%d: %s", w.start, w.stop - 1,
+             ", ".join(f"{k} {p[k]}" for k in gcv))
+    return p
+
+
+def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=None):
     """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
     and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
     uncertainties of :func:`irdic.stages.uncertainty.uncertainties`.
 
     The projection Jacobian of the calibrated camera at the surface points
     turns pixel gradients into surface ones (see the module docstring).
+    ``series`` (:class:`Window`): a time chunk's window around the times
+    ``t``, for the regression in time and the uncertainty probes.
     """
     T, N = sf.x.shape[:2]
     camera = load_camera(calibration)
@@ -156,7 +251,10 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs):
     best = theta
     chosen_k = {"temperature_smoothing": None, "temperature_smoothing_space": None}
     if p["temperature_smoothing"] is not None:
-        fit = smooth_series(theta, t, smoothing=p["temperature_smoothing"], c=p["c_time"], R0=p["R0_time"])
+        # a chunk regresses its window's series and evaluates it at its own times
+        th, ts = (series.theta, series.t) if series is not None else (theta, t)
+        fit = smooth_series(th, ts, t if series is not None else None, smoothing=p["temperature_smoothing"],
+                            c=p["c_time"], R0=p["R0_time"])
         smoothed_rate, smoothed = fit.rate, fit.value
         chosen_k["temperature_smoothing"] = fit.smoothing
         total = np.where(visible, smoothed_rate, np.nan)
@@ -175,7 +273,7 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs):
         return _regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"])[:2]
 
     unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
-                        g_pix, t, p, chosen_k, regress_space)
+                        g_pix, t, p, chosen_k, regress_space, window=series)
     return grad, total, loc, rate.convective, best, unc
 
 
@@ -232,6 +330,29 @@ def _with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
     return ds
 
 
+def _space_gcv_filled(filled, p, *, c, R0):
+    """GCV centre spacing of the spatial regression from up to 8 filled times (rows of ``filled``)."""
+    from ..surface import gcv_spatial
+
+    sample = filled[np.linspace(0, filled.shape[0] - 1, min(filled.shape[0], 8)).astype(int)].T
+    k, _ = gcv_spatial(p, sample, c=c, R0=R0)
+    log.info("temperature_smoothing_space: GCV chose a centre spacing of %.1f point spacings", k)
+    return k
+
+
+def _space_gcv(theta, psi, *, c, R0):
+    """:func:`_space_gcv_filled` of the times of ``theta`` (T, N) with 6 or more visible points."""
+    from ..surface import SpatialInterpolant
+
+    have = np.isfinite(psi).all(axis=1)
+    visible = np.isfinite(theta) & have
+    times = np.flatnonzero(visible.sum(axis=1) >= 6)
+    if times.size == 0:
+        return None
+    filled, _ = SpatialInterpolant(psi[have], c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
+    return _space_gcv_filled(filled, psi[have], c=c, R0=R0)
+
+
 def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
     """In-plane gradient and value from a spatial regression of the point temperatures of each time.
 
@@ -239,7 +360,7 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
     times with fewer than 6 visible points stay NaN. Returns ``(grad (T, N, 3)
     K/mm, value (T, N) degC, the centre spacing factor used)``.
     """
-    from ..surface import SpatialInterpolant, gcv_spatial
+    from ..surface import SpatialInterpolant
 
     T, N = theta.shape
     grad = np.full((T, N, 3), np.nan)
@@ -253,9 +374,7 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
     p = psi[have]
     filled, _ = SpatialInterpolant(p, c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
     if smoothing == "gcv":
-        sample = filled[np.linspace(0, times.size - 1, min(times.size, 8)).astype(int)].T
-        k, _ = gcv_spatial(p, sample, c=c, R0=R0)
-        log.info("temperature_smoothing_space: GCV chose a centre spacing of %.1f point spacings", k)
+        k = _space_gcv_filled(filled, p, c=c, R0=R0)
     else:
         k = float(smoothing)
     v0, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=True)
@@ -272,7 +391,8 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
 
 
 def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.PathLike], *,
-        log: str | os.PathLike | None = None, threads: int | None = None, **params) -> None:
+        log: str | os.PathLike | None = None, threads: int | None = None, chunk: tuple[int, int] | None = None,
+        **params) -> None:
     """Stage entry: ``inputs`` points, calibration (and dic, machine) -> ``outputs["store"]`` (fields.zarr).
 
     ``dic`` (``dic.zarr``) and ``machine`` (``machine.zarr``), when given,
@@ -281,7 +401,9 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     :func:`irdic.signals.signals_at`; machine signals prefixed ``machine_``).
     ``params``: the ``fields`` section of the configuration (see
     :func:`fields`); ``log`` a log file (Snakemake), ``threads`` the CPU
-    threads of the stage (default all cores).
+    threads of the stage (default all cores); ``chunk`` (index, count):
+    write only that time chunk (``results/<experiment>/chunks/fields-<i>.zarr``,
+    gathered by :func:`run_gather`).
     """
     from ..signals import signals_at
 
@@ -289,7 +411,7 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     o = paths(outputs, "fields", "outputs", ("store",))
     dic, machine = optional_path(i, "dic"), optional_path(i, "machine")
     with stage_context("fields", log, threads):
-        ds = fields(open_store(i["points"]), open_store(i["calibration"]), **params)
+        ds = fields(open_store(i["points"]), open_store(i["calibration"]), chunk=chunk, **params)
         sig = signals_at(ds["time"].values, dic=open_store(dic) if dic is not None else None,
                          machine=open_store(machine) if machine is not None else None)
         if sig is not None:
@@ -297,3 +419,13 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
         inputs_used = [os.fspath(i["points"]), os.fspath(i["calibration"])]
         inputs_used += [os.fspath(q) for q in (dic, machine) if q is not None]
         write_dataset(ds, o["store"], stage="fields", params=params, inputs=inputs_used)
+
+
+def run_gather(inputs: Mapping[str, Sequence[str | os.PathLike]], outputs: Mapping[str, str | os.PathLike], *,
+               log: str | os.PathLike | None = None, threads: int | None = None, **params) -> None:
+    """Gather entry: ``inputs["chunks"]`` (chunk stores in time order) -> ``outputs["store"]`` (fields.zarr)."""
+    o = paths(outputs, "fields", "outputs", ("store",))
+    parts = [os.fspath(q) for q in paths(inputs, "fields-gather", "inputs", ("chunks",))["chunks"]]
+    with stage_context("fields-gather", log, threads):
+        write_dataset(gather([open_store(q) for q in parts]), o["store"], stage="fields", params=params,
+                      inputs=parts)

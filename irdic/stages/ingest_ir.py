@@ -1,7 +1,10 @@
 """Ingest stage, IR: a series of IR exports -> ``ir.zarr``.
 
 IR frames are streamed into the store one at a time (memory is one frame,
-whatever the length of the series). The time axis comes from the files or a
+whatever the length of the series). With more than one thread, a pool reads
+and parses the next files while the current frame is written (at most two
+files per thread ahead, in order): a record of thousands of exports is
+bound by the disk and the parser, not by one core. The time axis comes from the files or a
 frame rate (:func:`irdic.stages.inputs.frame_times`).
 """
 
@@ -21,6 +24,7 @@ from ..errors import DataError, IrdicWarning
 from ..logs import Progress
 from ..store import FrameStore, provenance
 from ..vocabulary import series_attrs
+from ..threads import thread_budget
 from .common import paths, stage_context
 from .inputs import as_files, frame_times, log_gaps
 from .parameters import settings
@@ -37,34 +41,73 @@ MAX_NAN_FRACTION = 0.5
 WARN_NAN_FRACTION = 0.01
 
 
-def _read_untimed(f: Path, fmt: str) -> xr.DataArray:
-    """One IR file read as it is: a stack's missing time axis is no concern here.
+def _read_untimed(f: Path, ffmt: str) -> xr.DataArray:
+    """One non-``.irb`` export as the reader returns it.
 
-    The stage times every frame itself (:func:`~irdic.stages.inputs.frame_times`,
-    from ``frame_rate`` or a clear error), so the reader's warning that a
-    stack has no time coordinate would only be noise in the log.
+    A stack's missing time axis is no concern here: the stage times every
+    frame itself (:func:`~irdic.stages.inputs.frame_times`, from
+    ``frame_rate`` or a clear error), so the reader's warning that a stack
+    has no time coordinate would only be noise in the log.
     """
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=r".*frames but no frame_rate given", category=IrdicWarning)
-        return _io.read_ir(f, format=fmt)
+        return _io.read_ir(f, format=ffmt)
 
 
-def _iter_ir_frames(files: Sequence[Path], fmt: str) -> Iterator[tuple[str, xr.DataArray]]:
-    """Yield (label, frame DataArray with dims (v, u)) for every frame of the series."""
-    for f in files:
-        ffmt = _io.detect_ir_format(f) if fmt == "auto" else fmt
-        if ffmt == "irb":
-            from ..io import irb
+def _read_file(f: Path, ffmt: str) -> xr.DataArray:
+    """One non-``.irb`` export, read and parsed (its values in memory)."""
+    return _read_untimed(f, ffmt).load()
 
-            for i, frame in enumerate(irb.iter_irb_dataarrays(f)):
-                yield f"{f.name}[{i}]", frame
-            continue
-        da = _read_untimed(f, ffmt)
-        if "time" in da.dims:
-            for i in range(da.sizes["time"]):
-                yield f"{f.name}[{i}]", da.isel(time=i)
-        else:
-            yield f.name, da
+
+def _frames_of(f: Path, da: xr.DataArray) -> Iterator[tuple[str, xr.DataArray]]:
+    if "time" in da.dims:
+        for i in range(da.sizes["time"]):
+            yield f"{f.name}[{i}]", da.isel(time=i)
+    else:
+        yield f.name, da
+
+
+def _iter_ir_frames(files: Sequence[Path], fmt: str, threads: int = 1) -> Iterator[tuple[str, xr.DataArray]]:
+    """Yield (label, frame DataArray with dims (v, u)) for every frame of the series, in file order.
+
+    ``threads > 1``: up to ``2 threads`` files are read ahead in a thread
+    pool (file parsers release the GIL in numpy and I/O). ``.irb`` files
+    (many frames each) stay streamed frame by frame in this thread.
+    """
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    formats = [_io.detect_ir_format(f) if fmt == "auto" else fmt for f in files]
+    if threads <= 1:
+        for f, ffmt in zip(files, formats):
+            if ffmt == "irb":
+                from ..io import irb
+
+                for i, frame in enumerate(irb.iter_irb_dataarrays(f)):
+                    yield f"{f.name}[{i}]", frame
+                continue
+            yield from _frames_of(f, _read_file(f, ffmt))
+        return
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="ingest-ir") as pool:
+        ahead: deque = deque()
+        nxt = 0
+        try:
+            for f, ffmt in zip(files, formats):
+                while nxt < len(files) and len(ahead) < 2 * threads:
+                    if formats[nxt] != "irb":
+                        ahead.append((nxt, pool.submit(_read_file, files[nxt], formats[nxt])))
+                    nxt += 1
+                if ffmt == "irb":
+                    from ..io import irb
+
+                    for i, frame in enumerate(irb.iter_irb_dataarrays(f)):
+                        yield f"{f.name}[{i}]", frame
+                    continue
+                _, fut = ahead.popleft()  # the pool holds the non-.irb files in file order: this is file k
+                yield from _frames_of(f, fut.result())
+        finally:
+            for _, fut in ahead:
+                fut.cancel()
 
 
 def _count_ir_frames(files: Sequence[Path], fmt: str) -> tuple[int, list | None]:
@@ -146,7 +189,7 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         # are refused before hours of frames are decoded and written
         labels0, times0, numbers0 = zip(*stamps)
         frame_times(times0, numbers0, labels=labels0, what="IR frame", **p)
-    it = _iter_ir_frames(files, fmt)
+    it = _iter_ir_frames(files, fmt, thread_budget())
     label0, first = next(it)
     # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
     attrs = series_attrs("ir", first.attrs)

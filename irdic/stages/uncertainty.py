@@ -34,6 +34,7 @@ points within two point spacings of the point cloud's edge.
 from __future__ import annotations
 
 import logging
+from typing import NamedTuple
 
 import numpy as np
 
@@ -43,7 +44,7 @@ from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
 
-__all__ = ["uncertainties", "PROBES", "EDGE_PX"]
+__all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX"]
 
 log = logging.getLogger(__name__)
 
@@ -53,12 +54,30 @@ PROBES = 16
 EDGE_PX = 2.0
 
 
+class Window(NamedTuple):
+    """A time chunk's window (:mod:`irdic.chunks`): what the fields of its own times depend on.
+
+    ``theta`` (T_w, N) degC and ``x`` (T_w, N, 3) mm at the window's times
+    ``t`` (T_w,) s; ``x_ref``/``t_ref``: the record's first two stages (the
+    strain's reference); ``first``/``last``: the chunk holds the record's
+    first/last DIC time.
+    """
+
+    theta: np.ndarray
+    t: np.ndarray
+    x: np.ndarray
+    x_ref: np.ndarray
+    t_ref: np.ndarray
+    first: bool
+    last: bool
+
+
 def _probe_std(samples, base):
     """Standard deviation over the probe axis 0 of ``samples - base`` (zero-mean by construction)."""
     return np.sqrt(np.mean(np.square(samples - base), axis=0))
 
 
-def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0):
+def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None):
     """Standard uncertainties and bias flags of the fields (see the module docstring).
 
     Parameters
@@ -85,6 +104,10 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         the spatial regression of the fields stage.
     seed : int
         Seed of the probes (fixed: the stores are reproducible).
+    window : Window, optional
+        A time chunk's window: the temporal regression's weights and the
+        strain probes run over it, as the chunk's fields do, and only the
+        record's own ends are flagged as series ends.
 
     Returns
     -------
@@ -100,16 +123,17 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     sig_n, q, sigma, (s_T, s_g, s_r) = _ir_noise(a)
     notes = []
     temp_std, grad_std, rate_std = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
-                                           s_T, s_g, s_r)
+                                           s_T, s_g, s_r, window)
     # calibration: the projected position's uncertainty moves the sample along the pixel gradient
     pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
     cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
     temp_std = np.sqrt(temp_std ** 2 + cal ** 2)
     s_x = float(a.get("dic_noise_mm", np.nan))
-    strain_std = _strain_std(points, sf, t, p, s_x, rng)
+    strain_std = _strain_std(points, sf, t, p, s_x, rng, window)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
-    ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes)
+    ends = (True, True) if window is None else (window.first, window.last)
+    ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes, ends)
     for arr in (temp_std, rate_std):
         arr[~visible] = np.nan
     grad_std[~visible] = np.nan
@@ -136,7 +160,7 @@ def _ir_noise(a):
     return sig_n, q, sigma, tuple(gains)
 
 
-def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r):
+def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None):
     """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
@@ -154,7 +178,8 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     kt, ks = chosen_k.get("temperature_smoothing"), chosen_k.get("temperature_smoothing_space")
     W0 = None
     if kt is not None:
-        ts = TemporalInterpolant(t, c=p["c_time"], R0=p["R0_time"], smoothing=kt)
+        # a chunk's regression runs over its window (T_w samples) and is evaluated at its own times
+        ts = TemporalInterpolant(t if window is None else window.t, c=p["c_time"], R0=p["R0_time"], smoothing=kt)
         W0, W1 = ts.weights(t, 0), ts.weights(t, 1)
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W1 ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W0 ** 2, axis=1))[:, None], (T, N)).copy()
@@ -166,6 +191,10 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         g_pr, v_pr = regress_space(noise.reshape(PROBES * T, N), dual, ks)
         grad_std = _probe_std(g_pr.reshape(PROBES, T, N, 3), 0.0)
         if W0 is not None:
+            if window is not None:
+                # the temporal regression of a chunk mixes its window's noise
+                noise = rng.standard_normal((PROBES, window.t.size, N)) * s_T
+                noise[:, ~np.isfinite(window.theta)] = np.nan
             smoothed = np.einsum("ij,kjn->kin", W0, np.nan_to_num(noise))
             smoothed[:, ~visible] = np.nan
             _, v_pr = regress_space(smoothed.reshape(PROBES * T, N), dual, ks)
@@ -173,7 +202,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     return temp_std, grad_std, rate_std
 
 
-def _strain_std(points, sf, t, p, s_x, rng):
+def _strain_std(points, sf, t, p, s_x, rng, window=None):
     """Standard uncertainty of the max principal strain: DIC noise probes through the surface fit
     (smoothing frozen) and the strain; NaN when the DIC noise is unknown or zero."""
     T, N = sf.x.shape[:2]
@@ -186,12 +215,26 @@ def _strain_std(points, sf, t, p, s_x, rng):
     kw = {k: (None if k.startswith("smoothing") and v is not None and v <= 1.0 else v) for k, v in kw.items()}
     samples = []
     for _ in range(PROBES):
-        pf = fit_surface(x + rng.standard_normal(x.shape) * s_x, t, psi=sf.psi, **kw)
+        if window is None:
+            pf = fit_surface(x + rng.standard_normal(x.shape) * s_x, t, psi=sf.psi, **kw)
+        else:
+            pf = _window_probe(window, t, sf.psi, kw, s_x, rng)
         samples.append(strain(pf.tangents, pf.ref_tangents, tensors=False).e_max)
     return _probe_std(np.array(samples), base)
 
 
-def _bias_flags(points, sf, visible, q, sig_n, notes):
+def _window_probe(window, t, psi, kw, s_x, rng):
+    """A noisy surface fit of a chunk as the fields stage fits it: over its window, at its times ``t``,
+    with the strain's reference from the record's first two stages (noise drawn for those too)."""
+    pf = fit_surface(window.x + rng.standard_normal(window.x.shape) * s_x, window.t, psi, t_eval=t, **kw)
+    if window.t[0] > window.t_ref[0]:
+        ref = fit_surface(window.x_ref + rng.standard_normal(window.x_ref.shape) * s_x, window.t_ref, psi,
+                          t_eval=window.t_ref[:1], **{**kw, "smoothing_t": None})
+        pf = pf._replace(ref_x=ref.ref_x, ref_tangents=ref.ref_tangents)
+    return pf
+
+
+def _bias_flags(points, sf, visible, q, sig_n, notes, ends=(True, True)):
     """Where the method's bias, not the noise, dominates: IR fields, rates, strain (appends to ``notes``)."""
     T, N = sf.x.shape[:2]
     status = points["status"].values
@@ -203,7 +246,10 @@ def _bias_flags(points, sf, visible, q, sig_n, notes):
         notes.append(f"IR: the export step {q:g} K exceeds the noise ({sig_n:.3g} K): rounding is a deterministic "
                      "error, the temperature uncertainties do not bound it")
     rate_bias = ir_bias.copy()
-    rate_bias[[0, -1]] |= visible[[0, -1]]
+    # the one-sided end of the series: only the record's own first and last time (a chunk's window runs on)
+    for i, end in zip((0, -1), ends):
+        if end:
+            rate_bias[i] |= visible[i]
     h = _spacing(sf.psi)
     strain_bias = np.broadcast_to(~(sf.edge_distance >= 2 * h), (T, N)) | sf.filled
     strain_bias = strain_bias & np.isfinite(sf.x).all(axis=-1)

@@ -40,7 +40,7 @@ def fill_in_time(a: np.ndarray) -> np.ndarray:
     return np.take_along_axis(a, src[..., None], axis=0)
 
 
-def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle):
+def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, only: slice | None = None):
     """Per DIC time: specimen mask (H, W) and facing flags (M,).
 
     A point that failed correlation in one stage does not open a hole in the
@@ -48,31 +48,33 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle):
     the point's nearest valid stage. While the points move less than
     ``MASK_REUSE_PX`` the previous mask is reused, so a static specimen has
     one mask and the interpolant is set up once.
+
+    ``only`` (a slice of the times): masks and flags of those times alone,
+    equal to the same rows of the whole result (a time chunk): which mask a
+    time reuses depends on every earlier time, so that choice is made over
+    all times (cheap: pixel positions only) and just the masks the slice
+    uses are built.
     """
     n_t, M, _ = x.shape
     xf = fill_in_time(x)
     pf = fill_in_time(pix)
-    masks = np.zeros((n_t, v.size, u.size), dtype=bool)
-    facing = np.zeros((n_t, M), dtype=bool)
-    last = None
-    rebuilt = 0
-    for k in range(n_t):
-        ok = np.isfinite(pf[k]).all(axis=1)
-        if ok.sum() < 3:
+    source = _mask_sources(pf)
+    keep_t = np.arange(n_t) if only is None else np.arange(n_t)[only]
+    masks = np.zeros((keep_t.size, v.size, u.size), dtype=bool)
+    facing = np.zeros((keep_t.size, M), dtype=bool)
+    built = {}
+    for row, k in enumerate(keep_t):
+        j = source[k]
+        if j < 0:
             continue
-        if last is not None:
-            both = ok & np.isfinite(pf[last]).all(axis=1)
-            moved = np.abs(pf[k][both] - pf[last][both]).max() if both.any() else np.inf
-            if moved < MASK_REUSE_PX:
-                masks[k] = masks[last]
-                facing[k] = facing[last]
-                continue
-        n = point_normals(xf[k], towards=centre)
-        facing[k] = facing_camera(xf[k], n, centre, max_angle_deg=max_angle)
-        keep = ok & facing[k]
-        masks[k] = specimen_mask(pf[k][keep], u, v, erosion_px=erosion, max_edge_factor=edge_factor)
-        last = k
-        rebuilt += 1
+        if j not in built:
+            n = point_normals(xf[j], towards=centre)
+            f = facing_camera(xf[j], n, centre, max_angle_deg=max_angle)
+            keep = np.isfinite(pf[j]).all(axis=1) & f
+            built[j] = (specimen_mask(pf[j][keep], u, v, erosion_px=erosion, max_edge_factor=edge_factor), f)
+        masks[row], facing[row] = built[j]
+    rebuilt = len(built)
+    n_t = keep_t.size
     # a pixel the moving edge crosses between neighbouring times carries mixed
     # specimen/background values after temporal interpolation: leave it out
     both = masks.copy()
@@ -81,6 +83,25 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle):
     log.info("specimen masks: %d built for %d DIC times, %d to %d px", rebuilt, n_t,
              int(both.sum(axis=(1, 2)).min()), int(both.sum(axis=(1, 2)).max()))
     return both, facing
+
+
+def _mask_sources(pf: np.ndarray) -> np.ndarray:
+    """Per time the time whose mask it uses (itself when rebuilt; -1: fewer than 3 points, no mask)."""
+    n_t = pf.shape[0]
+    source = np.full(n_t, -1, np.int64)
+    last = None
+    for k in range(n_t):
+        ok = np.isfinite(pf[k]).all(axis=1)
+        if ok.sum() < 3:
+            continue
+        if last is not None:
+            both = ok & np.isfinite(pf[last]).all(axis=1)
+            moved = np.abs(pf[k][both] - pf[last][both]).max() if both.any() else np.inf
+            if moved < MASK_REUSE_PX:
+                source[k] = last
+                continue
+        source[k] = last = k
+    return source
 
 
 @dataclass
@@ -112,6 +133,13 @@ class Projection:
     pix: np.ndarray
     in_frame: np.ndarray
     local: np.ndarray
+
+    def times(self, sl: slice) -> "Projection":
+        """The projection of the times ``sl`` alone."""
+        n_t, M = self.valid.shape
+        front = self.front.reshape(n_t, M)[sl]
+        return Projection(self.x[sl], self.x[sl].reshape(-1, 3), self.valid[sl], front.ravel(), self.pix[sl],
+                          self.in_frame[sl], self.local[sl])
 
 
 def project_points(camera, dic: xr.Dataset, u: np.ndarray, v: np.ndarray) -> Projection:

@@ -253,6 +253,15 @@ def _defects(rng, M: int, N: int):
     return failed, absent
 
 
+def n_stages(name: str, scale: str) -> int | None:
+    """Number of DIC stages of demo experiment ``name`` at ``scale`` (None: not a demo experiment)."""
+    plan = _PLAN.get(name, {}).get(scale)
+    if plan is None:
+        return None
+    duration, _, dic_rate = plan[:3]
+    return int(round(duration * dic_rate)) + 1
+
+
 def experiment(name: str, scale: str = "demo", *, ir_noise: float = 0.05, dic_noise: float = 0.005,
                seed: int = 0, camera: TrueCamera | None = None, specimen: Specimen | None = None) -> Experiment:
     """Build the in-memory experiment ``name`` at ``scale``.

@@ -269,3 +269,24 @@ def test_named_pipe_in_the_input_folder_is_refused(tmp_path):
     (src / "sub").mkdir()  # sub-folders are still skipped
     os.remove(src / "spec_00002.txt")
     assert [p.name for p in list_inputs(src)] == ["spec_00000.txt", "spec_00001.txt"]
+
+
+@pytest.mark.parametrize("threads", [2, 5])
+def test_ir_files_read_in_parallel_equal_the_serial_result(tmp_path, threads):
+    """A thread pool reading ahead writes the same store, frame for frame and in order, as one thread."""
+    from irdic.threads import stage_threads
+
+    src = tmp_path / "ir"
+    src.mkdir()
+    rng = np.random.default_rng(3)
+    for k in range(23):  # not a multiple of the look-ahead (2 threads files)
+        write_irbis(src / f"spec_{k:05d}.txt", 20 + rng.random((6, 9)), ms=100.0 * k, frame_index=k,
+                    start_pos=(300, 200))
+    with stage_threads(1):
+        ingest_ir(src, tmp_path / "serial.zarr")
+    with stage_threads(threads):
+        ingest_ir(src, tmp_path / "parallel.zarr")
+    a, b = open_store(tmp_path / "serial.zarr"), open_store(tmp_path / "parallel.zarr")
+    for name in ("temperature", "time", "frame_index", "u", "v"):
+        np.testing.assert_array_equal(a[name].values, b[name].values)
+    np.testing.assert_array_equal(a["frame_index"].values, np.arange(23))

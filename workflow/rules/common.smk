@@ -3,10 +3,12 @@
 import os
 import re
 
+import irdic.chunks
 import irdic.config
 import irdic.pipeline
 from irdic.codehash import code_hash
 import irdic.plot
+from irdic.synthetic.experiments import n_stages as demo_stages
 from irdic.stages.inputs import list_inputs
 
 irdic.config.validate_config(config)
@@ -110,3 +112,59 @@ def all_outputs():
         out += [f"{RESULTS}/{e}/paraview", f"{RESULTS}/{e}/points.csv"]
     out.append(f"{RESULTS}/report.html")
     return out
+
+
+def planned_chunks(experiment):
+    """Time chunks of an experiment's couple and fields (execution.chunk_frames), planned before ingest.
+
+    The DIC times are counted as the DIC export files (one per stage), or
+    from the demo's plan; the chunk jobs split the ingested times by position
+    (irdic.chunks), so a count that differs a little still covers every time.
+    """
+    frames = config["execution"]["chunk_frames"]
+    if frames == 0:
+        return 1
+    path = config["experiments"][experiment]["dic"]["path"]
+    if _in_demo(path):
+        name = os.path.relpath(path, DEMO["outdir"]).split(os.sep)[0]
+        n = demo_stages(name, DEMO["scale"]) or 1
+    else:
+        n = len(list_inputs(path))
+    return irdic.chunks.n_chunks(n, frames)
+
+
+def chunk_stores(kind):
+    """The chunk stores (``chunks/<kind>-<i>.zarr``) an experiment's gather step reads."""
+
+    def inner(wildcards):
+        n = planned_chunks(wildcards.experiment)
+        return [f"{RESULTS}/{wildcards.experiment}/chunks/{kind}-{i}.zarr" for i in range(n)]
+
+    return inner
+
+
+def couple_inputs(wildcards):
+    """couple: the chunk stores when the experiment is chunked, else dic, ir and calibration."""
+    if planned_chunks(wildcards.experiment) > 1:
+        return {"chunks": chunk_stores("points")(wildcards)}
+    return couple_chunk_inputs(wildcards)
+
+
+def couple_chunk_inputs(wildcards):
+    e = config["experiments"][wildcards.experiment]
+    return {
+        "dic": f"{RESULTS}/{wildcards.experiment}/dic.zarr",
+        "ir": f"{RESULTS}/{wildcards.experiment}/ir.zarr",
+        "calibration": f"{RESULTS}/setups/{e['setup']}/calibration.zarr",
+    }
+
+
+def fields_gather_inputs(wildcards):
+    """fields: the chunk stores when the experiment is chunked, else the inputs of a whole-record run."""
+    if planned_chunks(wildcards.experiment) > 1:
+        return {"chunks": chunk_stores("fields")(wildcards)}
+    return fields_inputs(wildcards)
+
+
+def chunk_of(wildcards):
+    return [int(wildcards.i), planned_chunks(wildcards.experiment)]
