@@ -119,7 +119,8 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES, threads: int | Non
     unknown = set(stages) - set(STAGES)
     if unknown:
         raise ConfigError(f"unknown stage(s) {sorted(unknown)}; expected {', '.join(STAGES)}")
-    check_inputs(config)
+    if {"ingest", "calibrate"} & set(stages):  # the only stages that read the raw exports
+        check_inputs(config)
     with stage_threads(threads) as n:
         paths = stage_paths(config)
         for stage in STAGES:
@@ -168,11 +169,15 @@ def _ingest(config, paths, threads):
             ingest_machine.run({**src, "ir": p["ir"]}, {"store": p["machine"]}, threads=threads, **rest)
 
 
-def _chunked(stage, config, inputs, store, n_times, threads, params):
-    """Run ``stage`` in the configured time chunks (then gather them into ``store``), or whole."""
+def _chunked(stage, config, inputs, store, times_of, threads, params):
+    """Run ``stage`` in the configured time chunks (then gather them into ``store``), or whole.
+
+    ``times_of``: the store whose time axis is chunked (opened only when chunking is on).
+    """
     from .chunks import chunk_path, n_chunks
 
-    n = n_chunks(n_times, config.get("execution", {}).get("chunk_frames", 0))
+    per_chunk = config.get("execution", {}).get("chunk_frames", 0)
+    n = n_chunks(_n_times(times_of), per_chunk) if per_chunk else 1
     if n == 1:
         stage.run(inputs, {"store": store}, threads=threads, **params)
         return
@@ -196,7 +201,7 @@ def _couple(config, paths, threads):
         p = paths["experiments"][name]
         cal = paths["setups"][e["setup"]]["calibration"]
         _chunked(couple, config, {"dic": p["dic"], "ir": p["ir"], "calibration": cal}, p["points"],
-                 _n_times(p["dic"]), threads, config["interpolation"])
+                 p["dic"], threads, config["interpolation"])
 
 
 def _fields(config, paths, threads):
@@ -208,7 +213,7 @@ def _fields(config, paths, threads):
                   "dic": p["dic"]}
         if "machine" in p:
             inputs["machine"] = p["machine"]
-        _chunked(fields, config, inputs, p["fields"], _n_times(p["points"]), threads, config["fields"])
+        _chunked(fields, config, inputs, p["fields"], p["points"], threads, config["fields"])
 
 
 def _figures(config, paths, threads):

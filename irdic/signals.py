@@ -203,7 +203,8 @@ def ingest_machine(path: str | os.PathLike, out: str | os.PathLike, *, columns: 
         v = ds["signal_value"].transpose("time", "signal").values.astype(float)
         ds["signal_value_ir"] = (("ir_time", "signal"), _interpolate(ds["time"].values.astype(float), v, t,
                                                                      "IR frame times"),
-                                 {"long_name": "machine signal at the IR frame time (linear interpolation)"})
+                                 {"long_name": "machine signal at the IR frame time (linear interpolation; unit of each signal: "
+                                  "coordinate signal_unit)"})
         ds = ds.assign_coords(ir_time=("ir_time", t, {"units": "s", "long_name": "IR frame time"}))
     write_dataset(ds, out, stage="ingest-machine", params=params, inputs=[os.fspath(path)])
     return Path(out)

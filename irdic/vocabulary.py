@@ -157,7 +157,13 @@ DATASET_ATTRS: frozenset[str] = frozenset(
        "not_detected_ids", "outlier_ids", "outside_image_ids", "not_measured_ids", "polarity", "noise_k",
        "marker_radius_mm", "dlt_rms_px", "sigma_px", "parametrisation", "surface_solver", "temperature_smoothing",
        "n_source_files", "calibration_rms_px", "calibration_projection_matrix", "calibration_camera_centre_mm",
-       "calibration_focal_length_px", "ir_time_span_s", "ir_frames"]
+       "calibration_focal_length_px", "ir_time_span_s", "ir_frames",
+       # noise estimates, the smoothing "auto" chose and why, uncertainty notes (irdic.noise, fields)
+       "ir_noise_k", "ir_noise_temporal_k", "ir_noise_spatial_k", "ir_quantisation_k",
+       "ir_noise_gain_temperature", "ir_noise_gain_gradient_per_px", "ir_noise_gain_rate_per_s", "dic_noise_mm",
+       "uncertainty_notes"]
+    + [f"{o}_{w}" for o in ("temperature_smoothing", "temperature_smoothing_space", "surface_smoothing")
+       for w in ("chosen", "reason")]
     + [f"count_{s.name.lower()}" for s in Status])
 
 

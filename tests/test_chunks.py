@@ -119,8 +119,11 @@ def _compare(whole: Path, chunked: Path):
             assert {k: v for k, v in a.attrs.items() if k.startswith("count_")} == \
                    {k: v for k, v in b.attrs.items() if k.startswith("count_")}
             # the noise gains are the operator's: the same whatever the chunking
-            assert {k: v for k, v in a.attrs.items() if k.startswith("ir_noise_gain")} == \
-                   {k: v for k, v in b.attrs.items() if k.startswith("ir_noise_gain")}
+            ga = {k: v for k, v in a.attrs.items() if k.startswith("ir_noise_gain")}
+            gb = {k: v for k, v in b.attrs.items() if k.startswith("ir_noise_gain")}
+            assert ga.keys() == gb.keys() and ga
+            for k in ga:  # equal up to the rounding of separate processes
+                assert gb[k] == pytest.approx(ga[k], rel=1e-9), k
         else:
             # "auto" is resolved once on the whole record: every chunk and the whole record choose alike
             assert {k: v for k, v in a.attrs.items() if k.endswith("_chosen")} == \
