@@ -95,7 +95,7 @@ def fields_inputs(wildcards):
 
 
 def report_figures():
-    """Every PNG the HTML page (rule report_html) shows: calibrations, then each experiment's figures."""
+    """Every PNG the HTML page (the report_html rule) shows: calibrations, then each experiment's figures."""
     out = [f"{RESULTS}/setups/{s}/calibration.png" for s in SETUPS]
     for e in EXPERIMENTS:
         out += [f"{RESULTS}/{e}/figures/{name}.png" for name in figure_names()]

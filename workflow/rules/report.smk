@@ -62,7 +62,7 @@ rule report_html:
     output:
         html=f"{RESULTS}/report.html",
     params:
-        results=RESULTS,
+        results=lambda wc, output: os.path.dirname(output.html),
         code=code_hash("report"),
     log:
         f"{RESULTS}/logs/report.log",
