@@ -10,6 +10,7 @@ frame rate (:func:`irdic.stages.inputs.frame_times`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import warnings
@@ -41,22 +42,25 @@ MAX_NAN_FRACTION = 0.5
 WARN_NAN_FRACTION = 0.01
 
 
-def _read_untimed(f: Path, ffmt: str) -> xr.DataArray:
-    """One non-``.irb`` export as the reader returns it.
+@contextlib.contextmanager
+def _untimed_stacks():
+    """Silence the readers' warning that a stack has no time axis, for the whole ingest.
 
     A stack's missing time axis is no concern here: the stage times every
     frame itself (:func:`~irdic.stages.inputs.frame_times`, from
-    ``frame_rate`` or a clear error), so the reader's warning that a stack
-    has no time coordinate would only be noise in the log.
+    ``frame_rate`` or a clear error), so that warning would only be noise in
+    the log. The filter is set once, in the stage's own thread: warning
+    filters are process-wide and ``catch_warnings`` is not thread-safe, so
+    the reader threads must not set filters of their own.
     """
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=r".*frames but no frame_rate given", category=IrdicWarning)
-        return _io.read_ir(f, format=ffmt)
+        yield
 
 
 def _read_file(f: Path, ffmt: str) -> xr.DataArray:
     """One non-``.irb`` export, read and parsed (its values in memory)."""
-    return _read_untimed(f, ffmt).load()
+    return _io.read_ir(f, format=ffmt).load()
 
 
 def _frames_of(f: Path, da: xr.DataArray) -> Iterator[tuple[str, xr.DataArray]]:
@@ -132,7 +136,7 @@ def _count_ir_frames(files: Sequence[Path], fmt: str) -> tuple[int, list | None]
         if ffmt == "irbis":
             n += 1
         else:
-            da = _read_untimed(f, ffmt)
+            da = _io.read_ir(f, format=ffmt)
             n += da.sizes.get("time", 1)
     return n, stamps
 
@@ -182,26 +186,29 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
     p = settings("ir_source", params, drop=("path",))
     fmt = p.pop("format")
     files = as_files(source, "IR exports")
-    n, stamps = _count_ir_frames(files, fmt)
-    log.info("ingest IR: %d frames from %d files", n, len(files))
-    if stamps:
-        # the time axis from the headers: duplicate or decreasing time stamps
-        # are refused before hours of frames are decoded and written
-        labels0, times0, numbers0 = zip(*stamps)
-        frame_times(times0, numbers0, labels=labels0, what="IR frame", **p)
-    it = _iter_ir_frames(files, fmt, thread_budget())
-    label0, first = next(it)
-    # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
-    attrs = series_attrs("ir", first.attrs)
-    attrs.update(provenance("ingest-ir", dict(format=fmt, **p), [str(f) for f in files[:1000]]))
-    attrs["n_source_files"] = len(files)
-    with FrameStore(
-        out, "temperature", n, ("v", "u"), {"v": first["v"].values, "u": first["u"].values}, dtype=np.float32,
-        var_attrs={"units": "degC", "long_name": "temperature"},
-        attrs=attrs,
-        extra_time_vars={"frame_index": ("int64", {"long_name": "frame number in the recording (-1: unknown)"})},
-    ) as fs:
-        t, numbers = _write_frames(fs, _chain(first, label0, it), n, files, p)
+    with _untimed_stacks():
+        n, stamps = _count_ir_frames(files, fmt)
+        log.info("ingest IR: %d frames from %d files", n, len(files))
+        if stamps:
+            # the time axis from the headers: duplicate or decreasing time stamps
+            # are refused before hours of frames are decoded and written
+            labels0, times0, numbers0 = zip(*stamps)
+            frame_times(times0, numbers0, labels=labels0, what="IR frame", **p)
+        it = _iter_ir_frames(files, fmt, thread_budget())
+        label0, first = next(it)
+        # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
+        attrs = series_attrs("ir", first.attrs)
+        attrs.update(provenance("ingest-ir", dict(format=fmt, **p), [str(f) for f in files[:1000]]))
+        attrs["n_source_files"] = len(files)
+        with FrameStore(
+            out, "temperature", n, ("v", "u"), {"v": first["v"].values, "u": first["u"].values},
+            dtype=np.float32,
+            var_attrs={"units": "degC", "long_name": "temperature"},
+            attrs=attrs,
+            extra_time_vars={"frame_index": ("int64",
+                                             {"long_name": "frame number in the recording (-1: unknown)"})},
+        ) as fs:
+            t, numbers = _write_frames(fs, _chain(first, label0, it), n, files, p)
     log_gaps("IR", t, numbers)
     return Path(out)
 
