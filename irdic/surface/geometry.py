@@ -6,11 +6,11 @@ import logging
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial import Delaunay, QhullError, cKDTree
+from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, GeometryError
 from ..validation import float_array, positive, psi_array
-from .parametrisation import median_spacing
+from .parametrisation import short_triangles
 
 __all__ = ["MIN_SINE", "Geometry", "surface_geometry", "edge_distance"]
 
@@ -50,16 +50,11 @@ def edge_distance(psi, *, max_edge_factor=3.0):
     if pv.shape[0] < 3:
         out[ok] = 0.0
         return out
-    try:
-        tri = Delaunay(pv)
-    except QhullError:
+    found = short_triangles(pv, f)
+    if found is None:
         out[ok] = 0.0  # all on a line: every point is on the edge
         return out
-    h = median_spacing(pv)
-    s = tri.simplices
-    c = pv[s]
-    longest = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
-    s = s[longest <= f * h]
+    s, h = found
     if s.shape[0] == 0:
         out[ok] = 0.0
         return out

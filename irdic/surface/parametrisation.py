@@ -63,17 +63,39 @@ def _angle_stats(normals, ref_dirs):
     return float(np.percentile(ang, 99.0)), float(ang.max())
 
 
-def _flipped_triangles(psi, x, ref_normal_fn, max_edge_factor=3.0):
-    """Delaunay triangles in Psi whose 3-D orientation disagrees with the reference normal."""
+def short_triangles(psi, max_edge_factor):
+    """Delaunay triangles of 2-D points without those that bridge gaps or concave outlines.
+
+    Parameters
+    ----------
+    psi : ndarray, shape (N, 2)
+        Finite points (surface parameters, mm).
+    max_edge_factor : float
+        Triangles whose longest edge exceeds this many median point spacings
+        are dropped.
+
+    Returns
+    -------
+    (simplices, h) or None
+        ``simplices`` (K, 3) int of the kept triangles and ``h`` the median
+        spacing; None when the points are collinear (no triangulation).
+    """
     try:
         tri = Delaunay(psi)
     except QhullError:
-        return -1, 0
+        return None
     h = median_spacing(psi)
-    s = tri.simplices
-    p = psi[s]
-    e = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
-    s = s[e <= max_edge_factor * h]
+    c = psi[tri.simplices]
+    longest = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
+    return tri.simplices[longest <= max_edge_factor * h], h
+
+
+def _flipped_triangles(psi, x, ref_normal_fn, max_edge_factor=3.0):
+    """Delaunay triangles in Psi whose 3-D orientation disagrees with the reference normal."""
+    found = short_triangles(psi, max_edge_factor)
+    if found is None:
+        return -1, 0
+    s, _ = found
     if s.shape[0] == 0:
         return 0, 0
     p = psi[s]
