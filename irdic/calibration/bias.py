@@ -2,7 +2,8 @@
 
 The centre of an imaged circle is not the image of its centre:
 :func:`perspective_bias` gives the difference once the camera is known, with
-the marker planes from :func:`plane_normals`.
+the marker planes from :func:`plane_normals`; :func:`projected_ellipses`
+predicts where and how each marker is imaged.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from scipy.spatial import cKDTree
 from ..camera import CameraModel
 from ..pointcloud import plane_normal
 
-__all__ = ["plane_normals", "find_planes", "perspective_bias"]
+__all__ = ["plane_normals", "find_planes", "perspective_bias", "projected_ellipses"]
 
 
 
@@ -129,11 +130,7 @@ def perspective_bias(camera: CameraModel, x, normals, radius_mm) -> np.ndarray:
     nrm = np.asarray(normals, dtype=np.float64)
     nrm = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
     rho = np.broadcast_to(np.asarray(radius_mm, dtype=np.float64), (len(x),))
-    # orthonormal in-plane basis
-    helper = np.where(np.abs(nrm[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    e1 = np.cross(nrm, helper)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(nrm, e1)
+    e1, e2 = _plane_axes(nrm)
     R, C = camera.R, camera.C
     P = np.hstack([R, -(R @ C)[:, None]])  # normalised camera: (x_n, y_n, 1)
     B = np.zeros((len(x), 4, 3))
@@ -165,3 +162,57 @@ def perspective_bias(camera: CameraModel, x, normals, radius_mm) -> np.ndarray:
     cv = ((b + b1) * cross).sum(axis=1) / (6 * area)
     return np.column_stack([cu, cv]) - camera.project(x)
 
+
+
+def _plane_axes(nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two orthonormal in-plane axes (each (N, 3)) of the planes with unit normals ``nrm`` (N, 3)."""
+    helper = np.where(np.abs(nrm[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    e1 = np.cross(nrm, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(nrm, e1)
+
+
+def projected_ellipses(camera: CameraModel, x, normals, radius_mm) -> tuple[np.ndarray, np.ndarray]:
+    """Image position and elliptical shape of each imaged marker circle.
+
+    Parameters
+    ----------
+    camera : CameraModel
+    x : array_like, shape (N, 3)
+        Marker centres, mm.
+    normals : array_like, shape (N, 3)
+        Normals of the marker planes (any length and sign).
+    radius_mm : float or array_like (N,)
+        Marker radius, mm.
+
+    Returns
+    -------
+    centre : ndarray, shape (N, 2)
+        Centre of the imaged circle (projection of ``x`` plus its
+        :func:`perspective_bias`), px; NaN where ``x`` is not in front of
+        the camera.
+    shape : ndarray, shape (N, 2, 2)
+        Shape matrix ``S`` of the imaged circle, px^2: its boundary is
+        ``{c + d : d^T S^-1 d = 1}``, so the square roots of the eigenvalues
+        of ``S`` are the semi-axes and its eigenvectors their directions.
+
+    Notes
+    -----
+    The projection is linearised on the marker plane: with in-plane unit
+    axes ``e1, e2`` and radius ``rho``, the columns of ``J = [j1, j2]``,
+    ``j_k = (P(x + rho e_k) - P(x - rho e_k)) / 2``, map the unit circle onto
+    the imaged ellipse, ``S = J J^T``. The neglected curvature of the
+    projection across one marker changes the semi-axes by a fraction of the
+    order of (marker radius / depth)^2.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    nrm = np.asarray(normals, dtype=np.float64)
+    nrm = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+    rho = np.broadcast_to(np.asarray(radius_mm, dtype=np.float64), (len(x),))[:, None]
+    e1, e2 = _plane_axes(nrm)
+    j1 = 0.5 * (camera.project(x + rho * e1) - camera.project(x - rho * e1))
+    j2 = 0.5 * (camera.project(x + rho * e2) - camera.project(x - rho * e2))
+    J = np.stack([j1, j2], axis=-1)
+    shape = np.einsum("nik,njk->nij", J, J)
+    centre = camera.project(x) + perspective_bias(camera, x, nrm, rho[:, 0])
+    return centre, shape

@@ -79,7 +79,7 @@ def _spacing(uv: np.ndarray) -> float:
     return float(np.median(d[:, 1]))
 
 
-def _predicted_spacing(pred: np.ndarray) -> np.ndarray:
+def predicted_spacing(pred: np.ndarray) -> np.ndarray:
     """Distance (px) of every predicted marker position from the nearest other one (inf if none)."""
     out = np.full(len(pred), np.inf)
     ok = np.isfinite(pred).all(axis=1)
@@ -121,7 +121,7 @@ def propagate(model: CameraModel, marker_x, detected_uv, *, gate_px: float | Non
     for _ in range(max_iter):
         pred = model.project(X)
         if gate_px is None:
-            gate = 0.4 * _predicted_spacing(pred)
+            gate = 0.4 * predicted_spacing(pred)
         mi, di = assign(pred, D, gate)
         key = (tuple(mi), tuple(di))
         if key == prev or len(mi) < 6:

@@ -112,7 +112,7 @@ def _matched_peaks(snr: np.ndarray, radius: np.ndarray, thr_sigma: float) -> lis
     return [(float(v), float(u), float(radius[v, u])) for v, u in zip(vv, uu)]
 
 
-def _plane_fit(uu, vv, vals, noise=0.0):
+def plane_fit(uu, vv, vals, noise=0.0):
     """Least-squares plane a + b u + c v with one 3-sigma rejection pass.
 
     Values more than 8 x ``noise`` (K) from the median are left out first
@@ -179,7 +179,7 @@ def _measure_at(img, sign, vc, uc, r0, a0, others_mask, noise, smooth=0.0, inval
     ann = (dist >= r_in) & (dist <= r_out) & ~others_mask[v_lo:v_hi, u_lo:u_hi]
     if ann.sum() < 12:
         return None, "crowded"
-    coef = _plane_fit(uu[ann] - uc, vv[ann] - vc, patch[ann], noise)
+    coef = plane_fit(uu[ann] - uc, vv[ann] - vc, patch[ann], noise)
     s = sign * (patch - (coef[0] + coef[1] * (uu - uc) + coef[2] * (vv - vc)))
     s_shape = ndimage.gaussian_filter(s, smooth, mode="nearest") if smooth > 0 else s
     core = dist <= max(0.5 * r0, 1.0)

@@ -32,6 +32,7 @@ from ..errors import CalibrationError, ConfigError, IrdicWarning
 from .bias import perspective_bias, plane_normals
 from .correspondence import check_ids, match_seeds
 from .detection import detect_markers
+from .guided import estimate_radius, find_missing
 from .image import image_array
 from .lattice import match_lattice
 
@@ -191,14 +192,6 @@ def _fit(x, uv, opts: FitOptions, start: CameraModel | None = None):
     return model, info
 
 
-def _estimate_radius(model: CameraModel, x: np.ndarray, det: xr.Dataset, di: np.ndarray) -> float:
-    """Marker radius (mm) from the detected size: half-contrast radius / sqrt(axis ratio) x depth / f."""
-    q = np.clip(det["semi_minor_px"].values[di] / det["semi_major_px"].values[di], 0.2, 1.0)
-    a_px = det["radius_px"].values[di] / np.sqrt(q)
-    f = model.decompose().focal_length_px
-    return float(np.median(a_px * model.depth(x) / f))
-
-
 def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: str = "auto",
               distortion: str = "none", refine: bool = True, correct_bias: bool = True,
               marker_radius_mm: float | None = None, min_radius_px: float = 2.0, max_radius_px: float = 30.0,
@@ -269,7 +262,12 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     D = np.column_stack([det["u"].values, det["v"].values])
     if len(D) < 6:
         raise CalibrationError(f"only {len(D)} markers were detected in the target image; the calibration needs 6")
-    mi, di, how = _match(D, table, seeds)
+    mi, di, how, model = _match(D, table, seeds)
+    # faint markers on a steep wing escape the detector; the first camera says where to look
+    det, mi, di, _ = find_missing(target_image, det, table.x[table.measured], mi, di, model,
+                                  radius_mm=marker_radius_mm, min_radius_px=min_radius_px,
+                                  max_radius_px=max_radius_px, min_contrast_k=min_contrast_k)
+    D = np.column_stack([det["u"].values, det["v"].values])
     sol = _solve(table.x[table.measured], D, det, mi, di, how, opts, table.ids[table.measured])
     settings = dict(polarity=det.attrs.get("polarity", polarity), distortion=distortion, refine=refine,
                     correct_bias=correct_bias, marker_radius_mm=marker_radius_mm, min_radius_px=min_radius_px,
@@ -281,17 +279,17 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     return ds
 
 
-def _match(D: np.ndarray, table: MarkerTable, seeds: Mapping | None) -> tuple[np.ndarray, np.ndarray, str]:
-    """Matched (measured marker, detection) index pairs, from seeds or automatically, and which way."""
+def _match(D: np.ndarray, table: MarkerTable, seeds: Mapping | None):
+    """Matched (measured marker, detection) index pairs, from seeds or automatically, which way, and their DLT."""
     X = table.x[table.measured]
     if seeds:
-        mi, di, _ = match_seeds(D, X, table.ids[table.measured], seeds)
+        mi, di, model = match_seeds(D, X, table.ids[table.measured], seeds)
         how = "seeds"
     else:
-        mi, di, _ = match_lattice(D, X)
+        mi, di, model = match_lattice(D, X)
         how = "automatic"
     log.info("correspondence (%s): %d of %d markers matched to %d detections", how, len(mi), len(X), len(D))
-    return mi, di, how
+    return mi, di, how, model
 
 
 def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np.ndarray, how: str,
@@ -315,7 +313,7 @@ def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np
         model, info = _fit(X[use], D[duse] - bias[use], opts)
         if opts.correct_bias:
             if radius is None:
-                radius = _estimate_radius(model, X[use], det, duse)
+                radius = estimate_radius(model, X[use], det, duse)
                 log.info("marker radius estimated from the image: %.3f mm", radius)
             # the bias depends on the camera only weakly: two rounds converge
             for _ in range(2):

@@ -1,0 +1,361 @@
+"""Markers the detector missed, searched for where the first camera predicts them.
+
+On a wing seen at 70-75 deg from its normal a faint marker is a thin
+ellipse whose response to the detector's circular filters is too weak, so a
+fit from the detected markers rests mostly on the other wing. Once the
+correspondence has given a first camera (the DLT of the matched markers,
+:func:`irdic.calibration.correspondence.propagate`), every marker's image
+position and elliptical shape are known (:func:`projected_ellipses`);
+:func:`find_missing` looks for each matched-filter response there with a
+template of that shape and measures the centre of each clear one like the
+and measures the centre of each clear one by a least-squares fit of that
+template (amplitude and shift).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import xarray as xr
+
+from ..camera import CameraModel
+from .bias import plane_normals, projected_ellipses
+from .correspondence import predicted_spacing, propagate
+from .detection import DETECTION_FIELDS, plane_fit
+from .image import image_array
+
+__all__ = ["find_missing", "search_predicted", "estimate_radius", "MIN_SNR", "WINDOW_FRACTION", "MAX_WINDOW_PX",
+           "REFIT_SNR"]
+
+log = logging.getLogger(__name__)
+
+#: Smallest matched-filter signal-to-noise of a marker found at its predicted position. Pure noise
+#: exceeds 6 in a search window (a few tens of independent positions) with a probability ~1e-8.
+MIN_SNR = 6.0
+#: Search window radius as a fraction of the distance to the nearest other predicted marker (below
+#: one half, so the peak of a neighbour can never lie inside it).
+WINDOW_FRACTION = 0.4
+#: Largest search window radius, px: the first camera predicts the markers to a fraction of a pixel.
+MAX_WINDOW_PX = 3.0
+#: Matched detections with a pixel contrast/noise below this are re-measured by the template fit (the
+#: detector's centroid window is at its tightest below 10, and its precision there is the poorer).
+REFIT_SNR = 10.0
+#: Distance (px) from a marker's ellipse beyond which its blurred edge no longer reaches.
+_EDGE_PX = 1.5
+
+
+def estimate_radius(model: CameraModel, x: np.ndarray, det: xr.Dataset, di: np.ndarray) -> float:
+    """Marker radius (mm) from the detected size: half-contrast radius / sqrt(axis ratio) x depth / f."""
+    q = np.clip(det["semi_minor_px"].values[di] / det["semi_major_px"].values[di], 0.2, 1.0)
+    a_px = det["radius_px"].values[di] / np.sqrt(q)
+    f = model.decompose().focal_length_px
+    return float(np.median(a_px * model.depth(x) / f))
+
+
+def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.ndarray, model: CameraModel, *,
+                 radius_mm: float | None = None, min_radius_px: float = 2.0, max_radius_px: float = 30.0,
+                 min_contrast_k: float = 0.1, rounds: int = 2):
+    """Add the markers found at their predicted positions to the detections and the correspondence.
+
+    Each round predicts every marker's imaged ellipse with the current
+    camera, searches for the unmatched ones (:func:`search_predicted`),
+    appends what it finds to the detections and grows the correspondence
+    again (:func:`~irdic.calibration.correspondence.propagate`, which refits
+    the DLT); the next round predicts with that camera. Finally the matched
+    detections fainter than :data:`REFIT_SNR` are re-measured the same way.
+
+    Parameters
+    ----------
+    image : xarray.DataArray
+        The target image (see :func:`~irdic.calibration.detect_markers`).
+    det : xarray.Dataset
+        Its detections (attrs ``polarity`` and ``noise_k`` needed).
+    x : ndarray, shape (M, 3)
+        Marker centres, mm.
+    mi, di : ndarray of int
+        Matched (marker, detection) pairs.
+    model : CameraModel
+        Camera of the matched pairs.
+    radius_mm : float, optional
+        Marker radius, mm; estimated from the matched detections when not given.
+    min_radius_px, max_radius_px, min_contrast_k : float
+        The detection limits: markers predicted smaller or larger are not
+        searched for, fainter ones are not accepted.
+    rounds : int
+        Prediction and search rounds.
+
+    Returns
+    -------
+    det : xarray.Dataset
+        The detections with the found markers appended (variable ``guided``:
+        found by the search; ``template_fit``: centre from the template fit;
+        attrs ``n_guided``, ``n_template_fit``).
+    mi, di : ndarray of int
+    model : CameraModel
+
+    Notes
+    -----
+    Why faint markers are re-measured: at a pixel contrast/noise of a few
+    the windowed centroid of the detector takes noise from every pixel of
+    its window with a lever arm up to the window's radius, while the
+    template fit weighs each pixel by how much the marker's position changes
+    it (its edge); on the oblique benchmark pose at contrast/noise 3 the
+    camera error falls from 0.17-0.25 px to a few hundredths of a px. Both
+    estimate the centre of a centrally symmetric blob without bias, so the
+    perspective bias correction applies unchanged.
+    """
+    pol = det.attrs.get("polarity")
+    noise = float(det.attrs.get("noise_k", np.nan))
+    det = det.assign(guided=("detection", np.zeros(det.sizes["detection"], bool)),
+                     template_fit=("detection", np.zeros(det.sizes["detection"], bool)))
+    det.attrs.update(n_guided=0, n_template_fit=0)
+    if pol not in ("dark", "bright") or not noise > 0:
+        return det, mi, di, model  # detections from elsewhere: nothing to search with
+    normals = plane_normals(x)
+    kw = dict(polarity=pol, noise=noise, min_contrast_k=min_contrast_k)
+    for rnd in range(rounds + 1):
+        radius = radius_mm if radius_mm is not None else estimate_radius(model, x[mi], det, di)
+        centre, shape = projected_ellipses(model, x, normals, radius)
+        with np.errstate(invalid="ignore"):
+            eq_r = np.sqrt(np.sqrt(np.abs(np.linalg.det(shape))))
+            fine = np.isfinite(centre).all(axis=1) & (eq_r >= min_radius_px) & (eq_r <= max_radius_px)
+        window = np.minimum(WINDOW_FRACTION * predicted_spacing(np.where(fine[:, None], centre, np.nan)),
+                            MAX_WINDOW_PX)
+        if rnd == rounds:
+            det = _refit_faint(image, det, mi, di, centre, shape, window, fine, kw)
+            break
+        D = np.column_stack([det["u"].values, det["v"].values])
+        wanted = fine.copy()
+        wanted[mi] = False
+        for k in np.flatnonzero(wanted):
+            # a detection already there was left unmatched for a reason (contested, or far off)
+            wanted[k] = not (np.hypot(*(D - centre[k]).T) <= window[k]).any()
+        rows = search_predicted(image, centre, shape, window, np.flatnonzero(wanted), fine, **kw)
+        if rows:
+            det = _append(det, [r for r in rows if r is not None])
+            mi, di, model = propagate(model, x, np.column_stack([det["u"].values, det["v"].values]))
+    log.info("%d markers found at their predicted positions, %d faint ones re-measured", det.attrs["n_guided"],
+             det.attrs["n_template_fit"] - det.attrs["n_guided"])
+    return det, mi, di, model
+
+
+def _refit_faint(image, det, mi, di, centre, shape, window, fine, kw) -> xr.Dataset:
+    """``det`` with the matched detector rows fainter than :data:`REFIT_SNR` re-measured by the template fit."""
+    faint = (det["snr"].values[di] < REFIT_SNR) & ~det["template_fit"].values[di] & fine[mi]
+    rows = search_predicted(image, centre, shape, window, mi[faint], fine, keep_misses=True, **kw)
+    cols = {k: det[k].values.copy() for k in (*DETECTION_FIELDS, "template_fit")}
+    for d, row in zip(di[faint], rows):
+        if row is not None:
+            for k in DETECTION_FIELDS:
+                cols[k][d] = row[k]
+            cols["template_fit"][d] = True
+    out = det.assign({k: ("detection", v, det[k].attrs) for k, v in cols.items()})
+    out.attrs["n_template_fit"] = int(cols["template_fit"].sum())
+    return out
+
+
+def _append(det: xr.Dataset, rows: list[dict]) -> xr.Dataset:
+    """``det`` with ``rows`` appended as guided detections."""
+    n0 = det.sizes["detection"]
+    new = xr.Dataset({k: ("detection", np.array([r[k] for r in rows], dtype=np.float64)) for k in DETECTION_FIELDS},
+                     coords={"detection": np.arange(n0, n0 + len(rows))})
+    new["guided"] = ("detection", np.ones(len(rows), bool))
+    new["template_fit"] = ("detection", np.ones(len(rows), bool))
+    out = xr.concat([det, new], dim="detection", combine_attrs="override")
+    for k in DETECTION_FIELDS:
+        out[k].attrs = det[k].attrs
+    out["guided"].attrs = {"long_name": "found at the position predicted by the first camera"}
+    out["template_fit"].attrs = {"long_name": "centre from the least-squares fit of the predicted ellipse"}
+    out.attrs["n_guided"] = int(det.attrs.get("n_guided", 0)) + len(rows)
+    out.attrs["n_template_fit"] = int(det.attrs.get("n_template_fit", 0)) + len(rows)
+    return out
+
+
+def search_predicted(image, centre: np.ndarray, shape: np.ndarray, window: np.ndarray, which, visible, *,
+                     polarity: str, noise: float, min_contrast_k: float = 0.1,
+                     keep_misses: bool = False) -> list:
+    """Markers found at their predicted positions with a matched filter of their predicted shape.
+
+    Parameters
+    ----------
+    image : xarray.DataArray
+        The target image, dims ``("v", "u")``, °C, full-sensor coordinates.
+    centre : ndarray, shape (M, 2)
+        Predicted marker centres, px (full sensor).
+    shape : ndarray, shape (M, 2, 2)
+        Predicted shape matrices, px^2 (see
+        :func:`~irdic.calibration.bias.projected_ellipses`).
+    window : ndarray, shape (M,)
+        Search radius around each prediction, px.
+    which : array_like of int
+        The markers to search for.
+    visible : ndarray of bool, shape (M,)
+        Markers predicted in the image (kept out of each other's background).
+    polarity : {"dark", "bright"}
+    noise : float
+        Pixel noise, K.
+    min_contrast_k : float
+        Smallest accepted contrast, K.
+    keep_misses : bool
+        Return None for each marker not found (one entry per ``which``).
+
+    Returns
+    -------
+    list of dict
+        One row of :data:`~irdic.calibration.detection.DETECTION_FIELDS` per
+        marker found (``snr`` is the contrast / pixel noise, as for the
+        detector's rows; ``sigma_px`` from the fit's covariance).
+
+    Notes
+    -----
+    Around a prediction ``c`` with shape ``S`` the background plane is
+    fitted (:func:`~irdic.calibration.detection.plane_fit`) on a ring
+    beyond the search window and the marker's blurred edge, away from every
+    other predicted marker; ``r`` is the signed contrast left. The template
+    ``t_s`` is the area fraction of each pixel covered by the ellipse moved
+    to ``c + s``; its least-squares amplitude is the contrast
+    ``k_s = <t_s, r> / <t_s, t_s>`` with signal-to-noise
+    ``<t_s, r> / (sigma sqrt(<t_s, t_s>))``. ``s`` runs over a 1 px grid in
+    the window, then a 0.25 px grid around the best; a marker is accepted
+    when the best signal-to-noise reaches :data:`MIN_SNR`, its peak is not
+    on the window's rim (which a neighbour's or a stray blob's tail would
+    give) and its contrast reaches ``min_contrast_k``. Its centre is the
+    detector's windowed centroid of ``r`` with the predicted ellipse as the
+    window's shape, and must lie within half the semi-minor axis + 0.5 px
+    of the template's position.
+    """
+    img, u0, v0 = image_array(image)
+    img = np.asarray(img, dtype=np.float64)
+    sign = -1.0 if polarity == "dark" else 1.0
+    c_arr = centre - [u0, v0]
+    rows = []
+    for k in np.asarray(which, dtype=int):
+        near = np.flatnonzero(visible & (np.hypot(*(c_arr - c_arr[k]).T) < 4.0 * np.sqrt(
+            np.linalg.eigvalsh(shape[k])[-1]) + 40.0))
+        near = near[near != k]
+        row = _search_one(img, sign, noise, c_arr[k], shape[k], float(window[k]), c_arr[near], shape[near],
+                          min_contrast_k)
+        if row is not None:
+            row["u"] += u0
+            row["v"] += v0
+        if row is not None or keep_misses:
+            rows.append(row)
+    return rows
+
+
+def _grown_inside(uu, vv, c, shape, grow_px):
+    """Pixels whose centres lie inside the ellipse ``(c, shape)`` with both semi-axes grown by ``grow_px``."""
+    lam, vec = np.linalg.eigh(shape)
+    ax = np.sqrt(np.maximum(lam, 0.0)) + grow_px
+    du, dv = uu - c[0], vv - c[1]
+    p0 = du * vec[0, 0] + dv * vec[1, 0]
+    p1 = du * vec[0, 1] + dv * vec[1, 1]
+    return (p0 / ax[0]) ** 2 + (p1 / ax[1]) ** 2 <= 1.0
+
+
+def _coverage(uu, vv, c, s_inv):
+    """Area fraction of each pixel (centres ``uu``, ``vv``) inside the ellipse ``(c, S)``, soft-edged.
+
+    The fraction falls linearly from 1 to 0 across one pixel centred on the
+    boundary, by the first-order distance ``(sqrt(q) - 1) / |grad sqrt(q)|``
+    with ``q = d^T S^-1 d``; unlike sampled coverage it is continuous in ``c``.
+    """
+    du, dv = uu - c[0], vv - c[1]
+    gu = s_inv[0, 0] * du + s_inv[0, 1] * dv
+    gv = s_inv[0, 1] * du + s_inv[1, 1] * dv
+    q = np.maximum(du * gu + dv * gv, 1e-12)
+    rq = np.sqrt(q)
+    dist = (rq - 1.0) * rq / np.maximum(np.hypot(gu, gv), 1e-12)
+    return np.clip(0.5 - dist, 0.0, 1.0)
+
+
+def _search_one(img, sign, noise, c, shape, window, c_nb, shape_nb, min_contrast):
+    """Measured row of one marker searched for around ``c`` (array px), or None."""
+    lam, vec = np.linalg.eigh(shape)
+    b, a = np.sqrt(np.maximum(lam, 1e-12))
+    g_in = window + _EDGE_PX + 0.5
+    g_out = g_in + max(3.0, 0.5 * a)
+    half = int(np.ceil(a + g_out)) + 1
+    H, W = img.shape
+    v_lo, u_lo = int(round(c[1])) - half, int(round(c[0])) - half
+    v_hi, u_hi = v_lo + 2 * half + 1, u_lo + 2 * half + 1
+    if v_lo < 0 or u_lo < 0 or v_hi > H or u_hi > W:
+        return None
+    patch = img[v_lo:v_hi, u_lo:u_hi]
+    if not np.isfinite(patch).all():
+        return None  # a NaN hole would bias the background and the template sums
+    vv, uu = np.mgrid[v_lo:v_hi, u_lo:u_hi].astype(np.float64)
+    others = np.zeros(patch.shape, bool)
+    for cj, sj in zip(c_nb, shape_nb):
+        if np.hypot(*(cj - c)) < 1.5 * half + np.sqrt(np.linalg.eigvalsh(sj)[-1]) + _EDGE_PX:
+            others |= _grown_inside(uu, vv, cj, sj, _EDGE_PX)
+    ring = _grown_inside(uu, vv, c, shape, g_out) & ~_grown_inside(uu, vv, c, shape, g_in) & ~others
+    if ring.sum() < 12:
+        return None
+    coef = plane_fit(uu[ring] - c[0], vv[ring] - c[1], patch[ring], noise)
+    r = sign * (patch - (coef[0] + coef[1] * (uu - c[0]) + coef[2] * (vv - c[1])))
+    s_inv = np.linalg.inv(shape)
+    n = int(np.floor(window))
+    grid = [np.array([du, dv], float) for du in range(-n, n + 1) for dv in range(-n, n + 1) if np.hypot(du, dv) <= window]
+    scores = [_score(uu, vv, c + s, s_inv, r) for s in grid]
+    if not grid or max(scores) < MIN_SNR * noise:
+        return None
+    fit = _template_fit(uu, vv, c, grid[int(np.argmax(scores))], s_inv, r, noise)
+    if fit is None:
+        return None
+    s, contrast, cov = fit
+    snr_mf = contrast / np.sqrt(cov[0, 0])
+    if not (snr_mf >= MIN_SNR and np.hypot(*s) <= window - 0.5 and contrast >= min_contrast):
+        return None
+    return _row(c + s, a, b, vec, contrast, noise, cov)
+
+
+def _score(uu, vv, c, s_inv, r) -> float:
+    """Matched-filter response ``<t, r> / sqrt(<t, t>)`` of the template at ``c`` (K; / noise = SNR)."""
+    t = _coverage(uu, vv, c, s_inv)
+    tt = float((t * t).sum())
+    return float((t * r).sum()) / np.sqrt(tt) if tt > 0 else -np.inf
+
+
+def _template_fit(uu, vv, c, s, s_inv, r, noise, h: float = 0.05):
+    """Least-squares fit of ``k t(c + s)`` to ``r`` over amplitude and shift (Gauss-Newton from ``s``).
+
+    Returns ``(s, k, cov)`` with the covariance of ``(k, s_u, s_v)`` for
+    white noise ``noise``, or None when the fit diverges or loses the marker.
+    """
+    for _ in range(8):
+        t = _coverage(uu, vv, c + s, s_inv)
+        tu = (_coverage(uu, vv, c + s + [h, 0], s_inv) - _coverage(uu, vv, c + s - [h, 0], s_inv)) / (2 * h)
+        tv = (_coverage(uu, vv, c + s + [0, h], s_inv) - _coverage(uu, vv, c + s - [0, h], s_inv)) / (2 * h)
+        tt = float((t * t).sum())
+        if not tt > 0:
+            return None
+        k = float((t * r).sum()) / tt
+        if not k > 0:
+            return None
+        A = np.column_stack([t.ravel(), k * tu.ravel(), k * tv.ravel()])
+        ata = A.T @ A
+        step = np.linalg.lstsq(ata, A.T @ (r.ravel() - k * t.ravel()), rcond=None)[0]
+        d = np.clip(step[1:], -0.5, 0.5)  # a trust region: the template is narrow across a thin ellipse
+        s = s + d
+        if np.hypot(*d) < 1e-3:
+            break
+    if np.hypot(*d) > 0.01:
+        return None
+    t = _coverage(uu, vv, c + s, s_inv)
+    k = float((t * r).sum()) / float((t * t).sum())
+    try:
+        cov = noise**2 * np.linalg.inv(ata)
+    except np.linalg.LinAlgError:
+        return None
+    return s, k, cov
+
+
+def _row(pos, a, b, vec, contrast, noise, cov) -> dict:
+    """A detection row (:data:`~irdic.calibration.detection.DETECTION_FIELDS`) of a template-fitted marker."""
+    return {"u": float(pos[0]), "v": float(pos[1]), "radius_px": float(np.sqrt(a * b)), "semi_major_px": float(a),
+            "semi_minor_px": float(b), "orientation_rad": float(np.arctan2(vec[1, 1], vec[0, 1])),
+            "eccentricity": float(np.sqrt(max(0.0, 1.0 - (b / a) ** 2))), "solidity": 1.0,
+            "contrast_k": float(contrast), "area_px": float(np.pi * a * b), "snr": float(contrast / noise),
+            "sigma_px": float(np.sqrt(max(cov[1, 1] + cov[2, 2], 0.0)))}
