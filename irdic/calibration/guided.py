@@ -7,8 +7,7 @@ correspondence has given a first camera (the DLT of the matched markers,
 :func:`irdic.calibration.correspondence.propagate`), every marker's image
 position and elliptical shape are known (:func:`projected_ellipses`);
 :func:`find_missing` looks for each matched-filter response there with a
-template of that shape and measures the centre of each clear one like the
-and measures the centre of each clear one by a least-squares fit of that
+template of that shape and measures the centre of each clear one by a least-squares fit of that
 template (amplitude and shift).
 """
 
