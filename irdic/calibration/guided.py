@@ -115,12 +115,7 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
     kw = dict(polarity=pol, noise=noise, min_contrast_k=min_contrast_k)
     for rnd in range(rounds + 1):
         radius = radius_mm if radius_mm is not None else estimate_radius(model, x[mi], det, di)
-        centre, shape = projected_ellipses(model, x, normals, radius)
-        with np.errstate(invalid="ignore"):
-            eq_r = np.sqrt(np.sqrt(np.abs(np.linalg.det(shape))))
-            fine = np.isfinite(centre).all(axis=1) & (eq_r >= min_radius_px) & (eq_r <= max_radius_px)
-        window = np.minimum(WINDOW_FRACTION * predicted_spacing(np.where(fine[:, None], centre, np.nan)),
-                            MAX_WINDOW_PX)
+        centre, shape, fine, window = _predict(model, x, normals, radius, min_radius_px, max_radius_px)
         if rnd == rounds:
             det = _refit_faint(image, det, mi, di, centre, shape, window, fine, kw)
             break
@@ -137,6 +132,17 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
     log.info("%d markers found at their predicted positions, %d faint ones re-measured", det.attrs["n_guided"],
              det.attrs["n_template_fit"] - det.attrs["n_guided"])
     return det, mi, di, model
+
+
+def _predict(model, x, normals, radius, min_radius_px, max_radius_px):
+    """Predicted ``(centre, shape, searchable, window)`` of every marker (see :func:`projected_ellipses`)."""
+    centre, shape = projected_ellipses(model, x, normals, radius)
+    with np.errstate(invalid="ignore"):
+        eq_r = np.sqrt(np.sqrt(np.abs(np.linalg.det(shape))))
+        fine = np.isfinite(centre).all(axis=1) & (eq_r >= min_radius_px) & (eq_r <= max_radius_px)
+    window = np.minimum(WINDOW_FRACTION * predicted_spacing(np.where(fine[:, None], centre, np.nan)),
+                        MAX_WINDOW_PX)
+    return centre, shape, fine, window
 
 
 def _refit_faint(image, det, mi, di, centre, shape, window, fine, kw) -> xr.Dataset:

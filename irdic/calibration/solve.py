@@ -256,40 +256,39 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     _check_options(opts)
     table = _marker_table(markers)
     sensor = _sensor_size(target_image)
-    det = detections if detections is not None else detect_markers(
-        target_image, polarity=polarity, min_radius_px=min_radius_px, max_radius_px=max_radius_px,
-        min_contrast_k=min_contrast_k)
+    limits = dict(min_radius_px=min_radius_px, max_radius_px=max_radius_px, min_contrast_k=min_contrast_k)
+    det = detections if detections is not None else detect_markers(target_image, polarity=polarity, **limits)
     D = np.column_stack([det["u"].values, det["v"].values])
     if len(D) < 6:
         raise CalibrationError(f"only {len(D)} markers were detected in the target image; the calibration needs 6")
-    mi, di, how, model = _match(D, table, seeds)
-    # faint markers on a steep wing escape the detector; the first camera says where to look
-    det, mi, di, _ = find_missing(target_image, det, table.x[table.measured], mi, di, model,
-                                  radius_mm=marker_radius_mm, min_radius_px=min_radius_px,
-                                  max_radius_px=max_radius_px, min_contrast_k=min_contrast_k)
+    det, mi, di, how = _match(target_image, det, table, seeds, marker_radius_mm, limits)
     D = np.column_stack([det["u"].values, det["v"].values])
     sol = _solve(table.x[table.measured], D, det, mi, di, how, opts, table.ids[table.measured])
     settings = dict(polarity=det.attrs.get("polarity", polarity), distortion=distortion, refine=refine,
-                    correct_bias=correct_bias, marker_radius_mm=marker_radius_mm, min_radius_px=min_radius_px,
-                    max_radius_px=max_radius_px, min_contrast_k=min_contrast_k, outlier_factor=outlier_factor,
-                    outlier_min_px=outlier_min_px,
+                    correct_bias=correct_bias, marker_radius_mm=marker_radius_mm, **limits,
+                    outlier_factor=outlier_factor, outlier_min_px=outlier_min_px,
                     seeds={str(k): list(map(float, v)) for k, v in (seeds or {}).items()})
     ds = calibration_dataset(table, det, sol, sensor, settings)
     _report(ds)
     return ds
 
 
-def _match(D: np.ndarray, table: MarkerTable, seeds: Mapping | None):
-    """Matched (measured marker, detection) index pairs, from seeds or automatically, which way, and their DLT."""
+def _match(target_image, det: xr.Dataset, table: MarkerTable, seeds: Mapping | None, radius_mm, limits: dict):
+    """Detections (with the markers found at their predicted positions added), matched (measured marker,
+    detection) index pairs, from seeds or automatically, and which way."""
     X = table.x[table.measured]
+    D = np.column_stack([det["u"].values, det["v"].values])
     if seeds:
         mi, di, model = match_seeds(D, X, table.ids[table.measured], seeds)
         how = "seeds"
     else:
         mi, di, model = match_lattice(D, X)
         how = "automatic"
-    log.info("correspondence (%s): %d of %d markers matched to %d detections", how, len(mi), len(X), len(D))
-    return mi, di, how, model
+    # faint markers on a steep wing escape the detector: the first camera says where to look
+    det, mi, di, _ = find_missing(target_image, det, X, mi, di, model, radius_mm=radius_mm, **limits)
+    log.info("correspondence (%s): %d of %d markers matched to %d detections", how, len(mi), len(X),
+             det.sizes["detection"])
+    return det, mi, di, how
 
 
 def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np.ndarray, how: str,
