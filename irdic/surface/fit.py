@@ -125,6 +125,11 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
         Temporal shape factor and normalisation (s); the paper: 1, 1 s.
     smoothing, smoothing_t : None, float >= 1 or "gcv"
         Spatial / temporal regression (:mod:`irdic.surface` Notes); None = interpolation.
+        ``smoothing="gcv"`` chooses two spacings: one for the shape (the
+        first stage's positions, GCV on them) and one for the motion (the
+        displacements from it, :func:`gcv_displacement`); ``smoothing`` may
+        also be such a pair ``(k_shape, k_motion)``, as ``info`` records them
+        (``smoothing_shape``, ``smoothing``).
     solver : {"auto", "global", "local"}
         Spatial interpolation solver (:mod:`irdic.surface` Notes).
     halo : float, optional
@@ -161,7 +166,11 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     t0 = _time.perf_counter()
     X, t, frac = _check_stages(x, times, fill, max_gap, min_stage_fraction)
     M, N, _ = X.shape
-    ks = smoothing_factor(smoothing, "smoothing")
+    if isinstance(smoothing, tuple) and len(smoothing) == 2:
+        # (shape, motion): the spacings GCV chose for the reference and the displacement, frozen
+        ks = tuple(smoothing_factor(k, "smoothing", allow_gcv=False) for k in smoothing)
+    else:
+        ks = smoothing_factor(smoothing, "smoothing")
     kt = smoothing_factor(smoothing_t, "smoothing_t")
     info = {}
     if psi is None:
@@ -243,19 +252,39 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
     ts = TemporalInterpolant(tu, c=c_t, R0=R0_t, smoothing=kt)
     Y0, Y1, Yr, ok_t = _temporal_columns(ts, te, t_ref, Xs, Xt)
     # --- spatial
+    kg = None
     if ks == "gcv":
+        pick = np.linspace(0, tu.size - 1, min(tu.size, 8)).astype(int)
+        kg, info["gcv_shape"] = gcv_spatial(psi_n, Xs[pick].transpose(1, 0, 2).reshape(n, -1), c=c, R0=R0)
         ks, info["gcv"] = gcv_displacement(psi_n, Xs, Vu, c=c, R0=R0)
+    elif isinstance(ks, tuple):
+        kg, ks = ks
     if ks > 1.0:
-        sp = SpatialInterpolant(psi_n, c=c, R0=R0, smoothing=ks)
+        sp_motion = SpatialInterpolant(psi_n, c=c, R0=R0, smoothing=ks)
+    else:
+        sp_motion = sp
     cols = np.flatnonzero(np.repeat(ok_t, 3))
     Yall = np.concatenate([Y0[:, cols], Yr], axis=1)
     del Y0  # the stage data of many times are large: free each as soon as it is used
-    val, d1, d2 = sp.evaluate(Yall)
+    split = kg is not None and kg != ks
+    if split:
+        # shape and motion apart: x = S_shape x_0 + S_motion (x - x_0). The temporal weights of a value
+        # sum to 1 ({1, t} are reproduced), so the columns minus x_0 are the combined displacements
+        x0 = Xs[0]
+        Yall -= np.tile(x0, cols.size // 3 + 1)
+    val, d1, d2 = sp_motion.evaluate(Yall)
     del Yall
-    vel = sp.evaluate(Y1[:, cols], derivatives=False)[0]
+    if split:
+        sp_shape = SpatialInterpolant(psi_n, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
+        for a, b in zip((val, d1, d2), sp_shape.evaluate(x0)):
+            a += np.tile(b, cols.size // 3 + 1)
+    # the velocity's temporal weights sum to 0: it is a displacement rate, the motion's operator alone
+    vel = sp_motion.evaluate(Y1[:, cols], derivatives=False)[0]
     del Y1
-    info.update(sp.info)
+    info.update(sp_motion.info)
     info.update(smoothing=float(ks), smoothing_t=float(kt))
+    if kg is not None:
+        info["smoothing_shape"] = float(kg)
     return val, d1, d2, vel, np.flatnonzero(ok_t)
 
 
