@@ -210,6 +210,9 @@ def _resolve_gcv(points, x, t, psi, count, reach, p):
         info = fit_surface(x[w], t[w], psi, smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"],
                            **_surface_kw(p)).info
         p["surface_smoothing"] = info["smoothing"] if p["surface_smoothing"] is not None else None
+        if p["surface_smoothing"] is not None and "smoothing_shape" in info:
+            # GCV chose a spacing for the shape and one for the motion (irdic.surface.fit_surface): keep both
+            p["surface_smoothing"] = (info["smoothing_shape"], info["smoothing"])
         p["surface_smoothing_time"] = info["smoothing_t"] if p["surface_smoothing_time"] is not None else None
     theta = points["temperature"].isel(time=w).values.astype(float)
     if p["temperature_smoothing"] == "gcv":
