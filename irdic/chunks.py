@@ -55,12 +55,16 @@ def chunk_slice(n_times: int, index: int, count: int) -> slice:
     return slice(int(bounds[index]), int(bounds[index + 1]))
 
 
-def window(samples: np.ndarray, t_first: float, t_last: float, reach: int) -> slice:
+def window(samples: np.ndarray, t_first: float, t_last: float, reach: int | None) -> slice:
     """Samples a chunk's temporal interpolant needs: those in ``[t_first, t_last]`` plus ``reach`` on each side.
 
     One more sample on each side than ``reach`` covers evaluation times
     between two samples (the reach counts from the nearest sample).
+    ``reach`` None (the global operator, :func:`~irdic.numerics.temporal.temporal_window`):
+    every sample.
     """
+    if reach is None:
+        return slice(0, samples.size)
     lo = int(np.searchsorted(samples, t_first, side="right")) - 1 - reach - 1
     hi = int(np.searchsorted(samples, t_last, side="left")) + 1 + reach + 1
     return slice(max(lo, 0), min(hi, samples.size))

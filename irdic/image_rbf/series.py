@@ -154,7 +154,7 @@ def _combined_frames(F, sel, Wv, Wd, n_mask):
 
 
 def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rbf", c=2.0, R0=1.0, c_time=1.0,
-                    R0_time=1.0, halo=12, tile=8, chunk=32, u=None, v=None, name="frames"):
+                    R0_time=1.0, time_window=None, halo=12, tile=8, chunk=32, u=None, v=None, name="frames"):
     """Temperatures, gradients and rates at moving points over a frame series.
 
     Parameters
@@ -181,6 +181,10 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
         Spatial IMQ shape parameter and normalisation (px): 2, 1 in the paper.
     c_time, R0_time : float
         Temporal IMQ shape parameter and normalisation (s): 1, 1 in the paper.
+    time_window : None or int
+        The temporal operator's window (:class:`~irdic.numerics.temporal.TemporalInterpolant`):
+        :func:`~irdic.numerics.temporal.temporal_window` of the whole
+        record's frame times, also when ``frames`` are a time chunk's.
     halo, tile : int
         See :class:`MaskedGridInterpolant`.
     chunk : int
@@ -217,7 +221,7 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
         raise ConfigError(
             f"frame_times must have shape (n_frames,) = ({n_frames},) like frames, got {ft.shape}"
         )
-    temporal = TemporalInterpolant(ft, c=c_time, R0=R0_time)
+    temporal = TemporalInterpolant(ft, c=c_time, R0=R0_time, window=time_window)
     te = float_array(eval_times, "eval_times")
     if te.ndim != 1:
         raise ConfigError(f"eval_times must be 1-D (n_times,), got shape {te.shape}")

@@ -11,6 +11,7 @@ generalised cross-validation can choose (:func:`gcv_temporal`).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from typing import NamedTuple
@@ -19,12 +20,12 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import ConfigError, DataError, GeometryError
-from ..validation import float_array, increasing_times, positive, smoothing_factor
+from ..validation import as_int, float_array, increasing_times, positive, smoothing_factor
 from .imq import imq, imq_dr, regression_R0
 from .saddle import SaddleFactor
 
 __all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "SeriesFit", "smooth_series", "temporal_reach",
-           "REACH_TOL"]
+           "temporal_window", "REACH_TOL"]
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +57,13 @@ class TemporalInterpolant:
         None / 1: interpolation (the paper). ``k > 1``: least squares with
         centres on about every k-th time (first and last always) and a kernel
         six centre spacings wide (``c R0_eff = 6 H``); see :func:`gcv_temporal`.
+    window : None or int >= 1
+        None: one operator over all times (the paper). ``n``: the windowed
+        operator of a long record: each evaluation time uses only the ``n``
+        samples before the sample at or below it and the ``n`` after the
+        sample above it (fewer at the series' ends), with the same operator
+        (interpolation or regression) on those samples alone. Give the
+        :func:`temporal_window` of the whole record.
 
     Notes
     -----
@@ -64,9 +72,21 @@ class TemporalInterpolant:
     times. Regression is a QR factorisation of the design matrix. Evaluation
     times outside ``[times[0], times[-1]]`` give NaN weights: the operator is
     not meant to extrapolate; :meth:`in_span` tells which.
+
+    The windowed operator makes a time chunk's result equal the whole
+    record's to rounding: an evaluation time's window is fixed by its place
+    among the samples, so any subset of the record holding that window (a
+    chunk's samples plus ``n + 1`` on each side, :func:`irdic.chunks.window`)
+    gives the same weights. Inside the record it equals the one global
+    operator to the tolerance :func:`temporal_window` was chosen for; within
+    ``n`` samples of the first and last sample it is the windowed operator's
+    own boundary behaviour, which the global one's slowly decaying tail
+    there (:func:`temporal_reach`) would otherwise tie to the whole record.
+    It also keeps long records tractable: ``O(M n^2)`` work instead of an
+    ``(M + 2)^2`` system.
     """
 
-    def __init__(self, times, *, c=1.0, R0=1.0, smoothing=None):
+    def __init__(self, times, *, c=1.0, R0=1.0, smoothing=None, window=None):
         t = increasing_times(times, "times", "n_times")
         if t.size < 2:
             raise DataError(
@@ -77,7 +97,11 @@ class TemporalInterpolant:
         self.R0 = positive(R0, "R0")
         self.k = smoothing_factor(smoothing, "smoothing", allow_gcv=False)
         self._mid = 0.5 * (t[0] + t[-1])
-        if self.k > 1.0:
+        self.window = None if window is None else as_int(window, "window", 1)
+        if self.window is not None:
+            self.n_parameters = None
+            self._parts = {}
+        elif self.k > 1.0:
             self._init_regression()
         else:
             s = (t - self._mid) / self.R0
@@ -146,9 +170,41 @@ class TemporalInterpolant:
             raise ConfigError(f"t_eval must be a scalar or 1-D, got shape {te.shape}")
         ok = self.in_span(te)
         W = np.full((te.size, self.n_times), np.nan)
-        if ok.any():
+        if ok.any() and self.window is not None:
+            W[ok] = self._windowed(te[ok], derivative)
+        elif ok.any():
             tt = te[ok] - self._mid
             W[ok] = self._regression(tt, derivative) if self.k > 1.0 else self._interpolation(te[ok], tt, derivative)
+        return W
+
+    def sample_window(self, t_eval):
+        """``(first, stop)`` sample indices of the window of each evaluation time (in span), arrays (T,).
+
+        The whole series for the global operator.
+        """
+        te = np.atleast_1d(float_array(t_eval, "t_eval"))
+        if self.window is None:
+            return np.zeros(te.size, np.int64), np.full(te.size, self.n_times, np.int64)
+        # the bracketing samples: j - 1 <= t < j (a sample time counts as its own bracket)
+        j = np.clip(np.searchsorted(self.times, te + TIME_SNAP * self.R0, side="right"), 1, self.n_times - 1)
+        return np.maximum(j - 1 - self.window, 0), np.minimum(j + 1 + self.window, self.n_times)
+
+    def _windowed(self, te, derivative):
+        """Weight rows of the windowed operator: the global operator of each window's samples."""
+        lo, hi = self.sample_window(te)
+        W = np.zeros((te.size, self.n_times))
+        keys = lo * (self.n_times + 1) + hi
+        for key in np.unique(keys):
+            rows = np.flatnonzero(keys == key)
+            a, b = int(lo[rows[0]]), int(hi[rows[0]])
+            part = self._parts.get((a, b))
+            if part is None:
+                # a short window (a series end) still needs its two monomials' worth of samples
+                part = TemporalInterpolant(self.times[a:b], c=self.c, R0=self.R0,
+                                           smoothing=self.k if self.k > 1.0 and b - a > 4 else None)
+                if len(self._parts) < 4096:
+                    self._parts[(a, b)] = part
+            W[rows, a:b] = part.weights(te[rows], derivative)
         return W
 
     def _regression(self, tt, derivative):
@@ -263,7 +319,7 @@ class SeriesFit(NamedTuple):
     """GCV table ``(k, n_parameters, gcv)`` when chosen by GCV, else empty."""
 
 
-def _fill_series(F2, t, c, R0):
+def _fill_series(F2, t, c, R0, window=None):
     """Fill NaN entries of each column from its own valid times; returns the dead columns."""
     bad = ~np.isfinite(F2)
     dead = np.zeros(F2.shape[1], bool)
@@ -273,7 +329,7 @@ def _fill_series(F2, t, c, R0):
             dead[j] = True
             F2[:, j] = 0.0
             continue
-        fill = TemporalInterpolant(t[ok], c=c, R0=R0).weights(t[~ok]) @ F2[ok, j]
+        fill = TemporalInterpolant(t[ok], c=c, R0=R0, window=window).weights(t[~ok]) @ F2[ok, j]
         # outside the valid span: nearest valid value (flat)
         nanf = ~np.isfinite(fill)
         if nanf.any():
@@ -282,7 +338,7 @@ def _fill_series(F2, t, c, R0):
     return dead
 
 
-def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0):
+def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0, record_times=None):
     """Value and rate of time series by the temporal IMQ interpolant or regression.
 
     For point temperatures ``Theta_k(t_n)`` at fixed material points this gives
@@ -301,6 +357,10 @@ def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0)
         None/1: interpolation; k: regression; "gcv": k by :func:`gcv_temporal`.
     c, R0 : float
         Kernel shape factor and time normalisation (s).
+    record_times : array_like, optional
+        The whole record's times when ``times`` are a time chunk's window:
+        the operator's window (:func:`temporal_window`) is the record's.
+        Default ``times``.
 
     Returns
     -------
@@ -313,11 +373,12 @@ def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0)
     k = smoothing_factor(smoothing, "smoothing")
     tail = F.shape[1:]
     F2 = F.reshape(t.size, -1).copy()
-    dead = _fill_series(F2, t, c, R0)
+    record = t if record_times is None else increasing_times(record_times, "record_times", "n_times")
+    dead = _fill_series(F2, t, c, R0, temporal_window(record, c=c, R0=R0))
     table = []
     if k == "gcv":
         k, table = gcv_temporal(t, F2[:, ~dead] if (~dead).any() else F2, c=c, R0=R0)
-    ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k)
+    ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k, window=temporal_window(record, c=c, R0=R0, smoothing=k))
     W0 = ts.weights(t_eval, 0)
     W1 = ts.weights(t_eval, 1)
     with np.errstate(invalid="ignore"):
@@ -329,7 +390,7 @@ def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0)
     return SeriesFit(val.reshape((T,) + tail), rate.reshape((T,) + tail), float(k), table)
 
 
-def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):
+def temporal_reach(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL, model=401):
     """Samples on each side of a time window that make it reproduce the whole-series interpolant.
 
     Parameters
@@ -338,11 +399,15 @@ def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):
         Sample times (s) of the whole series, strictly increasing.
     c, R0 : float
         Kernel of the interpolant (as :class:`TemporalInterpolant`).
+    smoothing : None or float >= 1
+        The operator's smoothing (:class:`TemporalInterpolant`): a
+        regression's weights spread over its kernel, six centre spacings.
     tol : float
         Largest tail of the cardinal weights (dimensionless) allowed.
     model : int
-        Samples of the uniform model series the weights are measured on; a
-        reach beyond ``model // 2`` counts as the whole series.
+        Samples of the uniform model series the weights are measured on
+        (at least 200 per unit of ``smoothing``); a reach beyond
+        ``model // 2`` counts as the whole series.
 
     Returns
     -------
@@ -381,14 +446,20 @@ def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):
     the model, give the whole series.
     """
     t = increasing_times(times, "times", "n_times")
-    M = t.size
-    if M < 8:
-        return M
-    h = float(np.median(np.diff(t)))
-    if c * R0 > 8.0 * h:
+    k = smoothing_factor(smoothing, "smoothing", allow_gcv=False)
+    if t.size < 8:
+        return t.size
+    reach = _model_reach(float(np.median(np.diff(t))), float(c), float(R0), float(k), float(tol), int(model))
+    return t.size if reach is None else min(reach, t.size)
+
+
+@functools.lru_cache(maxsize=256)
+def _model_reach(h, c, R0, k, tol, model):
+    """:func:`temporal_reach` on the uniform model series of spacing ``h``; None: the whole series."""
+    if k == 1.0 and c * R0 > 8.0 * h:
         # flatter kernels: the saddle system loses the digits the tail is made of
-        return M
-    n = int(min(M, model))
+        return None
+    n = int(max(model, 200 * k))
     n -= 1 - n % 2  # odd: the evaluation point sits in the middle
     m = n // 2
     tm = (np.arange(n) - m) * h
@@ -396,16 +467,42 @@ def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):
     # tail over the whole record that no bounded window reproduces (Notes)
     pos = np.array([m + 0.25, m + 0.5])
     try:
-        ti = TemporalInterpolant(tm, c=c, R0=R0)
+        ti = TemporalInterpolant(tm, c=c, R0=R0, smoothing=k)
         te = tm[0] + pos * h
         W = np.abs(np.r_[ti.weights(te, 0), ti.weights(te, 1) * h])
     except (DataError, GeometryError):
-        return M
+        return None
     if not np.isfinite(W).all() or W.sum(axis=1).max() > 10.0:
         # ill-conditioned model: weights are not trustworthy, use every sample
-        return M
+        return None
     dist = np.abs(np.arange(n)[None, :] - np.r_[pos, pos][:, None])
     for reach in range(1, m):
         if (W * (dist > reach)).sum(axis=1).max() < tol:
             return reach
-    return M
+    return None
+
+
+def temporal_window(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL):
+    """The ``window`` of :class:`TemporalInterpolant` for a whole record: None (global) or samples per side.
+
+    Parameters
+    ----------
+    times : array_like, shape (M,)
+        Sample times (s) of the whole record (IR frames or DIC stages), not
+        of a time chunk: every chunk and the whole-record run must agree.
+    c, R0, smoothing, tol
+        As :func:`temporal_reach`.
+
+    Returns
+    -------
+    None or int
+        None when the kernel's reach (:func:`temporal_reach`) covers the
+        record (a short record, a flat kernel): the paper's one global
+        operator. Else the reach ``n``: the record is longer than any
+        evaluation time's window of ``2 n + 2`` samples, and the windowed
+        operator equals the global one inside the record (to ``tol``) while
+        giving every time chunk the whole-record result.
+    """
+    t = increasing_times(times, "times", "n_times")
+    n = temporal_reach(t, c=c, R0=R0, smoothing=smoothing, tol=tol)
+    return None if 2 * n + 3 >= t.size else int(n)

@@ -42,7 +42,7 @@ import xarray as xr
 
 from ..camera import load_camera
 from ..chunks import chunk_slice, gather, window
-from ..numerics.temporal import temporal_reach
+from ..numerics.temporal import temporal_window
 from ..errors import ConfigError, DataError
 from ..image_rbf import evaluate_series
 from ..noise import IRNoise, interpolation_noise_gains, ir_noise as estimate_ir_noise
@@ -125,15 +125,15 @@ def _couple_chunk(dic, ir, calibration, chunk, p) -> xr.Dataset:
     sl = chunk_slice(t_dic.size, *chunk)
     # one neighbour each side: a time's mask is intersected with its neighbours'
     a, b = max(sl.start - 1, 0), min(sl.stop + 1, t_dic.size)
-    reach = temporal_reach(t_ir, c=p["c_time"], R0=p["R0_time"])
+    reach = temporal_window(t_ir, c=p["c_time"], R0=p["R0_time"])
     frames = window(t_ir, t_dic[sl.start], t_dic[sl.stop - 1], reach)
-    if reach >= t_ir.size and chunk[1] > 1:
+    if reach is None and chunk[1] > 1:
         log.warning("couple: the temporal kernel (c_time %g, R0_time %g s) reaches over all %d IR frames "
                     "(spacing %.3g s): every chunk reads the whole IR record, so chunking does not bound memory; "
                     "set execution.chunk_frames: 0, or choose c_time * R0_time below 8 frame spacings",
                     p["c_time"], p["R0_time"], t_ir.size, float(np.median(np.diff(t_ir))))
-    log.info("couple: chunk %d of %d, DIC times %d..%d, IR frames %d..%d (kernel reach %d frames)", chunk[0] + 1,
-             chunk[1], sl.start, sl.stop - 1, frames.start, frames.stop - 1, reach)
+    log.info("couple: chunk %d of %d, DIC times %d..%d, IR frames %d..%d (kernel reach %s frames)", chunk[0] + 1,
+             chunk[1], sl.start, sl.stop - 1, frames.start, frames.stop - 1, "all" if reach is None else reach)
     # the whole record must have a DIC time in the IR span; a chunk outside it is all status 6
     whole = bool(((t_dic >= t_ir[0]) & (t_dic <= t_ir[-1])).any())
     # DIC positions of the whole record (small next to the IR frames): gaps are filled from the nearest valid
@@ -164,6 +164,9 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
         pr, dic = pr.times(only), dic.isel(time=only)
         n_t = pr.x.shape[0]
     seen = pr.in_frame & facing
+    # the temporal operator's window comes from the whole record: every chunk evaluates alike
+    p = dict(p, time_window=temporal_window(t_ir if record_times is None else record_times, c=p["c_time"],
+                                            R0=p["R0_time"]))
     theta, gu, gv, rate, edge, in_span, extrap = _interpolate(ir, dic["time"].values.astype(float), pr, masks,
                                                                seen, p, require_span)
     status = _status(pr, facing, seen, in_span, extrap, theta)
@@ -213,7 +216,8 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
     samples, cols = extrapolation_samples(pr.local, masks, outside, p["max_extrapolation_px"])
     res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
                           method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
-                          R0_time=p["R0_time"], halo=p["halo"], u=u, v=v, name="ir: frames")
+                          R0_time=p["R0_time"], time_window=p["time_window"], halo=p["halo"], u=u, v=v,
+                          name="ir: frames")
     theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)

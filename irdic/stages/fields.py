@@ -38,7 +38,7 @@ from ..store import open_store, write_dataset
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry, surface_parameters
 from ..chunks import chunk_slice, gather, window
-from ..numerics.temporal import smooth_series, temporal_reach
+from ..numerics.temporal import smooth_series, temporal_window
 from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
@@ -49,6 +49,10 @@ from .uncertainty import Window, uncertainties
 __all__ = ["run", "run_gather", "fields"]
 
 log = logging.getLogger(__name__)
+
+#: Smoothing chosen by GCV is chosen on the record's first stages (at most this many), by every time chunk
+#: and by the whole-record run alike, so that all of them regress with the same smoothing.
+GCV_STAGES = 256
 
 _SMOOTHING = ("surface_smoothing", "surface_smoothing_time", "temperature_smoothing", "temperature_smoothing_space")
 
@@ -112,15 +116,13 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
     A time chunk reads the coordinates of every stage (the surface
     parameters come from each point's first valid stage, the strain from the
     reference stage 0) but fits the surface and the temperature series only
-    over its own stages plus the temporal kernel's reach
-    (:func:`irdic.numerics.temporal.temporal_reach`) on each side; with
-    interpolation in time (the default) that reproduces the whole-record
-    result, except within the reach of the record's first and last stage
-    (:func:`irdic.numerics.temporal.temporal_reach`). Smoothing chosen by GCV is chosen once, on the stages of the
-    first chunk's window, identically in every chunk, and each chunk then
-    regresses its own window: a regression differs from the whole-record
-    regression by a small fraction of the noise it removes (centres are
-    placed per window), not by 1e-4.
+    over its own stages plus the temporal operators' reach on each side
+    (:func:`irdic.numerics.temporal.temporal_window`). In a record longer
+    than that reach every temporal operator is the windowed one, in the
+    whole-record run too, so a chunk reproduces the whole-record result to
+    rounding, at the record's ends included. Smoothing chosen by GCV is
+    chosen on the record's first :data:`GCV_STAGES` stages, identically in
+    every chunk and in the whole-record run.
     """
     p = _checked_settings(points, params)
     started = _time.perf_counter()
@@ -162,6 +164,8 @@ def _surface(points, x, t, chunk, p):
     """``(points, surface, p, window)`` of the whole record, or of a time chunk (:func:`_chunk_surface`)."""
     if chunk is not None:
         return _chunk_surface(points, x, t, chunk, p)
+    if t.size > GCV_STAGES:
+        p = _resolve_gcv(points, x, t, surface_parameters(x, p["parametrisation"])[0], p)
     sf = fit_surface(x, t, c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"],
                      smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"],
                      solver=p["solver"], parametrisation=p["parametrisation"])
@@ -172,18 +176,26 @@ def _surface_kw(p):
     return dict(c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"], solver=p["solver"])
 
 
+def _record_reach(t, p):
+    """Stages each side a time needs (:func:`~irdic.numerics.temporal.temporal_window`): the widest of the
+    temporal operators in use; None for the whole record."""
+    ks = [None] + [p[k] for k in ("temperature_smoothing", "surface_smoothing_time") if p[k] is not None]
+    reach = [temporal_window(t, c=p["c_time"], R0=p["R0_time"], smoothing=k) for k in ks]
+    return None if any(r is None for r in reach) else max(reach)
+
+
 def _chunk_surface(points, x, t, chunk, p):
     """Points of the chunk's window, the surface at the chunk's times, and ``p`` with GCV choices resolved."""
     sl = chunk_slice(t.size, *chunk)
-    reach = temporal_reach(t, c=p["c_time"], R0=p["R0_time"])
-    w = window(t, t[sl.start], t[sl.stop - 1], reach)
-    log.info("fields: chunk %d of %d, DIC times %d..%d, stages %d..%d (kernel reach %d stages)", chunk[0] + 1,
-             chunk[1], sl.start, sl.stop - 1, w.start, w.stop - 1, reach)
     psi, how = surface_parameters(x, p["parametrisation"])
-    p = _resolve_gcv(points, x, t, psi, chunk[1], reach, p)
+    p = _resolve_gcv(points, x, t, psi, p)
+    reach = _record_reach(t, p)
+    w = window(t, t[sl.start], t[sl.stop - 1], reach)
+    log.info("fields: chunk %d of %d, DIC times %d..%d, stages %d..%d (kernel reach %s stages)", chunk[0] + 1,
+             chunk[1], sl.start, sl.stop - 1, w.start, w.stop - 1, "all" if reach is None else reach)
     kw = _surface_kw(p)
     sf = fit_surface(x[w], t[w], psi, t_eval=t[sl], smoothing=p["surface_smoothing"],
-                     smoothing_t=p["surface_smoothing_time"], **kw)
+                     smoothing_t=p["surface_smoothing_time"], record_times=t, **kw)
     if w.start > 0:
         # the strain's reference is stage 0 of the record; at a sample time the temporal
         # operator is the identity, so stages 0 and 1 alone give its tangents
@@ -194,17 +206,17 @@ def _chunk_surface(points, x, t, chunk, p):
     sf.info["parametrisation"] = how
     # the window's temperature series and coordinates: the regression in time and the uncertainty probes need them
     series = Window(theta=points["temperature"].isel(time=w).values.astype(float), t=t[w], x=x[w], x_ref=x[:2],
-                    t_ref=t[:2], first=sl.start == 0, last=sl.stop == t.size)
+                    t_ref=t[:2], first=sl.start == 0, last=sl.stop == t.size, record=t)
     return points.isel(time=sl), sf, p, series
 
 
-def _resolve_gcv(points, x, t, psi, count, reach, p):
-    """``p`` with every "gcv" smoothing replaced by the number GCV picks on the first chunk's window."""
+def _resolve_gcv(points, x, t, psi, p):
+    """``p`` with every "gcv" smoothing replaced by the number GCV picks on the record's first
+    :data:`GCV_STAGES` stages: the same in every chunk and in the whole-record run."""
     gcv = [k for k in _SMOOTHING if p[k] == "gcv"]
     if not gcv:
         return p
-    sl = chunk_slice(t.size, 0, count)
-    w = window(t, t[sl.start], t[sl.stop - 1], reach)
+    w = slice(0, min(t.size, GCV_STAGES))
     p = dict(p)
     if "surface_smoothing" in gcv or "surface_smoothing_time" in gcv:
         info = fit_surface(x[w], t[w], psi, smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"],
@@ -220,9 +232,9 @@ def _resolve_gcv(points, x, t, psi, count, reach, p):
                                                    R0=p["R0_time"]).smoothing
     if p["temperature_smoothing_space"] == "gcv":
         k = _space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"])
-        if k is not None:  # no time with 6 visible points in that window: each chunk chooses its own
+        if k is not None:  # no time with 6 visible points among them: each chunk chooses its own
             p["temperature_smoothing_space"] = k
-    log.info("fields: smoothing chosen once for all chunks on DIC times %d..%d: %s", w.start, w.stop - 1,
+    log.info("fields: smoothing chosen once on DIC times %d..%d: %s", w.start, w.stop - 1,
              ", ".join(f"{k} {p[k]}" for k in gcv))
     return p
 
@@ -257,7 +269,7 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
         # a chunk regresses its window's series and evaluates it at its own times
         th, ts = (series.theta, series.t) if series is not None else (theta, t)
         fit = smooth_series(th, ts, t if series is not None else None, smoothing=p["temperature_smoothing"],
-                            c=p["c_time"], R0=p["R0_time"])
+                            c=p["c_time"], R0=p["R0_time"], record_times=t if series is None else series.record)
         smoothed_rate, smoothed = fit.rate, fit.value
         chosen_k["temperature_smoothing"] = fit.smoothing
         total = np.where(visible, smoothed_rate, np.nan)

@@ -39,7 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..gradient import material_rate, surface_gradient
-from ..numerics.temporal import TemporalInterpolant
+from ..numerics.temporal import TemporalInterpolant, temporal_window
 from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
@@ -60,7 +60,8 @@ class Window(NamedTuple):
     ``theta`` (T_w, N) degC and ``x`` (T_w, N, 3) mm at the window's times
     ``t`` (T_w,) s; ``x_ref``/``t_ref``: the record's first two stages (the
     strain's reference); ``first``/``last``: the chunk holds the record's
-    first/last DIC time.
+    first/last DIC time; ``record`` (M,) s: the whole record's stage times
+    (the temporal operator's window).
     """
 
     theta: np.ndarray
@@ -70,6 +71,7 @@ class Window(NamedTuple):
     t_ref: np.ndarray
     first: bool
     last: bool
+    record: np.ndarray
 
 
 def _probe_std(samples, base):
@@ -179,7 +181,9 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     W0 = None
     if kt is not None:
         # a chunk's regression runs over its window (T_w samples) and is evaluated at its own times
-        ts = TemporalInterpolant(t if window is None else window.t, c=p["c_time"], R0=p["R0_time"], smoothing=kt)
+        record = t if window is None else window.record
+        ts = TemporalInterpolant(t if window is None else window.t, c=p["c_time"], R0=p["R0_time"], smoothing=kt,
+                                 window=temporal_window(record, c=p["c_time"], R0=p["R0_time"], smoothing=kt))
         W0, W1 = ts.weights(t, 0), ts.weights(t, 1)
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W1 ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W0 ** 2, axis=1))[:, None], (T, N)).copy()
@@ -226,7 +230,8 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None):
 def _window_probe(window, t, psi, kw, s_x, rng):
     """A noisy surface fit of a chunk as the fields stage fits it: over its window, at its times ``t``,
     with the strain's reference from the record's first two stages (noise drawn for those too)."""
-    pf = fit_surface(window.x + rng.standard_normal(window.x.shape) * s_x, window.t, psi, t_eval=t, **kw)
+    pf = fit_surface(window.x + rng.standard_normal(window.x.shape) * s_x, window.t, psi, t_eval=t,
+                     record_times=window.record, **kw)
     if window.t[0] > window.t_ref[0]:
         ref = fit_surface(window.x_ref + rng.standard_normal(window.x_ref.shape) * s_x, window.t_ref, psi,
                           t_eval=window.t_ref[:1], **{**kw, "smoothing_t": None})

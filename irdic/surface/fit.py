@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 from ..errors import ConfigError, DataError, IrdicWarning
 from ..numerics.imq import imq
 from ..numerics.saddle import solve_dense
-from ..numerics.temporal import TemporalInterpolant, gcv_temporal
+from ..numerics.temporal import TemporalInterpolant, gcv_temporal, temporal_window
 from ..validation import as_int, choice, float_array, increasing_times, psi_array, smoothing_factor
 from .geometry import edge_distance
 from .interpolation import SpatialInterpolant
@@ -105,7 +105,7 @@ class SurfaceFields(NamedTuple):
 
 def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_t=1.0, smoothing=None,
                 smoothing_t=None, solver="auto", halo=None, parametrisation="auto", min_stage_fraction=0.5,
-                fill="both", max_gap=3):
+                fill="both", max_gap=3, record_times=None):
     """The continuous surface ``x(Psi, t)`` of DIC stages, evaluated at the points.
 
     Parameters
@@ -147,6 +147,11 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
         (:mod:`irdic.surface` Notes, Missing points).
     max_gap : int
         Longest run of missing stages filled in time.
+    record_times : array_like, optional
+        The whole record's stage times when ``x`` holds a time chunk's
+        window of stages: the temporal operator's window
+        (:func:`~irdic.numerics.temporal.temporal_window`) is the record's.
+        Default ``times``.
 
     Returns
     -------
@@ -189,7 +194,8 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     ed_nodes = edge_distance(psi[nodes])
     Xu, Vu = X[:, nodes][used], valid[:, nodes][used]
     Xs, Xt = _fill_missing(sp, Xu, Vu, tu, te.size, ks, fill, c_t, R0_t, max_gap, info)
-    fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info)
+    record = t if record_times is None else float_array(record_times, "record_times")
+    fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record)
     return _assemble(fields, psi, te, nodes, used, ~Vu, ed_nodes, (M, N), info, (c, R0, c_t, R0_t), t0)
 
 
@@ -243,13 +249,14 @@ def gcv_displacement(psi, X, valid=None, *, c=0.95, R0=1.0):
     return gcv_spatial(psi[rows], U, c=c, R0=R0, candidates=SURFACE_CANDIDATES)
 
 
-def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info):
+def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info, record):
     """Temporal then spatial operator on the filled stage data: value, d1, d2 (n, 3 T_ok + 3), velocity, ok times."""
     n = psi_n.shape[0]
     # --- temporal
     if kt == "gcv":
         kt, info["gcv_t"] = gcv_temporal(tu, Xt.reshape(tu.size, -1), c=c_t, R0=R0_t)
-    ts = TemporalInterpolant(tu, c=c_t, R0=R0_t, smoothing=kt)
+    ts = TemporalInterpolant(tu, c=c_t, R0=R0_t, smoothing=kt,
+                             window=temporal_window(record, c=c_t, R0=R0_t, smoothing=kt))
     Y0, Y1, Yr, ok_t = _temporal_columns(ts, te, t_ref, Xs, Xt)
     # --- spatial
     kg = None

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from irdic.errors import ConfigError, DataError
-from irdic.numerics.temporal import TemporalInterpolant
+from irdic.chunks import window as chunk_window
+from irdic.numerics.temporal import TemporalInterpolant, smooth_series, temporal_window
 
 # --------------------------------------------------------------------------
 # time
@@ -85,3 +86,69 @@ def test_temporal_bad_arguments():
         TemporalInterpolant([0.0, 1.0])(np.zeros(3), [0.5])
 
 
+
+
+# --- the windowed operator of long records ---------------------------------------------------------------------
+
+
+def _series(t):
+    return 20 + 10 * np.tanh((t - t.mean()) / 20) + 0.5 * np.sin(2.3 * t)
+
+
+def _series_rate(t):
+    return 0.5 / np.cosh((t - t.mean()) / 20) ** 2 + 1.15 * np.cos(2.3 * t)
+
+
+@pytest.mark.parametrize("k", [None, 2.0, 4.0])
+def test_a_chunk_of_the_windowed_operator_equals_the_whole_record_everywhere(k):
+    """Chunks, the record's first and last samples included, give the whole-record values and rates to rounding."""
+    t = np.arange(900) * 0.5
+    f = _series(t)
+    n = temporal_window(t, smoothing=k)
+    assert n is not None and 2 * n + 3 < t.size
+    whole = TemporalInterpolant(t, smoothing=k, window=n)
+    for a, b in ((0, 100), (400, 500), (800, 900)):
+        w = chunk_window(t, t[a], t[b - 1], n)
+        assert w.stop - w.start < t.size  # a chunk reads a bounded window
+        part = TemporalInterpolant(t[w], smoothing=k, window=n)
+        te = np.r_[t[a:b], np.linspace(t[a], t[b - 1], 61)]
+        for d in (0, 1):
+            np.testing.assert_allclose(part(f[w], te, d), whole(f, te, d), rtol=0, atol=1e-10)
+
+
+def test_windowed_operator_matches_the_global_one_inside_and_the_truth_at_the_ends():
+    t = np.arange(600) * 0.5
+    f = _series(t)
+    n = temporal_window(t)
+    g, w = TemporalInterpolant(t), TemporalInterpolant(t, window=n)
+    inner = np.linspace(t[100], t[500], 333)
+    for d in (0, 1):  # REACH_TOL: 1e-4 of a series within 10 K of a straight line
+        np.testing.assert_allclose(w(f, inner, d), g(f, inner, d), rtol=0, atol=1e-4)
+    # at the ends both are the interpolant's boundary behaviour: the windowed rate is as close to the truth
+    ends = np.r_[t[:3], t[-3:]]
+    err_w = np.abs(w(f, ends, 1) - _series_rate(ends)).max()
+    err_g = np.abs(g(f, ends, 1) - _series_rate(ends)).max()
+    assert err_w < 0.3 and err_w < 1.5 * err_g, (err_w, err_g)
+    # each row touches only its window
+    W = w.weights(inner, 1)
+    lo, hi = w.sample_window(inner)
+    cols = np.arange(t.size)
+    assert not np.any(W[(cols[None, :] < lo[:, None]) | (cols[None, :] >= hi[:, None])])
+
+
+def test_short_records_and_flat_kernels_keep_the_global_operator():
+    assert temporal_window(np.arange(30) * 0.5) is None  # shorter than two reaches: the paper's operator
+    assert temporal_window(np.arange(3000) * 0.02) is None  # 50 Hz with c R0 = 1 s: the kernel spans the record
+    assert temporal_window(np.arange(3000) * 0.02, R0=0.05) is not None  # R0 scaled to the frame rate
+
+
+def test_smooth_series_of_a_chunk_uses_the_record_window():
+    t = np.arange(700) * 0.5
+    rng = np.random.default_rng(3)
+    F = _series(t)[:, None] + 0.05 * rng.standard_normal((t.size, 4))
+    whole = smooth_series(F, t, smoothing=2.0)
+    n = temporal_window(t, smoothing=2.0)
+    w = chunk_window(t, t[600], t[699], n)
+    part = smooth_series(F[w], t[w], t[600:], smoothing=2.0, record_times=t)
+    np.testing.assert_allclose(part.rate, whole.rate[600:], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(part.value, whole.value[600:], rtol=0, atol=1e-10)
