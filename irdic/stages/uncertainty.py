@@ -53,7 +53,7 @@ PROBES = 16
 #: points closer than this to the mask edge (px) have interpolation bias rather than noise
 EDGE_PX = 2.0
 #: nearest points (surface parameters) over which a regression's bias is averaged, at each time and its neighbours
-BIAS_NEIGHBOURS = 16
+BIAS_NEIGHBOURS = 32
 
 
 class Window(NamedTuple):
