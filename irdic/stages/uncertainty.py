@@ -22,6 +22,12 @@ are propagated through those same operators:
   frozen at the chosen values; the standard deviation over the probes.
 - Calibration: the temperature gets ``pixel_std |∇_pix Θ|`` (the projected
   position's uncertainty times the pixel gradient) in quadrature.
+- Regression bias: a regression's error is noise plus bias. For the spatial
+  temperature regression (value, gradient) and the surface regression
+  (strain) the difference ``d`` to the exact interpolation of the same input
+  has ``E d² = b² + v`` (``v``: the noise variance of ``d``, from the same
+  probes through both operators); ``b² = <d²> - <v>`` averaged locally
+  (:func:`_local_bias`) is added to the variance.
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
