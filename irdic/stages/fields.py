@@ -265,6 +265,7 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
     visible = np.isfinite(theta)
     best = theta
     chosen_k = {"temperature_smoothing": None, "temperature_smoothing_space": None}
+    spatial = None
     if p["temperature_smoothing"] is not None:
         # a chunk regresses its window's series and evaluates it at its own times
         th, ts = (series.theta, series.t) if series is not None else (theta, t)
@@ -282,13 +283,15 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
         if p["temperature_smoothing"] is not None:
             # space-time regression: the spatial regression of the temporally regressed series
             _, value, _ = _regressed_gradient(best, sf.psi, geo.dual, ks, c=p["c_space"], R0=p["R0_space"])
+        # the regression's inputs and outputs: its bias is estimated against the exact interpolation of the inputs
+        spatial = (theta, grad, best, value)
         best = value
 
     def regress_space(th, dual, k):
         return _regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"])[:2]
 
     unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
-                        g_pix, t, p, chosen_k, regress_space, window=series)
+                        g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial)
     return grad, total, loc, rate.convective, best, unc
 
 

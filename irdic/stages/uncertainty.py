@@ -22,6 +22,12 @@ are propagated through those same operators:
   frozen at the chosen values; the standard deviation over the probes.
 - Calibration: the temperature gets ``pixel_std |∇_pix Θ|`` (the projected
   position's uncertainty times the pixel gradient) in quadrature.
+- Regression bias: a regression's error is noise plus bias. For the spatial
+  temperature regression (value, gradient) and the surface regression
+  (strain) the difference ``d`` to the exact interpolation of the same input
+  has ``E d² = b² + v`` (``v``: the noise variance of ``d``, from the same
+  probes through both operators); ``b² = <d²> - <v>`` averaged locally
+  (:func:`_local_bias`) is added to the variance.
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
@@ -44,7 +50,7 @@ from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
 
-__all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX"]
+__all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +58,8 @@ log = logging.getLogger(__name__)
 PROBES = 16
 #: points closer than this to the mask edge (px) have interpolation bias rather than noise
 EDGE_PX = 2.0
+#: nearest points (surface parameters) over which a regression's bias is averaged, at each time and its neighbours
+BIAS_NEIGHBOURS = 32
 
 
 class Window(NamedTuple):
@@ -79,7 +87,7 @@ def _probe_std(samples, base):
     return np.sqrt(np.mean(np.square(samples - base), axis=0))
 
 
-def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None):
+def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None, spatial=None):
     """Standard uncertainties and bias flags of the fields (see the module docstring).
 
     Parameters
@@ -110,6 +118,12 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         A time chunk's window: the temporal regression's weights and the
         strain probes run over it, as the chunk's fields do, and only the
         record's own ends are flagged as series ends.
+    spatial : tuple, optional
+        With the spatial regression of the temperatures: ``(theta (T, N),
+        grad (T, N, 3), value_in (T, N), value (T, N))``, the point
+        temperatures and the regressed gradient, and the regression's input
+        (``theta`` or its temporal regression) and output; their differences
+        to the exact interpolation give the regression's bias.
 
     Returns
     -------
@@ -124,18 +138,20 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     visible = np.isfinite(points["temperature"].values.astype(float))
     sig_n, q, sigma, (s_T, s_g, s_r) = _ir_noise(a)
     notes = []
+    ends = (True, True) if window is None else (window.first, window.last)
+    ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes, ends)
+    # the bias is averaged over points where the exact interpolation is itself accurate (unflagged)
+    trusted = ~(near_edge(points, sf, visible) | strain_bias)
     temp_std, grad_std, rate_std = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
-                                           s_T, s_g, s_r, window)
+                                           s_T, s_g, s_r, window, spatial, trusted)
     # calibration: the projected position's uncertainty moves the sample along the pixel gradient
     pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
     cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
     temp_std = np.sqrt(temp_std ** 2 + cal ** 2)
     s_x = float(a.get("dic_noise_mm", np.nan))
-    strain_std = _strain_std(points, sf, t, p, s_x, rng, window)
+    strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
-    ends = (True, True) if window is None else (window.first, window.last)
-    ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes, ends)
     for arr in (temp_std, rate_std):
         arr[~visible] = np.nan
     grad_std[~visible] = np.nan
@@ -162,8 +178,10 @@ def _ir_noise(a):
     return sig_n, q, sigma, tuple(gains)
 
 
-def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None):
-    """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise."""
+def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None, spatial=None,
+            trusted=None):
+    """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise (and the spatial
+    regression's bias, :func:`_local_bias`)."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
@@ -202,11 +220,66 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             smoothed = np.einsum("ij,kjn->kin", W0, np.nan_to_num(noise))
             smoothed[:, ~visible] = np.nan
             _, v_pr = regress_space(smoothed.reshape(PROBES * T, N), dual, ks)
-        temp_std = _probe_std(v_pr.reshape(PROBES, T, N), 0.0)
+            value_in_pr = smoothed
+        else:
+            value_in_pr = noise
+        v_pr = v_pr.reshape(PROBES, T, N)
+        temp_std = _probe_std(v_pr, 0.0)
+        if spatial is not None:
+            theta, grad, value_in, value = spatial
+            # the same probes through the exact interpolation (k = 1): the noise expected in the
+            # difference regression - interpolation, which is subtracted from the data's difference
+            g_int = regress_space(noise.reshape(PROBES * T, N), dual, 1.0)[0].reshape(PROBES, T, N, 3)
+            g_var = np.mean(np.square(g_pr.reshape(PROBES, T, N, 3) - g_int), axis=0)
+            d_grad = grad - regress_space(theta, geo.dual, 1.0)[0]
+            grad_std = np.hypot(grad_std, _local_bias(d_grad, g_var, sf.psi, trusted))
+            # the exact interpolation of the input at the points is the input itself
+            v_var = np.mean(np.square(v_pr - value_in_pr), axis=0)
+            temp_std = np.hypot(temp_std, _local_bias(value - value_in, v_var, sf.psi, trusted))
     return temp_std, grad_std, rate_std
 
 
-def _strain_std(points, sf, t, p, s_x, rng, window=None):
+def _local_bias(d, noise_var, psi, trusted=None):
+    """Local RMS of a regression's bias from its difference ``d`` to the exact interpolation.
+
+    ``d`` (T, N) or (T, N, C) has the expectation ``b`` (the bias, up to the
+    interpolation's own, much smaller, bias) and the noise variance
+    ``noise_var`` (same shape, from probes); ``E d² = b² + noise_var``. Both
+    are averaged over the :data:`BIAS_NEIGHBOURS` nearest points in the
+    surface parameters ``psi`` (N, 2) at the same and the adjacent times
+    (the bias varies on the scale of the regression's centre spacing, the
+    noise from point to point); ``sqrt(max(0, <d²> - <noise_var>))``, 0 where
+    nothing is known. Only ``trusted`` (T, N) points enter the averages: at
+    the mask's and the point cloud's edges the interpolation's own error is
+    large (those points are flagged as bias-dominated).
+    """
+    a = np.square(d) - noise_var
+    ok = np.isfinite(a)
+    if trusted is not None:
+        ok &= np.asarray(trusted, dtype=bool).reshape(trusted.shape + (1,) * (a.ndim - 2))
+    a = np.where(ok, a, 0.0)
+    have = np.flatnonzero(np.isfinite(psi).all(axis=1))
+    out = np.zeros_like(a)
+    if have.size == 0:
+        return out
+    from scipy.spatial import cKDTree
+
+    k = min(BIAS_NEIGHBOURS, have.size)
+    nb = have[cKDTree(psi[have]).query(psi[have], k=k)[1].reshape(have.size, k)]
+    s = np.zeros_like(a)
+    n = np.zeros(a.shape)
+    s[:, have] = a[:, nb].sum(axis=2)
+    n[:, have] = ok[:, nb].sum(axis=2)
+    s2, n2 = s.copy(), n.copy()
+    s2[1:] += s[:-1]
+    s2[:-1] += s[1:]
+    n2[1:] += n[:-1]
+    n2[:-1] += n[1:]
+    np.divide(s2, n2, out=out, where=n2 > 0)
+    return np.sqrt(np.maximum(out, 0.0))
+
+
+def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None):
     """Standard uncertainty of the max principal strain: DIC noise probes through the surface fit
     (smoothing frozen) and the strain; NaN when the DIC noise is unknown or zero."""
     T, N = sf.x.shape[:2]
@@ -217,23 +290,40 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None):
     kw = dict(c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"], solver=p["solver"],
               smoothing=sf.info.get("smoothing", None), smoothing_t=sf.info.get("smoothing_t", None))
     kw = {k: (None if k.startswith("smoothing") and v is not None and v <= 1.0 else v) for k, v in kw.items()}
-    samples = []
+    if kw["smoothing"] is not None and sf.info.get("smoothing_shape") not in (None, sf.info["smoothing"]):
+        # the fit's own pair of spacings (shape, motion), so that the probes regress as the fit did
+        kw["smoothing"] = (sf.info["smoothing_shape"], sf.info["smoothing"])
+    # a surface regression's bias: against the exact interpolation of the same coordinates (see _local_bias)
+    regressed = kw["smoothing"] is not None or kw["smoothing_t"] is not None
+    kws = [kw, {**kw, "smoothing": None, "smoothing_t": None}] if regressed else [kw]
+    shape = x.shape if window is None else window.x.shape
+
+    def e_max(kwi, dx, dref):
+        pf = fit_surface(x + dx, t, psi=sf.psi, **kwi) if window is None else _window_probe(window, t, sf.psi, kwi,
+                                                                                             dx, dref)
+        return strain(pf.tangents, pf.ref_tangents, tensors=False).e_max
+
+    bases = [base] + [e_max(kwi, 0.0, 0.0) for kwi in kws[1:]]
+    samples = [[] for _ in kws]
     for _ in range(PROBES):
-        if window is None:
-            pf = fit_surface(x + rng.standard_normal(x.shape) * s_x, t, psi=sf.psi, **kw)
-        else:
-            pf = _window_probe(window, t, sf.psi, kw, s_x, rng)
-        samples.append(strain(pf.tangents, pf.ref_tangents, tensors=False).e_max)
-    return _probe_std(np.array(samples), base)
+        dx = rng.standard_normal(shape) * s_x
+        dref = rng.standard_normal(window.x_ref.shape) * s_x if window is not None else None
+        for s, kwi in zip(samples, kws):
+            s.append(e_max(kwi, dx, dref))
+    std = _probe_std(np.array(samples[0]), base)
+    if regressed:
+        var = np.mean(np.square((np.array(samples[0]) - base) - (np.array(samples[1]) - bases[1])), axis=0)
+        std = np.hypot(std, _local_bias(base - bases[1], var, sf.psi, trusted))
+    return std
 
 
-def _window_probe(window, t, psi, kw, s_x, rng):
-    """A noisy surface fit of a chunk as the fields stage fits it: over its window, at its times ``t``,
-    with the strain's reference from the record's first two stages (noise drawn for those too)."""
-    pf = fit_surface(window.x + rng.standard_normal(window.x.shape) * s_x, window.t, psi, t_eval=t,
-                     record_times=window.record, **kw)
+def _window_probe(window, t, psi, kw, dx, dref):
+    """A surface fit of a chunk as the fields stage fits it, with the coordinate noise ``dx`` (window) and
+    ``dref`` (the record's first two stages) added: over its window, at its times ``t``, with the strain's
+    reference from the record's first two stages."""
+    pf = fit_surface(window.x + dx, window.t, psi, t_eval=t, record_times=window.record, **kw)
     if window.t[0] > window.t_ref[0]:
-        ref = fit_surface(window.x_ref + rng.standard_normal(window.x_ref.shape) * s_x, window.t_ref, psi,
+        ref = fit_surface(window.x_ref + (0.0 if dref is None else dref), window.t_ref, psi,
                           t_eval=window.t_ref[:1], **{**kw, "smoothing_t": None})
         pf = pf._replace(ref_x=ref.ref_x, ref_tangents=ref.ref_tangents)
     return pf
@@ -242,10 +332,7 @@ def _window_probe(window, t, psi, kw, s_x, rng):
 def _bias_flags(points, sf, visible, q, sig_n, notes, ends=(True, True)):
     """Where the method's bias, not the noise, dominates: IR fields, rates, strain (appends to ``notes``)."""
     T, N = sf.x.shape[:2]
-    status = points["status"].values
-    edge = points["edge_distance"].values.astype(float)
-    near_edge = visible & ((status == Status.EXTRAPOLATED_FROM_EDGE) | ~(edge >= EDGE_PX))
-    ir_bias = near_edge.copy()
+    ir_bias = near_edge(points, sf, visible)
     if q / np.sqrt(12) > sig_n or not np.isfinite(sig_n):
         ir_bias |= visible
         notes.append(f"IR: the export step {q:g} K exceeds the noise ({sig_n:.3g} K): rounding is a deterministic "
@@ -259,6 +346,13 @@ def _bias_flags(points, sf, visible, q, sig_n, notes, ends=(True, True)):
     strain_bias = np.broadcast_to(~(sf.edge_distance >= 2 * h), (T, N)) | sf.filled
     strain_bias = strain_bias & np.isfinite(sf.x).all(axis=-1)
     return ir_bias, rate_bias, strain_bias
+
+
+def near_edge(points, sf, visible):
+    """Visible points within :data:`EDGE_PX` of the mask edge or extrapolated from it (T, N)."""
+    status = points["status"].values
+    edge = points["edge_distance"].values.astype(float)
+    return visible & ((status == Status.EXTRAPOLATED_FROM_EDGE) | ~(edge >= EDGE_PX))
 
 
 def _median(a):
