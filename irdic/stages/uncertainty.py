@@ -314,6 +314,10 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None):
     if regressed:
         var = np.mean(np.square((np.array(samples[0]) - base) - (np.array(samples[1]) - bases[1])), axis=0)
         std = np.hypot(std, _local_bias(base - bases[1], var, sf.psi, trusted))
+    # the strain is zero by definition at the reference stage (stage 0 of the record): no uncertainty there,
+    # whatever rounding the probes leave
+    t_ref = t[0] if window is None else window.t_ref[0]
+    std[np.asarray(t) == t_ref] = 0.0
     return std
 
 
