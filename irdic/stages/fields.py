@@ -195,7 +195,7 @@ def _chunk_surface(points, x, t, chunk, p):
              chunk[1], sl.start, sl.stop - 1, w.start, w.stop - 1, "all" if reach is None else reach)
     kw = _surface_kw(p)
     sf = fit_surface(x[w], t[w], psi, t_eval=t[sl], smoothing=p["surface_smoothing"],
-                     smoothing_t=p["surface_smoothing_time"], record_times=t, **kw)
+                     smoothing_t=p["surface_smoothing_time"], record_times=t, shape_stage=x[0], **kw)
     if w.start > 0:
         # the strain's reference is stage 0 of the record; at a sample time the temporal
         # operator is the identity, so stages 0 and 1 alone give its tangents

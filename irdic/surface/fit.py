@@ -105,7 +105,7 @@ class SurfaceFields(NamedTuple):
 
 def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_t=1.0, smoothing=None,
                 smoothing_t=None, solver="auto", halo=None, parametrisation="auto", min_stage_fraction=0.5,
-                fill="both", max_gap=3, record_times=None):
+                fill="both", max_gap=3, record_times=None, shape_stage=None):
     """The continuous surface ``x(Psi, t)`` of DIC stages, evaluated at the points.
 
     Parameters
@@ -152,6 +152,11 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
         window of stages: the temporal operator's window
         (:func:`~irdic.numerics.temporal.temporal_window`) is the record's.
         Default ``times``.
+    shape_stage : array_like, shape (N, 3), optional
+        Coordinates (mm) of the stage the shape regression is fitted on
+        when ``smoothing`` is a pair of different spacings; default the
+        first of ``x``. A time chunk passes the record's stage 0, so that
+        shape and motion split as in the whole record.
 
     Returns
     -------
@@ -195,7 +200,14 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     Xu, Vu = X[:, nodes][used], valid[:, nodes][used]
     Xs, Xt = _fill_missing(sp, Xu, Vu, tu, te.size, ks, fill, c_t, R0_t, max_gap, info)
     record = t if record_times is None else float_array(record_times, "record_times")
-    fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record)
+    x0 = None
+    if shape_stage is not None:
+        s0 = float_array(shape_stage, "shape_stage")
+        if s0.shape != (N, 3):
+            raise ConfigError(f"shape_stage must have shape (points, 3) = ({N}, 3), got {s0.shape}")
+        s0 = s0[nodes]
+        x0 = sp.fill(s0[None], np.isfinite(s0).all(axis=1)[None])[0][0]
+    fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record, x0)
     return _assemble(fields, psi, te, nodes, used, ~Vu, ed_nodes, (M, N), info, (c, R0, c_t, R0_t), t0)
 
 
@@ -249,7 +261,7 @@ def gcv_displacement(psi, X, valid=None, *, c=0.95, R0=1.0):
     return gcv_spatial(psi[rows], U, c=c, R0=R0, candidates=SURFACE_CANDIDATES)
 
 
-def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info, record):
+def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info, record, x0=None):
     """Temporal then spatial operator on the filled stage data: value, d1, d2 (n, 3 T_ok + 3), velocity, ok times."""
     n = psi_n.shape[0]
     # --- temporal
@@ -277,7 +289,7 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
     if split:
         # shape and motion apart: x = S_shape x_0 + S_motion (x - x_0). The temporal weights of a value
         # sum to 1 ({1, t} are reproduced), so the columns minus x_0 are the combined displacements
-        x0 = Xs[0]
+        x0 = Xs[0] if x0 is None else x0
         Yall -= np.tile(x0, cols.size // 3 + 1)
     val, d1, d2 = sp_motion.evaluate(Yall)
     del Yall

@@ -61,3 +61,28 @@ def test_gcv_displacement_uses_measured_points_and_rigid_motion_is_free():
     Xb[2, bad] += 1.0
     valid[2, bad] = False
     assert gcv_displacement(psi, Xb, valid)[0] == k
+
+
+def test_a_time_chunk_of_a_long_record_fits_the_whole_record_surface():
+    """Shape and motion regressed apart, windowed in time: a chunk's surface equals the whole record's."""
+    from irdic.chunks import window
+    from irdic.numerics.temporal import temporal_window
+
+    ex = experiment("tube", "demo", ir_noise=0.0, dic_noise=0.0)
+    t = np.arange(90) * 0.5  # longer than the temporal kernel's reach (19 stages at 2 Hz)
+    rng = np.random.default_rng(5)
+    x = ex.specimen.position(ex.s[None], ex.h[None], t[:, None]) + rng.normal(0, 0.003, (t.size, ex.s.size, 3))
+    n = temporal_window(t)
+    assert n is not None
+    kw = dict(smoothing=(3.0, 6.0))
+    whole = fit_surface(x, t, **kw)
+    for a, b in ((30, 45), (75, 90)):
+        w = window(t, t[a], t[b - 1], n)
+        assert w.start > 0
+        part = fit_surface(x[w], t[w], whole.psi, t_eval=t[a:b], record_times=t, shape_stage=x[0], **kw)
+        for name in ("x", "tangents", "velocity"):
+            np.testing.assert_allclose(getattr(part, name), getattr(whole, name)[a:b], rtol=0, atol=1e-9,
+                                       err_msg=name)
+    # without the record's stage 0 the shape would be fitted on the window's first stage
+    stray = fit_surface(x[w], t[w], whole.psi, t_eval=t[a:b], record_times=t, **kw)
+    assert np.abs(stray.tangents - whole.tangents[a:b]).max() > 1e-7
