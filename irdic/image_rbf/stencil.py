@@ -15,6 +15,7 @@ import numpy as np
 
 from ..numerics.imq import imq_matrix
 from ..numerics.saddle import SaddleFactor
+from ..threads import blas_threads
 
 __all__ = ["CHEB_DEGREE", "CHEB_SUB", "Stencil", "chebyshev", "interior_stencil"]
 
@@ -62,6 +63,13 @@ def interior_stencil(ce, halo, degree=CHEB_DEGREE, sub=CHEB_SUB):
     sub-cell coordinates in [-1, 1]^2 (tensor Chebyshev interpolation at
     Chebyshev points of the first kind).
     """
+    # one BLAS thread: threaded BLAS sums in another order, and the float32 weights (cached for the
+    # process) would then depend on the thread count of the stage that happened to build them first
+    with blas_threads(1):
+        return _interior_stencil(ce, halo, degree, sub)
+
+
+def _interior_stencil(ce, halo, degree, sub):
     k = np.arange(-halo, halo + 1)
     KV, KU = np.meshgrid(k, k, indexing="ij")
     keep = KU**2 + KV**2 <= halo**2
