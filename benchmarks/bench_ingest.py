@@ -1,8 +1,9 @@
 """Benchmark of the ingest stage: throughput and memory versus series length.
 
 Writes synthetic IRBIS text series (crop exports) of two lengths, ingests
-them with :func:`irdic.stages.ingest_ir.ingest_ir`, and reports wall time, MB/s of text
-and the peak of Python-allocated memory (tracemalloc): the peak must not grow
+them with :func:`irdic.stages.ingest_ir.ingest_ir` on one thread, and reports wall time, MB/s of text
+per wall second and per CPU second (``time.process_time``, all threads of the process: the
+figure that stays meaningful on a shared machine) and the peak of Python-allocated memory (tracemalloc): the peak must not grow
 with the number of frames, because frames are streamed into the store. In
 the same run, the obvious approach (read every frame with ``numpy.loadtxt``
 into one array, then ``xarray.Dataset.to_zarr``) is timed for comparison.
@@ -15,6 +16,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import os
 import warnings
 import platform
 import shutil
@@ -27,6 +29,7 @@ import numpy as np
 import xarray as xr
 
 from irdic.stages.ingest_ir import ingest_ir
+from irdic.threads import stage_threads
 from irdic.synthetic.writers import write_irbis
 
 
@@ -42,18 +45,24 @@ def write_series(folder: Path, n: int, width: int, height: int) -> int:
 
 
 def measure(fn):
-    """Wall time of a plain run (best of 2), then the tracemalloc peak of a second run
+    """Wall and CPU time of a plain run (best of 3 each), then the tracemalloc peak of another run
     (tracemalloc slows allocation-heavy code several fold, so it is not timed)."""
-    times = []
-    for _ in range(2):
-        t0 = time.perf_counter()
+    walls, cpus = [], []
+    for _ in range(3):
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        times.append(time.perf_counter() - t0)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
     tracemalloc.start()
     fn()
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    return min(times), peak / 2**20
+    return min(walls), min(cpus), peak / 2**20
+
+
+def ingest_one_thread(src: Path, out: Path) -> None:
+    with stage_threads(1):
+        ingest_ir(src, out)
 
 
 def naive(folder: Path, out: Path) -> None:
@@ -74,16 +83,19 @@ def main() -> None:
     ap.add_argument("--frames", type=int, nargs="+", default=[40, 160])
     args = ap.parse_args()
     print(f"machine: {platform.machine()} {platform.processor() or ''}, python {platform.python_version()}")
-    print(f"frame {args.width} x {args.height} px (IRBIS text, TAB, 2 decimals)")
-    print(f"{'frames':>7} {'MB text':>8} {'irdic s':>8} {'MB/s':>6} {'peak MiB':>9} | {'loadtxt s':>9} {'MB/s':>6} {'peak MiB':>9}")
+    print(f"frame {args.width} x {args.height} px (IRBIS text, TAB, 2 decimals); load average "
+          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(f"{'frames':>7} {'MB text':>8} {'irdic s':>8} {'MB/s':>6} {'cpu s':>6} {'MB/s/core':>9} {'peak MiB':>9} | "
+          f"{'loadtxt s':>9} {'MB/s':>6} {'cpu s':>6} {'MB/s/core':>9} {'peak MiB':>9}")
     root = Path(tempfile.mkdtemp(prefix="bench_ingest_"))
     try:
         for n in args.frames:
             src = root / f"s{n}"
             size = write_series(src, n, args.width, args.height) / 1e6
-            dt, peak = measure(lambda: ingest_ir(src, root / f"ir{n}.zarr"))
-            dt2, peak2 = measure(lambda: naive(src, root / f"naive{n}.zarr"))
-            print(f"{n:>7} {size:>8.1f} {dt:>8.2f} {size / dt:>6.0f} {peak:>9.1f} | {dt2:>9.2f} {size / dt2:>6.0f} {peak2:>9.1f}")
+            dt, cpu, peak = measure(lambda: ingest_one_thread(src, root / f"ir{n}.zarr"))
+            dt2, cpu2, peak2 = measure(lambda: naive(src, root / f"naive{n}.zarr"))
+            print(f"{n:>7} {size:>8.1f} {dt:>8.2f} {size / dt:>6.0f} {cpu:>6.2f} {size / cpu:>9.0f} {peak:>9.1f} | "
+                  f"{dt2:>9.2f} {size / dt2:>6.0f} {cpu2:>6.2f} {size / cpu2:>9.0f} {peak2:>9.1f}")
     finally:
         shutil.rmtree(root, ignore_errors=True)
 

@@ -34,9 +34,11 @@ import warnings
 from pathlib import Path
 from typing import Any, Iterator, Mapping, Sequence
 
+import numcodecs
 import numpy as np
 import xarray as xr
 import zarr
+from zarr.codecs import BloscCodec
 
 from .errors import DataError, IrdicError
 from .outputs import COMPLETE_ATTR, atomic_directory, zarr_group_attrs
@@ -54,6 +56,15 @@ __all__ = [
 
 #: JSON text written with the completion mark: chunk files of every array (see :func:`open_store`)
 CHUNKS_ATTR = "irdic_chunks"
+
+#: Codec of :class:`FrameStore` frames: blosc (a core zarr v3 codec, readable by any zarr) with LZ4 after a
+#: bit shuffle. On float32 temperatures it costs ~0.2 ms per 360 x 260 frame against ~1.8 ms for zarr's
+#: default zstd, for a store ~1.9x smaller than the float32 values instead of ~3x.
+FRAME_BLOSC = {"cname": "lz4", "clevel": 5, "shuffle": "bitshuffle"}
+_BLOSC_SHUFFLE = {"noshuffle": 0, "shuffle": 1, "bitshuffle": 2}
+# Blosc would start a pool of its own threads when called from the main thread, beyond the threads a stage
+# was given; zarr sets the same on import, this keeps it true whatever imports come first.
+numcodecs.blosc.use_threads = False
 
 
 def _version() -> str:
@@ -394,15 +405,27 @@ class FrameStore:
         self.frame_shape = tuple(len(frame_coords[d]) for d in frame_dims)
         root = zarr.open_group(str(self._tmp), mode="w", zarr_format=3)
         self._root = root
+        dtype = np.dtype(dtype)
         self._data = root.create_array(
             name,
             shape=(n_frames, *self.frame_shape),
             chunks=(1, *self.frame_shape),
             dtype=dtype,
-            fill_value=np.nan if np.dtype(dtype).kind == "f" else 0,
+            fill_value=np.nan if dtype.kind == "f" else 0,
             dimension_names=("time", *frame_dims),
+            serializer={"name": "bytes", "configuration": {"endian": "little"}},
+            compressors=BloscCodec(typesize=dtype.itemsize, **FRAME_BLOSC),
         )
         self._data.attrs.update(dict(var_attrs or {}))
+        # Frames are encoded here and written as chunk files at the keys zarr gives them: zarr's own write
+        # path (an event loop in another thread, buffer copies) costs ~1 ms of CPU per frame on top of the
+        # encoding, as much as parsing the frame. The bytes are those of the array's codecs
+        # (little-endian values, then blosc), so zarr and xarray read the store as usual.
+        self._dtype = dtype.newbyteorder("<")
+        self._blosc = numcodecs.Blosc(cname=FRAME_BLOSC["cname"], clevel=FRAME_BLOSC["clevel"],
+                                      shuffle=_BLOSC_SHUFFLE[FRAME_BLOSC["shuffle"]], blocksize=0,
+                                      typesize=dtype.itemsize)
+        self._data_dir = self._tmp / name
         self._time = root.create_array(
             "time", shape=(n_frames,), chunks=(n_frames,), dtype="float64", fill_value=np.nan,
             dimension_names=("time",),
@@ -437,7 +460,11 @@ class FrameStore:
             raise DataError(
                 f"frame {index} has shape {frame.shape}, expected {self.frame_shape} like the first frame"
             )
-        self._data[index] = frame
+        if not 0 <= index < self.n_frames:
+            raise DataError(f"{self.path}: frame index {index} outside 0..{self.n_frames - 1}")
+        chunk = self._data_dir / self._data.metadata.encode_chunk_key((index,) + (0,) * len(self.frame_shape))
+        chunk.parent.mkdir(parents=True, exist_ok=True)
+        chunk.write_bytes(self._blosc.encode(np.ascontiguousarray(frame, dtype=self._dtype)))
         self._time_buf[index] = time
         for k, v in extra.items():
             self._extra_buf[k][index] = v

@@ -140,28 +140,30 @@ def decode_block(b: np.ndarray, sep0: int, mark: int, newline: int, out: np.ndar
     masks = _classify(b, sep0, mark, ws)
     if masks is None:
         return None
-    tmp, delim, is_mark, is_sign = masks
+    tmp, delim, digits, n_marks, n_signs = masks
     start, end = _number_bounds(delim, tmp, ws)
     n = start.size
     if n == 0:
         return 0, np.zeros(np.count_nonzero(b == newline) + 1, np.int64)
     if offset + n > out.size:
         return None
-    shape = _lengths(start, end, is_sign, ws)
+    shape = _lengths(start, end, b, n_signs, ws)
     if shape is None:
         return None
-    length, signed, n_signed, width = shape
-    padded, last = _right_aligned(b, end, width, ws)
-    acc = out[offset:offset + n] if convert is None else ws.get("acc", np.float64, n)
-    acc[:] = 0.0
-    k = _common_mark_position(padded, last, length, width, mark, int(np.count_nonzero(is_mark)), ws)
+    length, signed, width = shape
+    k = _common_mark_position(b, end, length, width, mark, n_marks, ws)
     if k is not None:
         if (length - signed).min() < 2:  # a lone mark
             return None
-        _sum_fixed(padded, last, length, width, k, acc, ws)
-    elif not _sum_general(padded, last, length, signed, width, mark, acc):
-        return None
-    if n_signed:
+        acc = ws.get("acc", np.float64, n) if convert is not None else out[offset:offset + n]
+        _sum_fixed(digits, end, length, width, k, acc, ws)
+    else:
+        padded, last = _right_aligned(b, end, width, ws)
+        acc = out[offset:offset + n] if convert is None else ws.get("acc", np.float64, n)
+        acc[:] = 0.0
+        if not _sum_general(padded, last, length, signed, width, mark, acc):
+            return None
+    if n_signs:
         row = ws.get("row", np.uint8, n)
         use = ws.get("use", bool, n)
         np.take(b, start, out=row, mode="clip")
@@ -177,11 +179,19 @@ def decode_block(b: np.ndarray, sep0: int, mark: int, newline: int, out: np.ndar
     return n, _values_per_line(b, newline, end, n, tmp)
 
 
+#: zero digits in front of every block's digit values, so that the j-th digit
+#: from the end of a number can be gathered for all numbers from one shifted
+#: view without running off the front (numbers have at most 15 characters)
+_PAD = 16
+
+
 def _classify(b: np.ndarray, sep0: int, mark: int, ws: Workspace):
-    """Masks (scratch, delimiter, decimal mark, sign) of the block's bytes; None for a byte or cell not expected.
+    """Scratch, delimiter mask, digit values, mark and sign counts of the block; None for a byte or cell not expected.
 
     Only digits, the mark, signs, the separator and line ends may occur (a
-    blank separator also admits TABs), and no cell may be empty.
+    blank separator also admits TABs), and no cell may be empty. The digit
+    values (``byte - '0'``, 0 for every other byte) are returned behind
+    :data:`_PAD` zeros.
     """
     size = b.size
     tmp = ws.get("tmp", bool, size)
@@ -190,20 +200,19 @@ def _classify(b: np.ndarray, sep0: int, mark: int, ws: Workspace):
     for other in ((10, 13, 9) if sep0 == 32 else (10, 13)):
         np.equal(b, other, out=tmp)
         delim |= tmp
-    digit = ws.get("digit", np.uint8, size)
-    np.subtract(b, np.uint8(48), out=digit)
+    padded = ws.get("digits", np.uint8, size + _PAD)
+    padded[:_PAD] = 0
+    digits = padded[_PAD:]
+    np.subtract(b, np.uint8(48), out=digits)
     ok = ws.get("ok", bool, size)
-    np.less(digit, 10, out=ok)
-    is_mark = ws.get("mark", bool, size)
-    np.equal(b, mark, out=is_mark)
-    ok |= is_mark
-    ok |= delim
-    is_sign = ws.get("sign", bool, size)
-    np.equal(b, 45, out=is_sign)
-    np.equal(b, 43, out=tmp)
-    is_sign |= tmp
-    ok |= is_sign
-    if not ok.all():
+    np.less(digits, 10, out=ok)
+    # every byte is a digit, a delimiter, the mark or a sign: their counts add up to the block's size
+    n_digits = int(np.count_nonzero(ok))
+    digits *= ok
+    n_delim = int(np.count_nonzero(delim))
+    n_marks = _count(b, mark, tmp)
+    n_signs = _count(b, 45, tmp) + _count(b, 43, tmp)
+    if n_digits + n_delim + n_marks + n_signs != size:
         return None
     if sep0 != 32:
         # an empty cell (a separator after a separator or at a line start) would shift the row silently
@@ -214,7 +223,12 @@ def _classify(b: np.ndarray, sep0: int, mark: int, ws: Workspace):
         t &= delim[:size - 1]
         if t.any():
             return None
-    return tmp, delim, is_mark, is_sign
+    return tmp, delim, padded, n_marks, n_signs
+
+
+def _count(b: np.ndarray, byte: int, tmp: np.ndarray) -> int:
+    np.equal(b, byte, out=tmp)
+    return int(np.count_nonzero(tmp))
 
 
 def _number_bounds(delim: np.ndarray, tmp: np.ndarray, ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
@@ -230,24 +244,32 @@ def _number_bounds(delim: np.ndarray, tmp: np.ndarray, ws: Workspace) -> tuple[n
     return start, np.flatnonzero(tmp)
 
 
-def _lengths(start: np.ndarray, end: np.ndarray, is_sign: np.ndarray, ws: Workspace):
-    """(length, signed, n_signed, width) of the numbers; None unless the decoder can sum them exactly.
+def _lengths(start: np.ndarray, end: np.ndarray, b: np.ndarray, n_signs: int, ws: Workspace):
+    """(length, signed, width) of the numbers; None unless the decoder can sum them exactly.
 
     A sign may only lead a number and must have something after it, and a
     number has at most 15 characters, so that its digit sum is an integer
-    that float64 holds exactly.
+    that float64 holds exactly. ``signed`` is 0 or a bool array.
     """
     n = start.size
     length = ws.get("length", np.intp, n)
     np.subtract(end, start, out=length)
     length += 1
     width = int(length.max())
-    signed = ws.get("signed", bool, n)
-    np.take(is_sign, start, out=signed, mode="clip")
-    n_signed = int(np.count_nonzero(signed))
-    if n_signed != np.count_nonzero(is_sign) or width > 15 or (n_signed and (length[signed] < 2).any()):
+    if width >= _PAD:
         return None
-    return length, signed, n_signed, width
+    if not n_signs:
+        return length, 0, width
+    row = ws.get("row", np.uint8, n)
+    signed = ws.get("signed", bool, n)
+    np.take(b, start, out=row, mode="clip")
+    np.equal(row, 45, out=signed)
+    use = ws.get("use", bool, n)
+    np.equal(row, 43, out=use)
+    signed |= use
+    if int(np.count_nonzero(signed)) != n_signs or (length[signed] < 2).any():
+        return None
+    return length, signed, width
 
 
 def _right_aligned(b: np.ndarray, end: np.ndarray, width: int, ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
@@ -265,46 +287,59 @@ def _right_aligned(b: np.ndarray, end: np.ndarray, width: int, ws: Workspace) ->
     return padded, last
 
 
-def _common_mark_position(padded: np.ndarray, last: np.ndarray, length: np.ndarray, width: int, mark: int,
+def _common_mark_position(b: np.ndarray, end: np.ndarray, length: np.ndarray, width: int, mark: int,
                           n_marks: int, ws: Workspace) -> int | None:
-    """Position ``k`` of the decimal mark, counted from the end, when every number has it there; else None."""
-    n = last.size
+    """Position ``k`` of the decimal mark, counted from the end, when every number has it there; else None.
+
+    Every number is longer than ``k`` and the block holds as many marks as
+    numbers, so each number holds exactly one mark, at ``k``.
+    """
+    n = end.size
     if n_marks != n:
         return None
-    first = padded[last[0] - np.arange(min(width, int(length[0])))]
+    first = b[end[0] - np.arange(min(width, int(length[0])))]
     hits = np.flatnonzero(first == mark)
     if hits.size != 1:
         return None
-    idx = ws.get("idx", np.intp, n)
+    k = int(hits[0])
+    if int(length.min()) <= k:
+        return None
     row = ws.get("row", np.uint8, n)
-    np.subtract(last, hits[0], out=idx)
-    np.take(padded, idx, out=row, mode="clip")
-    return int(hits[0]) if (row == mark).all() else None
-
-
-def _sum_fixed(padded: np.ndarray, last: np.ndarray, length: np.ndarray, width: int, k: int, acc: np.ndarray,
-               ws: Workspace) -> None:
-    """Values of numbers that all have ``k`` decimals (the usual export), into ``acc``."""
-    n = last.size
     idx = ws.get("idx", np.intp, n)
+    np.subtract(end, k, out=idx)
+    np.take(b, idx, out=row, mode="clip")
+    return k if (row == mark).all() else None
+
+
+def _sum_fixed(digits: np.ndarray, end: np.ndarray, length: np.ndarray, width: int, k: int, acc: np.ndarray,
+               ws: Workspace) -> None:
+    """Values of numbers that all have ``k`` decimals (the usual export), into ``acc``.
+
+    ``digits`` holds the digit values of the block behind :data:`_PAD`
+    zeros. The digits are summed as an integer (int32 when it fits, else
+    int64; exact either way), which is divided by ``10**k`` once.
+    """
+    n = end.size
+    size = digits.size - _PAD
+    itype = np.int32 if width <= 10 else np.int64
+    total = ws.get("total" + np.dtype(itype).char, itype, n)
+    term = ws.get("term" + np.dtype(itype).char, itype, n)
     row = ws.get("row", np.uint8, n)
     use = ws.get("use", bool, n)
-    use2 = ws.get("use2", bool, n)
-    prod = ws.get("prod", np.float64, n)
+    # the byte just before a number is a delimiter, a sign or padding (digit value 0); only bytes further
+    # back belong to the previous number and must be masked out
+    unmasked = int(length.min()) + 1
+    total[:] = 0
     for j in range(width):
         if j == k:
             continue
-        np.subtract(last, j, out=idx)
-        np.take(padded, idx, out=row, mode="clip")
-        row -= 48
-        np.less(row, 10, out=use)
-        if j:
-            np.greater(length, j, out=use2)
-            use &= use2
-        np.multiply(row, use, out=row)
-        np.multiply(row, POW10[j - (j > k)], out=prod)
-        acc += prod
-    acc /= POW10[k]
+        np.take(digits[_PAD - j:_PAD - j + size], end, out=row, mode="clip")
+        if j >= unmasked:
+            np.greater(length, j, out=use)
+            row *= use
+        np.multiply(row, itype(POW10[j - (j > k)]), out=term)
+        total += term
+    np.divide(total, POW10[k], out=acc)
 
 
 def _sum_general(padded: np.ndarray, last: np.ndarray, length: np.ndarray, signed: np.ndarray, width: int,

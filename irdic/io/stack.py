@@ -105,7 +105,10 @@ def check_temperatures(values: np.ndarray, where: str | os.PathLike, *, allow_na
         Accept NaN (masked pixels in array stacks).
     """
     finite = np.isfinite(values)
-    if not finite.all():
+    if finite.all():
+        # the usual case: one pass for the minimum (nanmin would copy the frame and scan it for NaN again)
+        low = values.min() if values.size else 0.0
+    else:
         bad = ~finite if not allow_nan else np.isinf(values)
         if bad.any():
             idx = tuple(int(i) for i in np.argwhere(bad)[0])
@@ -114,8 +117,8 @@ def check_temperatures(values: np.ndarray, where: str | os.PathLike, *, allow_na
                 "values beyond ±3.4e38 count as infinite); expected finite numbers",
                 where,
             )
-    with np.errstate(invalid="ignore"):
-        low = np.nanmin(values) if values.size and not np.isnan(values).all() else 0.0
+        with np.errstate(invalid="ignore"):
+            low = np.nanmin(values) if values.size and not np.isnan(values).all() else 0.0
     if low < ABSOLUTE_ZERO_C - 1e-3:
         raise FormatError(
             f"temperature {low:.2f} °C is below absolute zero; the unit is probably wrong "
