@@ -159,7 +159,8 @@ def _rasterise(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     sgn = np.sign(area)
     tol = 1e-9 * np.abs(area)
     # triangles grouped by bounding-box size: one vectorised test per group
-    for su, sv in {(int(x), int(y)) for x, y in span[ok]}:
+    # np.unique, not a set of Python tuples: ~10^4 triangles per mask
+    for su, sv in np.unique(span[ok], axis=0).tolist():
         if su == 0 or sv == 0:
             continue
         sel = np.flatnonzero(ok & (span[:, 0] == su) & (span[:, 1] == sv))

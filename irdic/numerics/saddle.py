@@ -64,6 +64,33 @@ class SaddleFactor:
         self.lu = scipy.linalg.lu_factor(S, overwrite_a=True, check_finite=False)
         self.nbytes = S.nbytes + P.nbytes
 
+    @classmethod
+    def from_cholesky(cls, L, P):
+        """The factor of ``[[A, P], [P^T, 0]]`` from a given lower Cholesky factor ``L`` of ``A``.
+
+        Parameters
+        ----------
+        L : ndarray, shape (K, K)
+            Lower triangular, ``A = L L^T`` (the upper triangle is ignored),
+            e.g. assembled block by block when ``A`` extends a matrix whose
+            factor is already known.
+        P : ndarray, shape (K, m)
+            Monomials at the centres, full column rank.
+
+        Returns
+        -------
+        SaddleFactor
+        """
+        self = cls.__new__(cls)
+        self.K = L.shape[0]
+        self.P = P
+        self.lu = None
+        self.cho = (L, True)
+        self.Y = scipy.linalg.cho_solve(self.cho, P, check_finite=False)
+        self.S_inv = np.linalg.inv(P.T @ self.Y)
+        self.nbytes = L.nbytes + P.nbytes + self.Y.nbytes
+        return self
+
     def solve(self, F, Q=None):
         """Solve ``A x + P y = F``, ``P^T x = Q`` (``Q = 0`` when None).
 

@@ -67,3 +67,14 @@ def test_solve_dense_matches_the_factorisation():
     x2, y2 = SaddleFactor(A, P).solve(f[:, None], q[:, None])
     np.testing.assert_allclose(x, x2[:, 0], atol=1e-9 * np.abs(x).max())
     np.testing.assert_allclose(y, y2[:, 0], atol=1e-9 * np.abs(y).max())
+
+
+def test_from_cholesky_matches_the_factorisation():
+    A, P, rng = _system()
+    F = rng.standard_normal((40, 4))
+    L = np.linalg.cholesky(A)
+    L[np.triu_indices(40, 1)] = np.nan  # the upper triangle is never read
+    x, y = SaddleFactor.from_cholesky(np.asfortranarray(L), P).solve(F)
+    x0, y0 = SaddleFactor(A.copy(), P).solve(F)
+    np.testing.assert_allclose(x, x0, atol=1e-9 * np.abs(x0).max())
+    np.testing.assert_allclose(y, y0, atol=1e-9 * np.abs(y0).max())
