@@ -467,8 +467,8 @@ class MaskedGridInterpolant:
         key = ty * (self.shape[1] // C + 1) + tx
         order = np.argsort(key, kind="stable")
         idx, grp, ty, tx, key = idx[order], grp[order], ty[order], tx[order], key[order]
-        starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-        ends = np.r_[starts[1:], key.size]
+        starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+        ends = np.append(starts[1:], key.size)
         for s0, s1 in zip(starts, ends):
             tile, alpha, beta = self._tile_alpha((int(ty[s0]), int(tx[s0])))
             for b0 in range(s0, s1, EDGE_BLOCK):

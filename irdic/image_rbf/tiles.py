@@ -43,7 +43,7 @@ def check_unisolvent(u, v, what):
     """Raise DataError unless the pixels ``(u, v)`` admit the monomials {1, u, v}."""
     n = len(u)
     if n >= 3:
-        P = np.c_[np.ones(n), u - u.mean(), v - v.mean()]
+        P = np.column_stack([np.ones(n), u - u.mean(), v - v.mean()])
         sv = np.linalg.svd(P, compute_uv=False)
         if sv[-1] > 1e-8 * sv[0]:
             return
@@ -117,18 +117,61 @@ class TileCache:
             self._bytes -= old.fac.nbytes
 
     def stable_factor(self, key, make):
-        """Cholesky factor of a stable pattern's kernel block: cached, or ``make()`` (None: not definite)."""
-        L = self._s.get(key, False)
-        if L is not False:
+        """The :class:`_Stable` factor of a stable pattern: cached, or ``make()`` (None: not definite)."""
+        st = self._s.get(key, False)
+        if st is not False:
             self._s.move_to_end(key)
-            return L
-        L = make()
-        self._s[key] = L
-        self._s_bytes += 0 if L is None else L.nbytes
+            return st
+        st = make()
+        self._s[key] = st
+        self.grew(0 if st is None else st.nbytes)
+        return st
+
+    def grew(self, nbytes):
+        """Account ``nbytes`` more of stable factors; the least recently used go beyond ``stable_bytes``."""
+        self._s_bytes += nbytes
         while self._s_bytes > self.stable_bytes and len(self._s) > 1:
             _, old = self._s.popitem(last=False)
             self._s_bytes -= 0 if old is None else old.nbytes
-        return L
+
+
+class _Stable:
+    """Cholesky factor ``L`` of a stable pattern's kernel block and the columns ``L^-1 A_sp`` of extra pixels.
+
+    A run of masks adds and removes the same few pixels near the outline
+    again and again, so the triangular solve of each extra pixel (``s^2``
+    flops, the bulk of an extension) is done once per stable pattern.
+    """
+
+    def __init__(self, L, cen, shape):
+        self.L = L
+        self.cen = cen
+        self.col = np.full(shape, -1, np.int64)  # column of each window pixel in X, -1: not yet solved
+        self.X = np.empty((L.shape[0], 0), order="F")
+        self.n = 0
+
+    @property
+    def nbytes(self):
+        return self.L.nbytes + self.X.nbytes
+
+    def columns(self, iv, iu, cr, ce):
+        """``L^-1 A_sr`` (s, r) for the extra pixels at window rows/columns ``iv``, ``iu`` (local coordinates ``cr``), and the bytes added."""
+        c = self.col[iv, iu]
+        new = np.flatnonzero(c < 0)
+        added = 0
+        if new.size:
+            Xn = scipy.linalg.solve_triangular(self.L, imq_matrix(self.cen, cr[new], ce), lower=True,
+                                               check_finite=False)
+            if self.n + new.size > self.X.shape[1]:
+                grown = np.empty((self.L.shape[0], max(2 * self.X.shape[1], self.n + new.size)), order="F")
+                grown[:, :self.n] = self.X[:, :self.n]
+                added = grown.nbytes - self.X.nbytes
+                self.X = grown
+            self.X[:, self.n:self.n + new.size] = Xn
+            self.col[iv[new], iu[new]] = np.arange(self.n, self.n + new.size)
+            self.n += new.size
+            c = self.col[iv, iu]
+        return self.X[:, c], added
 
 
 def _cholesky(A):
@@ -139,8 +182,10 @@ def _cholesky(A):
         return None
 
 
-def _extended_factor(cache, key, cen, s, ce, P):
+def _extended_factor(cache, key, cen, s, ce, P, rest):
     """Saddle factor of the centres ``cen`` whose first ``s`` form the stable pattern ``key``; None on failure.
+
+    ``rest`` (window-shaped bool) marks the other pixels, in the order of ``cen[s:]``.
 
     Notes
     -----
@@ -150,14 +195,21 @@ def _extended_factor(cache, key, cen, s, ce, P):
     beyond the stable ones. The factor is that of the same matrix (in this
     pixel order), so results agree with a direct factorisation to round-off.
     """
-    L_ss = cache.stable_factor(key, lambda: _cholesky(imq_matrix(cen[:s], cen[:s], ce)))
-    if L_ss is None:
+    def make():
+        L = _cholesky(imq_matrix(cen[:s], cen[:s], ce))
+        return None if L is None else _Stable(L, cen[:s].copy(), rest.shape)
+
+    st = cache.stable_factor(key, make)
+    if st is None:
         return None
+    L_ss = st.L
     cr = cen[s:]
     # L_rs^T = L_ss^-1 A_sr, (s, r)
-    X = scipy.linalg.solve_triangular(L_ss, imq_matrix(cen[:s], cr, ce), lower=True, check_finite=False)
-    schur = imq_matrix(cr, cr, ce)
-    schur -= X.T @ X
+    X, added = st.columns(*np.nonzero(rest), cr, ce)
+    cache.grew(added)
+    # A_rr - X^T X, lower triangle only (syrk: half the flops of a product)
+    schur = scipy.linalg.blas.dsyrk(-1.0, X, beta=1.0, c=np.asfortranarray(imq_matrix(cr, cr, ce)), trans=1,
+                                    lower=1, overwrite_c=1)
     L_rr = _cholesky(schur)
     if L_rr is None:
         return None
@@ -224,11 +276,11 @@ def build_tile(cache, mask, ty, tx, C, R, ce, stable=None):
         check_unisolvent(
             lu, lv, f"mask: the masked pixels within halo = {R} px of pixels u = {u0}..{u1}, v = {v0}..{v1}"
         )
-        cen = np.c_[lu, lv]
-        P = np.c_[np.ones(lu.size), lu, lv]
+        cen = np.column_stack([lu, lv])
+        P = np.column_stack([np.ones(lu.size), lu, lv])
         fac = None
         if 0 < s < lu.size:
-            fac = _extended_factor(cache, key[:4] + (np.packbits(keep).tobytes(),), cen, s, ce, P)
+            fac = _extended_factor(cache, key[:4] + (np.packbits(keep).tobytes(),), cen, s, ce, P, rest)
         if fac is None:
             fac = SaddleFactor(imq_matrix(cen, cen, ce), P)
         tile = Tile(cv, cu, ov, ou, lu, lv, fac)
@@ -269,7 +321,8 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
     want = np.flatnonzero(np.array(derivs, bool))
     xu = u[sel] - tile.ou
     xv = v[sel] - tile.ov
-    s = cdist(np.c_[xu, xv], np.c_[tile.cu, tile.cv], "sqeuclidean")
+    # np.column_stack, not np.c_: this runs ~10^4 times per evaluation pass
+    s = cdist(np.column_stack([xu, xv]), np.column_stack([tile.cu, tile.cv]), "sqeuclidean")
     imq_scaled_inverse(s, ce, out=s)
     s3 = None
     if want.size:
@@ -280,7 +333,7 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
     if gb is None:
         runs = [(0, sel.size, 0)]
     else:
-        cut = np.flatnonzero(np.r_[True, gb[1:] != gb[:-1], True])
+        cut = np.flatnonzero(np.concatenate([[True], gb[1:] != gb[:-1], [True]]))
         runs = [(a, b, int(gb[a])) for a, b in zip(cut[:-1], cut[1:])]
     for r0, r1, q in runs:
         A = alpha[q * g:(q + 1) * g].T  # (n_t, g)

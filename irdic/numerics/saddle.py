@@ -47,8 +47,7 @@ class SaddleFactor:
         self.cho = None
         try:
             self.cho = scipy.linalg.cho_factor(A, lower=True, overwrite_a=rebuild is not None, check_finite=False)
-            self.Y = scipy.linalg.cho_solve(self.cho, P, check_finite=False)
-            self.S_inv = np.linalg.inv(P.T @ self.Y)
+            self._schur(scipy.linalg.cho_solve(self.cho, P, check_finite=False))
             self.nbytes = A.nbytes + P.nbytes + self.Y.nbytes
             return
         except np.linalg.LinAlgError:
@@ -86,10 +85,29 @@ class SaddleFactor:
         self.P = P
         self.lu = None
         self.cho = (L, True)
-        self.Y = scipy.linalg.cho_solve(self.cho, P, check_finite=False)
-        self.S_inv = np.linalg.inv(P.T @ self.Y)
-        self.nbytes = L.nbytes + P.nbytes + self.Y.nbytes
+        # Y = A^-1 P comes with the first solve (one pass over the factor
+        # instead of two): an edge tile is often solved only once
+        self._Y = None
+        self.nbytes = L.nbytes + 2 * P.nbytes
         return self
+
+    def _schur(self, Y):
+        self._Y = Y
+        self._S_inv = np.linalg.inv(self.P.T @ Y)
+
+    @property
+    def Y(self):
+        """``A^-1 P``, shape (K, m) (Cholesky path only)."""
+        if self._Y is None:
+            self._schur(scipy.linalg.cho_solve(self.cho, self.P, check_finite=False))
+        return self._Y
+
+    @property
+    def S_inv(self):
+        """``(P^T A^-1 P)^-1``, shape (m, m) (Cholesky path only)."""
+        if self._Y is None:
+            self._schur(scipy.linalg.cho_solve(self.cho, self.P, check_finite=False))
+        return self._S_inv
 
     def solve(self, F, Q=None):
         """Solve ``A x + P y = F``, ``P^T x = Q`` (``Q = 0`` when None).
@@ -108,7 +126,13 @@ class SaddleFactor:
             rhs = np.concatenate([F, np.zeros((self.P.shape[1], F.shape[1])) if Q is None else Q])
             sol = scipy.linalg.lu_solve(self.lu, rhs, check_finite=False)
             return sol[: self.K], sol[self.K:]
-        X = scipy.linalg.cho_solve(self.cho, F, check_finite=False)
+        if self._Y is None:
+            m = self.P.shape[1]
+            Z = scipy.linalg.cho_solve(self.cho, np.concatenate([self.P, F], axis=1), check_finite=False)
+            self._schur(Z[:, :m].copy())
+            X = Z[:, m:]
+        else:
+            X = scipy.linalg.cho_solve(self.cho, F, check_finite=False)
         rhs = self.P.T @ X
         if Q is not None:
             rhs -= Q

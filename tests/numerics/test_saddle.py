@@ -74,7 +74,15 @@ def test_from_cholesky_matches_the_factorisation():
     F = rng.standard_normal((40, 4))
     L = np.linalg.cholesky(A)
     L[np.triu_indices(40, 1)] = np.nan  # the upper triangle is never read
-    x, y = SaddleFactor.from_cholesky(np.asfortranarray(L), P).solve(F)
-    x0, y0 = SaddleFactor(A.copy(), P).solve(F)
-    np.testing.assert_allclose(x, x0, atol=1e-9 * np.abs(x0).max())
-    np.testing.assert_allclose(y, y0, atol=1e-9 * np.abs(y0).max())
+    ref = SaddleFactor(A.copy(), P)
+    x0, y0 = ref.solve(F)
+    # Y = A^-1 P comes with the first solve, or on its own when asked for first
+    for first_solve in (True, False):
+        fac = SaddleFactor.from_cholesky(np.asfortranarray(L), P)
+        if not first_solve:
+            np.testing.assert_allclose(fac.S_inv, ref.S_inv, rtol=1e-9)
+        for _ in range(2):
+            x, y = fac.solve(F)
+            np.testing.assert_allclose(x, x0, atol=1e-9 * np.abs(x0).max())
+            np.testing.assert_allclose(y, y0, atol=1e-9 * np.abs(y0).max())
+        np.testing.assert_allclose(fac.Y, ref.Y, atol=1e-9 * np.abs(ref.Y).max())
