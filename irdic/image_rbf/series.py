@@ -30,7 +30,7 @@ _READ_BYTES = 2**27
 # edge tiles' factors of the stable pixels are shared within the run. Longer
 # runs share more but leave more pixels outside the intersection (moving
 # tube: ~4 x fewer flops than a factorisation per new pattern at 16).
-_STABLE_RUN = 16
+_STABLE_RUN = 32
 
 
 class SeriesEvaluation(NamedTuple):

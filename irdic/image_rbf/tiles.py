@@ -213,15 +213,9 @@ def _extended_factor(cache, key, cen, s, ce, P, rest):
     L_rr = _cholesky(schur)
     if L_rr is None:
         return None
-    n = cen.shape[0]
-    # Fortran order, as LAPACK's solves read it (a C-ordered factor is copied
-    # at every solve); the upper triangle is never read
-    L = np.empty((n, n), order="F")
-    L[:s, :s] = L_ss
-    L[s:, :s] = X.T
-    L[s:, s:] = L_rr
     cache.extended += 1
-    return SaddleFactor.from_cholesky(L, P)
+    # L = [[L_ss, 0], [X^T, L_rr]] in blocks: L_ss stays shared, not copied
+    return SaddleFactor.from_blocks(L_ss, X, L_rr, P)
 
 
 def build_tile(cache, mask, ty, tx, C, R, ce, stable=None):

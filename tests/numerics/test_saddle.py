@@ -86,3 +86,20 @@ def test_from_cholesky_matches_the_factorisation():
             np.testing.assert_allclose(x, x0, atol=1e-9 * np.abs(x0).max())
             np.testing.assert_allclose(y, y0, atol=1e-9 * np.abs(y0).max())
         np.testing.assert_allclose(fac.Y, ref.Y, atol=1e-9 * np.abs(ref.Y).max())
+
+
+def test_from_blocks_matches_the_factorisation():
+    A, P, rng = _system()
+    F = rng.standard_normal((40, 4))
+    s = 25
+    L_ss = np.linalg.cholesky(A[:s, :s])
+    X = np.linalg.solve(L_ss, A[:s, s:])
+    L_rr = np.linalg.cholesky(A[s:, s:] - X.T @ X)
+    ref = SaddleFactor(A.copy(), P)
+    x0, y0 = ref.solve(F)
+    fac = SaddleFactor.from_blocks(np.asfortranarray(L_ss), np.asfortranarray(X), L_rr, P)
+    for _ in range(2):  # the first solve also gives Y
+        x, y = fac.solve(F)
+        np.testing.assert_allclose(x, x0, atol=1e-9 * np.abs(x0).max())
+        np.testing.assert_allclose(y, y0, atol=1e-9 * np.abs(y0).max())
+    np.testing.assert_allclose(fac.coefficients(F)[0], ref.coefficients(F)[0], atol=1e-9 * np.abs(x0).max())
