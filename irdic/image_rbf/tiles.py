@@ -72,7 +72,12 @@ class TileCache:
     ----------
     max_bytes : int
         Bound on the bytes of the cached factorisations; the least recently
-        used go beyond it (default 1 GiB, ~2,500 tiles of ~600 px).
+        used go beyond it (default 512 MiB: ~1,200 tiles of ~600 px factorised
+        whole, several times more extending a stable factor).
+    stable_bytes : int
+        Bound on the bytes of the stable factors (see :func:`build_tile`);
+        a stable factor that goes takes the tiles extending it along, so
+        that the two bounds hold for the memory actually held.
 
     Attributes
     ----------
@@ -82,7 +87,7 @@ class TileCache:
         Tiles served from the cache.
     """
 
-    def __init__(self, max_bytes=1 << 30, stable_bytes=1 << 29):
+    def __init__(self, max_bytes=1 << 29, stable_bytes=1 << 29):
         self.max_bytes = max_bytes
         self.stable_bytes = stable_bytes
         self._d = OrderedDict()
@@ -107,9 +112,11 @@ class TileCache:
             self.hits += 1
         return tile
 
-    def put(self, key, tile):
-        """Store a tile; the least recently used ones go beyond ``max_bytes``."""
+    def put(self, key, tile, stable=None):
+        """Store a tile (extending the :class:`_Stable` ``stable``); the least recently used go beyond ``max_bytes``."""
         self._d[key] = tile
+        if stable is not None:
+            stable.tiles.append(key)
         self._bytes += tile.fac.nbytes
         self.built += 1
         while self._bytes > self.max_bytes and len(self._d) > 1:
@@ -132,7 +139,15 @@ class TileCache:
         self._s_bytes += nbytes
         while self._s_bytes > self.stable_bytes and len(self._s) > 1:
             _, old = self._s.popitem(last=False)
-            self._s_bytes -= 0 if old is None else old.nbytes
+            if old is None:
+                continue
+            self._s_bytes -= old.nbytes
+            # the tiles extending it hold its factor: dropped with it, or the
+            # factor would stay in memory uncounted
+            for k in old.tiles:
+                tile = self._d.pop(k, None)
+                if tile is not None:
+                    self._bytes -= tile.fac.nbytes
 
 
 class _Stable:
@@ -149,6 +164,7 @@ class _Stable:
         self.col = np.full(shape, -1, np.int64)  # column of each window pixel in X, -1: not yet solved
         self.X = np.empty((L.shape[0], 0), order="F")
         self.n = 0
+        self.tiles = []  # keys of the cached tiles extending this factor
 
     @property
     def nbytes(self):
@@ -183,7 +199,7 @@ def _cholesky(A):
 
 
 def _extended_factor(cache, key, cen, s, ce, P, rest):
-    """Saddle factor of the centres ``cen`` whose first ``s`` form the stable pattern ``key``; None on failure.
+    """Saddle factor of the centres ``cen`` whose first ``s`` form the stable pattern ``key``, and that :class:`_Stable` (None, None on failure).
 
     ``rest`` (window-shaped bool) marks the other pixels, in the order of ``cen[s:]``.
 
@@ -201,7 +217,7 @@ def _extended_factor(cache, key, cen, s, ce, P, rest):
 
     st = cache.stable_factor(key, make)
     if st is None:
-        return None
+        return None, None
     L_ss = st.L
     cr = cen[s:]
     # L_rs^T = L_ss^-1 A_sr, (s, r)
@@ -212,10 +228,10 @@ def _extended_factor(cache, key, cen, s, ce, P, rest):
                                     lower=1, overwrite_c=1)
     L_rr = _cholesky(schur)
     if L_rr is None:
-        return None
+        return None, None
     cache.extended += 1
     # L = [[L_ss, 0], [X^T, L_rr]] in blocks: L_ss stays shared, not copied
-    return SaddleFactor.from_blocks(L_ss, X, L_rr, P)
+    return SaddleFactor.from_blocks(L_ss, X, L_rr, P), st
 
 
 def build_tile(cache, mask, ty, tx, C, R, ce, stable=None):
@@ -272,13 +288,13 @@ def build_tile(cache, mask, ty, tx, C, R, ce, stable=None):
         )
         cen = np.column_stack([lu, lv])
         P = np.column_stack([np.ones(lu.size), lu, lv])
-        fac = None
+        fac = st = None
         if 0 < s < lu.size:
-            fac = _extended_factor(cache, key[:4] + (np.packbits(keep).tobytes(),), cen, s, ce, P, rest)
+            fac, st = _extended_factor(cache, key[:4] + (np.packbits(keep).tobytes(),), cen, s, ce, P, rest)
         if fac is None:
             fac = SaddleFactor(imq_matrix(cen, cen, ce), P)
         tile = Tile(cv, cu, ov, ou, lu, lv, fac)
-        cache.put(key, tile)
+        cache.put(key, tile, st)
     return tile._replace(pv=tile.pv + v0, pu=tile.pu + u0, ov=tile.ov + v0, ou=tile.ou + u0)
 
 

@@ -559,6 +559,15 @@ def test_stable_mask_extends_shared_factors_with_the_same_interpolant():
         assert cache.extended > 0
     # the stable factors are shared: fewer than one per extended tile
     assert len(cache._s) < cache.extended
+    # Regression: a stable factor evicted from its LRU stayed in memory,
+    # uncounted, through the cached tiles that extend it. Now they go with it.
+    small = TileCache(stable_bytes=1)
+    for m in masks:
+        MaskedGridInterpolant(m, tile_cache=small, stable_mask=stable).fit(f).evaluate(pts)
+    assert small.extended > 0 and len(small._s) == 1
+    held = [t.fac._blocks[0] for t in small._d.values() if t.fac._blocks is not None]
+    assert held and all(any(L is st.L for st in small._s.values()) for L in held)
+    assert small._bytes == sum(t.fac.nbytes for t in small._d.values())
     with pytest.raises(ConfigError, match="stable_mask must have the mask's shape"):
         MaskedGridInterpolant(masks[0], stable_mask=stable[:-1])
 
