@@ -159,7 +159,10 @@ def _rasterise(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     sgn = np.sign(area)
     tol = 1e-9 * np.abs(area)
     # triangles grouped by bounding-box size: one vectorised test per group
-    for su, sv in {(int(x), int(y)) for x, y in span[ok]}:
+    # one integer key per box size, np.unique on it: not a set of Python
+    # tuples (~10^4 triangles per mask), nor np.unique(axis=0) (a slow sort)
+    box = np.unique(span[ok, 0] * (int(span[:, 1].max()) + 1) + span[ok, 1])
+    for su, sv in zip(*(x.tolist() for x in np.divmod(box, int(span[:, 1].max()) + 1))):
         if su == 0 or sv == 0:
             continue
         sel = np.flatnonzero(ok & (span[:, 0] == su) & (span[:, 1] == sv))

@@ -35,7 +35,8 @@ def local_normals(x, k=12):
     """
     k = min(k, x.shape[0])
     _, idx = cKDTree(x).query(x, k=k)
-    nb = x[idx] - x[idx].mean(axis=1, keepdims=True)
+    nb = x[idx]
+    nb -= nb.mean(axis=1, keepdims=True)
     cov = np.einsum("nki,nkj->nij", nb, nb)
     return np.linalg.eigh(cov)[1][:, :, 0]
 

@@ -65,6 +65,10 @@ determined, to ~1e-5 of the local data variation, by the masked pixels within
   the tile's RBF coefficients. Factorisations are cached by the tile's local
   mask pattern alone (relative pixel positions), shared by all tile positions,
   masks and times, so a moving edge factorises only patterns not seen before.
+  Even those are mostly extensions: within a run of masks (``evaluate_series``)
+  a tile orders the pixels every mask of the run has first; their Cholesky
+  factor, and the triangular solves of the pixels near the outline, are shared,
+  and a new pattern costs only the factor of its few outline pixels.
 
 *Accuracy* against :func:`exact_global_interpolant` (tests, benchmark), fields
 of tens of K with 0.05 K noise: ~3e-5 K and ~6e-5 K/px from ``halo`` px off the

@@ -84,6 +84,11 @@ class MaskedGridInterpolant:
     tile_cache : TileCache, optional
         Factorised edge tiles shared with other interpolants (e.g. of the
         masks of neighbouring times); default a private cache.
+    stable_mask : array_like of bool, shape (H, W), optional
+        Pixels masked in this mask and in the masks of neighbouring times
+        (their intersection). An edge tile's factorisation then extends a
+        shared factor of its stable pixels instead of starting afresh (the
+        same interpolant to round-off; only with ``tile_cache`` shared).
 
     Attributes
     ----------
@@ -104,7 +109,7 @@ class MaskedGridInterpolant:
     tiles are factorised on first use (setup times: ``benchmarks/README.md``).
     """
 
-    def __init__(self, mask, *, method="rbf", c=2.0, R0=1.0, halo=12, tile=8, tile_cache=None):
+    def __init__(self, mask, *, method="rbf", c=2.0, R0=1.0, halo=12, tile=8, tile_cache=None, stable_mask=None):
         self.method = choice(method, "method", METHODS)
         self.c = positive(c, "c")
         self.R0 = positive(R0, "R0")
@@ -118,6 +123,12 @@ class MaskedGridInterpolant:
         self.n_mask = vv.size
         check_unisolvent(uu.astype(float), vv.astype(float), "mask")
         self.pixels = np.c_[uu, vv]
+        self._stable = None
+        if stable_mask is not None:
+            st = bool_mask(stable_mask, "stable_mask")
+            if st.shape != m.shape:
+                raise ConfigError(f"stable_mask must have the mask's shape {m.shape}, got {st.shape}")
+            self._stable = st & m
 
         margin = self.halo if self.method == "rbf" else _MARGIN[self.method]
         self._rv0 = int(vv.min()) - margin
@@ -439,7 +450,8 @@ class MaskedGridInterpolant:
         """Tile ``key = (ty, tx)`` and the RBF and monomial coefficients of all fitted fields on it."""
         got = self._alpha.get(key)
         if got is None:
-            tile = build_tile(self._tiles, self.mask, key[0], key[1], self.tile, self.halo, self._ce)
+            tile = build_tile(self._tiles, self.mask, key[0], key[1], self.tile, self.halo, self._ce,
+                              self._stable)
             F = self._grid[:, tile.pv - self._rv0, tile.pu - self._ru0].T
             alpha, beta = tile.fac.solve(F)
             got = (tile, np.ascontiguousarray(alpha.T), beta.T)  # (nf, n_t), (nf, 3)
@@ -455,8 +467,8 @@ class MaskedGridInterpolant:
         key = ty * (self.shape[1] // C + 1) + tx
         order = np.argsort(key, kind="stable")
         idx, grp, ty, tx, key = idx[order], grp[order], ty[order], tx[order], key[order]
-        starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-        ends = np.r_[starts[1:], key.size]
+        starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+        ends = np.append(starts[1:], key.size)
         for s0, s1 in zip(starts, ends):
             tile, alpha, beta = self._tile_alpha((int(ty[s0]), int(tx[s0])))
             for b0 in range(s0, s1, EDGE_BLOCK):

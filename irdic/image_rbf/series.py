@@ -26,6 +26,11 @@ log = logging.getLogger(__name__)
 
 # Bytes of frames read per block (float32 frames: 128 MB).
 _READ_BYTES = 2**27
+# Distinct masks per run that shares a stable mask (their intersection): the
+# edge tiles' factors of the stable pixels are shared within the run. Longer
+# runs share more but leave more pixels outside the intersection (moving
+# tube: ~4 x fewer flops than a factorisation per new pattern at 16).
+_STABLE_RUN = 32
 
 
 class SeriesEvaluation(NamedTuple):
@@ -249,13 +254,17 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
     out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(5)]
     cache = TileCache()
     interp, current = None, None
+    stable, run = None, None
     progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
     done = 0
     for ch in _pieces(ks, mask_of, chunk):
         mi = int(mask_of[ch[0]])
         if mi != current:  # masks come in runs: keep only the current one
             interp, current = None, mi
-            interp = MaskedGridInterpolant(masks[mi], tile_cache=cache, **interp_args)
+            if mi // _STABLE_RUN != run:
+                run = mi // _STABLE_RUN
+                stable = np.logical_and.reduce(masks[run * _STABLE_RUN:(run + 1) * _STABLE_RUN])
+            interp = MaskedGridInterpolant(masks[mi], tile_cache=cache, stable_mask=stable, **interp_args)
         sel = lookup[interp.pixels[:, 1], interp.pixels[:, 0]]
         if sel.size == F.shape[0]:
             sel = slice(None)  # the mask is the union: no copy
@@ -268,7 +277,8 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
         progress.update(done)
     log.info(
         "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised, "
-        "%d reused (hit rate %.0f %%)",
+        "%d reused (hit rate %.0f %%), %d of the factorised extending a shared stable factor",
         te.size, pts.shape[1], F.shape[0], len(masks), cache.built, cache.hits, 100 * cache.hit_rate,
+        cache.extended,
     )
     return out

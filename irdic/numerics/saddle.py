@@ -45,10 +45,10 @@ class SaddleFactor:
         self.P = P
         self.lu = None
         self.cho = None
+        self._blocks = None
         try:
             self.cho = scipy.linalg.cho_factor(A, lower=True, overwrite_a=rebuild is not None, check_finite=False)
-            self.Y = scipy.linalg.cho_solve(self.cho, P, check_finite=False)
-            self.S_inv = np.linalg.inv(P.T @ self.Y)
+            self._schur(scipy.linalg.cho_solve(self.cho, P, check_finite=False))
             self.nbytes = A.nbytes + P.nbytes + self.Y.nbytes
             return
         except np.linalg.LinAlgError:
@@ -63,6 +63,100 @@ class SaddleFactor:
         S[n:, :n] = P.T
         self.lu = scipy.linalg.lu_factor(S, overwrite_a=True, check_finite=False)
         self.nbytes = S.nbytes + P.nbytes
+
+    @classmethod
+    def from_cholesky(cls, L, P):
+        """The factor of ``[[A, P], [P^T, 0]]`` from a given lower Cholesky factor ``L`` of ``A``.
+
+        Parameters
+        ----------
+        L : ndarray, shape (K, K)
+            Lower triangular, ``A = L L^T`` (the upper triangle is ignored),
+            e.g. assembled block by block when ``A`` extends a matrix whose
+            factor is already known.
+        P : ndarray, shape (K, m)
+            Monomials at the centres, full column rank.
+
+        Returns
+        -------
+        SaddleFactor
+        """
+        self = cls.__new__(cls)
+        self.K = L.shape[0]
+        self.P = P
+        self.lu = None
+        self.cho = (L, True)
+        self._blocks = None
+        # Y = A^-1 P comes with the first solve (one pass over the factor
+        # instead of two): an edge tile is often solved only once
+        self._Y = None
+        self.nbytes = L.nbytes + 2 * P.nbytes
+        return self
+
+    @classmethod
+    def from_blocks(cls, L_ss, X, L_rr, P):
+        """The factor of ``[[A, P], [P^T, 0]]`` from the blocks of the Cholesky factor of ``A``.
+
+        Parameters
+        ----------
+        L_ss : ndarray, shape (s, s)
+            Lower Cholesky factor of the leading block ``A_ss`` (may be shared
+            by many factors: it is not copied).
+        X : ndarray, shape (s, r)
+            ``L_ss^-1 A_sr``, i.e. ``L_rs^T``.
+        L_rr : ndarray, shape (r, r)
+            Lower Cholesky factor of ``A_rr - X^T X``.
+        P : ndarray, shape (s + r, m)
+
+        Returns
+        -------
+        SaddleFactor
+
+        Notes
+        -----
+        ``L = [[L_ss, 0], [X^T, L_rr]]`` is never assembled: solves go block
+        by block, and many factors that extend one ``L_ss`` hold only their
+        own ``(s + r) r`` numbers.
+        """
+        self = cls.from_cholesky(L_rr, P)
+        self.K = P.shape[0]
+        self.cho = None
+        self._blocks = (L_ss, X, L_rr)
+        self.nbytes = X.nbytes + L_rr.nbytes + 2 * P.nbytes
+        return self
+
+    def _cho_solve(self, F):
+        """``A^-1 F`` by the Cholesky factor, whole or in blocks."""
+        if self._blocks is None:
+            return scipy.linalg.cho_solve(self.cho, F, check_finite=False)
+        L_ss, X, L_rr = self._blocks
+        s = L_ss.shape[0]
+        # BLAS trsm directly: this runs for every tile and time, and
+        # solve_triangular's checks cost as much as the solve itself here
+        trsm = scipy.linalg.blas.dtrsm
+        y_s = trsm(1.0, L_ss, F[:s], lower=1)
+        y_r = trsm(1.0, L_rr, F[s:] - X.T @ y_s, lower=1, overwrite_b=1)
+        x_r = trsm(1.0, L_rr, y_r, lower=1, trans_a=1, overwrite_b=1)
+        x_s = trsm(1.0, L_ss, y_s - X @ x_r, lower=1, trans_a=1, overwrite_b=1)
+        return np.concatenate([x_s, x_r])
+
+    def _schur(self, Y):
+        self._Y = Y
+        self._S_inv = np.linalg.inv(self.P.T @ Y)
+
+    @property
+    def Y(self):
+        """``A^-1 P``, shape (K, m) (Cholesky path only)."""
+        if self._Y is None:
+            self._schur(self._cho_solve(self.P))
+        return self._Y
+
+    @property
+    def S_inv(self):
+        """``(P^T A^-1 P)^-1``, shape (m, m) (Cholesky path only)."""
+        if self._Y is None:
+            self._schur(self._cho_solve(self.P))
+        return self._S_inv
 
     def solve(self, F, Q=None):
         """Solve ``A x + P y = F``, ``P^T x = Q`` (``Q = 0`` when None).
@@ -81,7 +175,13 @@ class SaddleFactor:
             rhs = np.concatenate([F, np.zeros((self.P.shape[1], F.shape[1])) if Q is None else Q])
             sol = scipy.linalg.lu_solve(self.lu, rhs, check_finite=False)
             return sol[: self.K], sol[self.K:]
-        X = scipy.linalg.cho_solve(self.cho, F, check_finite=False)
+        if self._Y is None:
+            m = self.P.shape[1]
+            Z = self._cho_solve(np.concatenate([self.P, F], axis=1))
+            self._schur(Z[:, :m].copy())
+            X = Z[:, m:]
+        else:
+            X = self._cho_solve(F)
         rhs = self.P.T @ X
         if Q is not None:
             rhs -= Q
@@ -118,7 +218,7 @@ class SaddleFactor:
         """
         if self.lu is not None:
             return self.solve(F)
-        Z = scipy.linalg.cho_solve(self.cho, F, check_finite=False)
+        Z = self._cho_solve(F)
         beta = self.S_inv @ (self.Y.T @ F)
         Z -= self.Y @ beta
         return Z, beta

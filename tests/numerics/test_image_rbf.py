@@ -532,6 +532,46 @@ def test_edge_tiles_shared_across_positions_and_masks():
     assert small.built == built and len(small._d) == 1
 
 
+def test_stable_mask_extends_shared_factors_with_the_same_interpolant():
+    """Edge tiles of a moving outline extend the shared factor of the pixels all masks have.
+
+    The extended factor is that of the same saddle system with the stable
+    pixels ordered first: the interpolant agrees with a direct factorisation
+    to round-off, and the masks share their stable factors (issue 10).
+    """
+    n = 96
+    gv, gu = np.mgrid[0:n, 0:n]
+    # an outline that moves to and fro and breathes: each mask has pixels of its own
+    masks = [(gu - 40.0 - s) ** 2 / 1.2 + (gv - 44.0 + s) ** 2 <= (20.0 + 0.5 * s) ** 2
+             for s in (0.0, 1.5, -1.2, 0.7)]
+    stable = np.logical_and.reduce(masks)
+    assert all((m & ~stable).sum() > 20 for m in masks)
+    f = gauss(gu - 12.0, gv - 14.0)
+    pts = points_in(masks[0], 400, np.random.default_rng(5))
+    cache = TileCache()
+    for k, m in enumerate(masks):
+        got = MaskedGridInterpolant(m, tile_cache=cache, stable_mask=stable).fit(f).evaluate(pts)
+        ref = MaskedGridInterpolant(m).fit(f).evaluate(pts)
+        for x, y in ((got.value, ref.value), (got.du, ref.du), (got.dv, ref.dv)):
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-9, equal_nan=True)
+            assert np.isfinite(x).sum() > 200
+        # every tile built is either stable-only (plain factorisation) or an extension
+        assert cache.extended > 0
+    # the stable factors are shared: fewer than one per extended tile
+    assert len(cache._s) < cache.extended
+    # Regression: a stable factor evicted from its LRU stayed in memory,
+    # uncounted, through the cached tiles that extend it. Now they go with it.
+    small = TileCache(stable_bytes=1)
+    for m in masks:
+        MaskedGridInterpolant(m, tile_cache=small, stable_mask=stable).fit(f).evaluate(pts)
+    assert small.extended > 0 and len(small._s) == 1
+    held = [t.fac._blocks[0] for t in small._d.values() if t.fac._blocks is not None]
+    assert held and all(any(L is st.L for st in small._s.values()) for L in held)
+    assert small._bytes == sum(t.fac.nbytes for t in small._d.values())
+    with pytest.raises(ConfigError, match="stable_mask must have the mask's shape"):
+        MaskedGridInterpolant(masks[0], stable_mask=stable[:-1])
+
+
 @pytest.mark.parametrize("method", ["bilinear", "cubic"])
 def test_series_comparison_methods_run(method):
     t, mask, frames = series_case()

@@ -67,3 +67,39 @@ def test_solve_dense_matches_the_factorisation():
     x2, y2 = SaddleFactor(A, P).solve(f[:, None], q[:, None])
     np.testing.assert_allclose(x, x2[:, 0], atol=1e-9 * np.abs(x).max())
     np.testing.assert_allclose(y, y2[:, 0], atol=1e-9 * np.abs(y).max())
+
+
+def test_from_cholesky_matches_the_factorisation():
+    A, P, rng = _system()
+    F = rng.standard_normal((40, 4))
+    L = np.linalg.cholesky(A)
+    L[np.triu_indices(40, 1)] = np.nan  # the upper triangle is never read
+    ref = SaddleFactor(A.copy(), P)
+    x0, y0 = ref.solve(F)
+    # Y = A^-1 P comes with the first solve, or on its own when asked for first
+    for first_solve in (True, False):
+        fac = SaddleFactor.from_cholesky(np.asfortranarray(L), P)
+        if not first_solve:
+            np.testing.assert_allclose(fac.S_inv, ref.S_inv, rtol=1e-9)
+        for _ in range(2):
+            x, y = fac.solve(F)
+            np.testing.assert_allclose(x, x0, atol=1e-9 * np.abs(x0).max())
+            np.testing.assert_allclose(y, y0, atol=1e-9 * np.abs(y0).max())
+        np.testing.assert_allclose(fac.Y, ref.Y, atol=1e-9 * np.abs(ref.Y).max())
+
+
+def test_from_blocks_matches_the_factorisation():
+    A, P, rng = _system()
+    F = rng.standard_normal((40, 4))
+    s = 25
+    L_ss = np.linalg.cholesky(A[:s, :s])
+    X = np.linalg.solve(L_ss, A[:s, s:])
+    L_rr = np.linalg.cholesky(A[s:, s:] - X.T @ X)
+    ref = SaddleFactor(A.copy(), P)
+    x0, y0 = ref.solve(F)
+    fac = SaddleFactor.from_blocks(np.asfortranarray(L_ss), np.asfortranarray(X), L_rr, P)
+    for _ in range(2):  # the first solve also gives Y
+        x, y = fac.solve(F)
+        np.testing.assert_allclose(x, x0, atol=1e-9 * np.abs(x0).max())
+        np.testing.assert_allclose(y, y0, atol=1e-9 * np.abs(y0).max())
+    np.testing.assert_allclose(fac.coefficients(F)[0], ref.coefficients(F)[0], atol=1e-9 * np.abs(x0).max())
