@@ -293,6 +293,8 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None):
     if kw["smoothing"] is not None and sf.info.get("smoothing_shape") not in (None, sf.info["smoothing"]):
         # the fit's own pair of spacings (shape, motion), so that the probes regress as the fit did
         kw["smoothing"] = (sf.info["smoothing_shape"], sf.info["smoothing"])
+    # every probe fits the same points with the same missing pattern: the spatial factorisations are shared
+    kw["operators"] = {}
     # a surface regression's bias: against the exact interpolation of the same coordinates (see _local_bias)
     regressed = kw["smoothing"] is not None or kw["smoothing_t"] is not None
     kws = [kw, {**kw, "smoothing": None, "smoothing_t": None}] if regressed else [kw]
@@ -325,7 +327,8 @@ def _window_probe(window, t, psi, kw, dx, dref):
     """A surface fit of a chunk as the fields stage fits it, with the coordinate noise ``dx`` (window) and
     ``dref`` (the record's first two stages) added: over its window, at its times ``t``, with the strain's
     reference from the record's first two stages."""
-    pf = fit_surface(window.x + dx, window.t, psi, t_eval=t, record_times=window.record, **kw)
+    pf = fit_surface(window.x + dx, window.t, psi, t_eval=t, record_times=window.record,
+                     shape_stage=window.x_ref[0] + (0.0 if dref is None else dref[0]), **kw)
     if window.t[0] > window.t_ref[0]:
         ref = fit_surface(window.x_ref + (0.0 if dref is None else dref), window.t_ref, psi,
                           t_eval=window.t_ref[:1], **{**kw, "smoothing_t": None})

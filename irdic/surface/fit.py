@@ -105,7 +105,7 @@ class SurfaceFields(NamedTuple):
 
 def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_t=1.0, smoothing=None,
                 smoothing_t=None, solver="auto", halo=None, parametrisation="auto", min_stage_fraction=0.5,
-                fill="both", max_gap=3, record_times=None, shape_stage=None):
+                fill="both", max_gap=3, record_times=None, shape_stage=None, operators=None):
     """The continuous surface ``x(Psi, t)`` of DIC stages, evaluated at the points.
 
     Parameters
@@ -157,6 +157,10 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
         when ``smoothing`` is a pair of different spacings; default the
         first of ``x``. A time chunk passes the record's stage 0, so that
         shape and motion split as in the whole record.
+    operators : dict, optional
+        A cache of the spatial operators (their factorisations), shared by
+        calls on the same points and missing-point pattern with other
+        coordinates (noise probes): pass the same empty dict to each call.
 
     Returns
     -------
@@ -193,7 +197,8 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     nodes = _nodes(psi, valid, info)
     n = nodes.size
     used = _used_stages(valid[:, nodes].sum(axis=1), frac, n)
-    sp = SpatialInterpolant(psi[nodes], c=c, R0=R0, solver=solver, halo=halo)
+    ops = {} if operators is None else operators
+    sp = _operator(ops, psi[nodes], valid[:, nodes], c=c, R0=R0, solver=solver, halo=halo)
     te = t if t_eval is None else np.atleast_1d(float_array(t_eval, "t_eval"))
     tu = t[used]
     ed_nodes = edge_distance(psi[nodes])
@@ -207,7 +212,8 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
             raise ConfigError(f"shape_stage must have shape (points, 3) = ({N}, 3), got {s0.shape}")
         s0 = s0[nodes]
         x0 = sp.fill(s0[None], np.isfinite(s0).all(axis=1)[None])[0][0]
-    fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record, x0)
+    fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record, x0,
+                         ops)
     return _assemble(fields, psi, te, nodes, used, ~Vu, ed_nodes, (M, N), info, (c, R0, c_t, R0_t), t0)
 
 
@@ -261,7 +267,20 @@ def gcv_displacement(psi, X, valid=None, *, c=0.95, R0=1.0):
     return gcv_spatial(psi[rows], U, c=c, R0=R0, candidates=SURFACE_CANDIDATES)
 
 
-def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info, record, x0=None):
+def _operator(ops, psi_n, valid, **kw):
+    """The :class:`SpatialInterpolant` of ``kw`` on ``psi_n``, from the cache ``ops`` when it was built there
+    for the same points and missing-point pattern (its factorisations are cached on the instance)."""
+    built = ops.setdefault(tuple(sorted(kw.items())), [])
+    for p, v, sp in built:
+        if np.array_equal(p, psi_n) and np.array_equal(v, valid):
+            return sp
+    sp = SpatialInterpolant(psi_n, **kw)
+    built.append((psi_n, valid, sp))
+    del built[:-4]  # a few patterns (a chunk's window and the record's first stages)
+    return sp
+
+
+def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info, record, x0=None, ops=None):
     """Temporal then spatial operator on the filled stage data: value, d1, d2 (n, 3 T_ok + 3), velocity, ok times."""
     n = psi_n.shape[0]
     # --- temporal
@@ -278,8 +297,9 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
         ks, info["gcv"] = gcv_displacement(psi_n, Xs, Vu, c=c, R0=R0)
     elif isinstance(ks, tuple):
         kg, ks = ks
+    ops = {} if ops is None else ops
     if ks > 1.0:
-        sp_motion = SpatialInterpolant(psi_n, c=c, R0=R0, smoothing=ks)
+        sp_motion = _operator(ops, psi_n, Vu, c=c, R0=R0, smoothing=ks)
     else:
         sp_motion = sp
     cols = np.flatnonzero(np.repeat(ok_t, 3))
@@ -294,7 +314,7 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
     val, d1, d2 = sp_motion.evaluate(Yall)
     del Yall
     if split:
-        sp_shape = SpatialInterpolant(psi_n, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
+        sp_shape = _operator(ops, psi_n, Vu, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
         for a, b in zip((val, d1, d2), sp_shape.evaluate(x0)):
             a += np.tile(b, cols.size // 3 + 1)
     # the velocity's temporal weights sum to 0: it is a displacement rate, the motion's operator alone
