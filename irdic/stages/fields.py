@@ -355,7 +355,11 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate):
     # the spatial regression's bias is judged against the temporal regression of the points' own series
     own = smooth_series(th_in, ts_in, t_eval, smoothing=fit.smoothing, c=p["c_time"], R0=p["R0_time"],
                         record_times=record).value
-    return grad, total, total - convective, value, (theta, grad, np.where(visible, own, np.nan), value), chosen
+    # the regressions' bias of the rate: against the exact interpolation (in space and time) of the points' series
+    exact = smooth_series(th_in, ts_in, t_eval, smoothing=None, c=p["c_time"], R0=p["R0_time"],
+                          record_times=record).rate
+    return (grad, total, total - convective, value,
+            (theta, grad, np.where(visible, own, np.nan), value, total - exact), chosen)
 
 
 def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, temperature_smoothing,

@@ -123,10 +123,12 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         record's own ends are flagged as series ends.
     spatial : tuple, optional
         With the spatial regression of the temperatures: ``(theta (T, N),
-        grad (T, N, 3), value_in (T, N), value (T, N))``, the point
+        grad (T, N, 3), value_in (T, N), value (T, N)[, d_rate (T, N)])``, the point
         temperatures and the regressed gradient, and the regression's input
         (``theta`` or its temporal regression) and output; their differences
-        to the exact interpolation give the regression's bias.
+        to the exact interpolation give the regression's bias. ``d_rate``: the
+        rate of the space-time regression minus that of the exact temporal
+        interpolation of the points' own series (its bias).
 
     Returns
     -------
@@ -239,7 +241,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         v_pr = v_pr.reshape(PROBES, T, N)
         temp_std = _probe_std(v_pr, 0.0)
         if spatial is not None:
-            theta, grad, value_in, value = spatial
+            theta, grad, value_in, value = spatial[:4]
             # the same probes through the exact interpolation (k = 1): the noise expected in the
             # difference regression - interpolation, which is subtracted from the data's difference
             g_int = regress_space(noise_c.reshape(PROBES * T, N), dual, 1.0)[0].reshape(PROBES, T, N, 3)
@@ -249,6 +251,13 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             # the exact interpolation of the input at the points is the input itself
             v_var = np.mean(np.square(v_pr - value_in_pr), axis=0)
             temp_std = np.hypot(temp_std, _local_bias(value - value_in, v_var, sf.psi, trusted))
+            if len(spatial) > 4 and W0 is not None:
+                # the regressions' bias of the rate, against the exact interpolation in space and time
+                ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
+                                         window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
+                r_var = np.mean(np.square(np.einsum("ij,kjn->kin", W1, s_pr)
+                                          - np.einsum("ij,kjn->kin", ti.weights(t, 1), np.nan_to_num(noise))), axis=0)
+                rate_std = np.hypot(rate_std, _local_bias(spatial[4], r_var, sf.psi, trusted))
     return temp_std, grad_std, rate_std
 
 
