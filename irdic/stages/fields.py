@@ -227,13 +227,17 @@ def _resolve_gcv(points, x, t, psi, p):
             p["surface_smoothing"] = (info["smoothing_shape"], info["smoothing"])
         p["surface_smoothing_time"] = info["smoothing_t"] if p["surface_smoothing_time"] is not None else None
     theta = points["temperature"].isel(time=w).values.astype(float)
-    if p["temperature_smoothing"] == "gcv":
-        p["temperature_smoothing"] = smooth_series(theta, t[w], smoothing="gcv", c=p["c_time"],
-                                                   R0=p["R0_time"]).smoothing
     if p["temperature_smoothing_space"] == "gcv":
         k = _space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"])
         if k is not None:  # no time with 6 visible points among them: each chunk chooses its own
             p["temperature_smoothing_space"] = k
+    if p["temperature_smoothing"] == "gcv":
+        if p["temperature_smoothing_space"] not in (None, "gcv"):
+            # judged on the spatially regressed series, as the fields regress them (see _space_time)
+            theta = _regressed_gradient(theta, psi, None, p["temperature_smoothing_space"], c=p["c_space"],
+                                        R0=p["R0_space"])[1]
+        p["temperature_smoothing"] = smooth_series(theta, t[w], smoothing="gcv", c=p["c_time"],
+                                                   R0=p["R0_time"]).smoothing
     log.info("fields: smoothing chosen once on DIC times %d..%d: %s", w.start, w.stop - 1,
              ", ".join(f"{k} {p[k]}" for k in gcv))
     return p
@@ -266,26 +270,18 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
     best = theta
     chosen_k = {"temperature_smoothing": None, "temperature_smoothing_space": None}
     spatial = None
-    if p["temperature_smoothing"] is not None:
+    if p["temperature_smoothing_space"] is not None:
+        grad, total, loc, best, spatial, chosen_k = _space_time(theta, t, sf, geo, p, series, rate.convective, visible,
+                                                                (total, loc))
+    elif p["temperature_smoothing"] is not None:
         # a chunk regresses its window's series and evaluates it at its own times
         th, ts = (series.theta, series.t) if series is not None else (theta, t)
         fit = smooth_series(th, ts, t if series is not None else None, smoothing=p["temperature_smoothing"],
                             c=p["c_time"], R0=p["R0_time"], record_times=t if series is None else series.record)
-        smoothed_rate, smoothed = fit.rate, fit.value
         chosen_k["temperature_smoothing"] = fit.smoothing
-        total = np.where(visible, smoothed_rate, np.nan)
+        total = np.where(visible, fit.rate, np.nan)
         loc = total - rate.convective
-        best = np.where(visible, smoothed, np.nan)
-    if p["temperature_smoothing_space"] is not None:
-        grad, value, ks = _regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"],
-                                              c=p["c_space"], R0=p["R0_space"])
-        chosen_k["temperature_smoothing_space"] = ks
-        if p["temperature_smoothing"] is not None:
-            # space-time regression: the spatial regression of the temporally regressed series
-            _, value, _ = _regressed_gradient(best, sf.psi, geo.dual, ks, c=p["c_space"], R0=p["R0_space"])
-        # the regression's inputs and outputs: its bias is estimated against the exact interpolation of the inputs
-        spatial = (theta, grad, best, value)
-        best = value
+        best = np.where(visible, fit.value, np.nan)
 
     def regress_space(th, dual, k):
         return _regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"])[:2]
@@ -293,6 +289,77 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
     unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
                         g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial)
     return grad, total, loc, rate.convective, best, unc
+
+
+def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate):
+    """Gradient, rate (material, local) and value of the space-time regression of the point temperatures.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (T, N)
+        Point temperatures (degC) at the DIC times ``t`` (s).
+    sf, geo
+        The fitted surface and its geometry (surface parameters, dual basis).
+    p : dict
+        The fields settings; ``temperature_smoothing_space`` is set.
+    series : Window or None
+        A time chunk's window (its regressions run over the window).
+    convective : ndarray, shape (T, N)
+        Convective part of the rate (K/s).
+    visible : ndarray of bool, shape (T, N)
+    paper_rate : (total, local)
+        The paper's rate and local part, kept when there is no regression in time.
+
+    Returns
+    -------
+    grad (T, N, 3) K/mm, total (T, N) K/s, local (T, N) K/s, value (T, N) degC,
+    spatial (the inputs of the regression's bias estimate, see
+    :func:`irdic.stages.uncertainty.uncertainties`), chosen (the spacings used).
+
+    Notes
+    -----
+    Space first, then time. The tube's temperature is smooth in space (a
+    quadratic axial profile) but changes within a few DIC stages in time, so
+    a point's own series, with the full 0.05 K noise, makes GCV in time
+    choose centres every 4 stages, whose bias alone is 7 % of the rate. The
+    spatial regression of each stage removes most of the noise first
+    (GCV over the points, whose noise is white in space); GCV of the
+    regressed series in time then judges a nearly noise-free signal and
+    chooses the light smoothing the signal needs. The value, gradient and
+    rate are those of one field, ``S_t(S_x Θ)``: the gradient is the spatial
+    regression's derivative of the temporally regressed values (the spatial
+    regression is a projection, so this is the regressed field's own
+    gradient), the rate the temporal derivative of the spatially regressed
+    series. Measured on the tube (demo, seed 3, 0.05 K, 2 decimals): rate
+    9.6 -> 3.6 %, gradient 13.1 -> 7.8 %, temperature 0.019 -> 0.008 K.
+    """
+    kw = dict(c=p["c_space"], R0=p["R0_space"])
+    chosen = {"temperature_smoothing": None, "temperature_smoothing_space": None}
+    grad, value, ks = _regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], **kw)
+    chosen["temperature_smoothing_space"] = ks
+    total, loc = paper_rate
+    if p["temperature_smoothing"] is None:
+        return grad, total, loc, value, (theta, grad, theta, value), chosen
+    # a chunk regresses its window's series (in space at each stage, then in time) and evaluates at its own times
+    if series is not None:
+        th_in, ts_in, t_eval, record = series.theta, series.t, t, series.record
+        _, th_s, _ = _regressed_gradient(th_in, sf.psi, None, ks, **kw)
+    else:
+        th_in, ts_in, t_eval, record, th_s = theta, t, None, t, value
+    fit = smooth_series(th_s, ts_in, t_eval, smoothing=p["temperature_smoothing"], c=p["c_time"], R0=p["R0_time"],
+                        record_times=record)
+    chosen["temperature_smoothing"] = fit.smoothing
+    total = np.where(visible, fit.rate, np.nan)
+    smoothed = np.where(visible, fit.value, np.nan)
+    grad, value, _ = _regressed_gradient(smoothed, sf.psi, geo.dual, ks, **kw)
+    # the spatial regression's bias is judged against the temporal regression of the points' own series
+    own = smooth_series(th_in, ts_in, t_eval, smoothing=fit.smoothing, c=p["c_time"], R0=p["R0_time"],
+                        record_times=record).value
+    # the regressions' bias of the rate: against the exact interpolation (in space and time) of the points' series
+    exact = smooth_series(th_in, ts_in, t_eval, smoothing=None, c=p["c_time"], R0=p["R0_time"],
+                          record_times=record).rate
+    return (grad, total, total - convective, value,
+            (theta, grad, np.where(visible, own, np.nan), value, total - exact), chosen)
 
 
 def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, temperature_smoothing,
@@ -376,7 +443,8 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
 
     Missing values of a time are filled from that time's visible points first;
     times with fewer than 6 visible points stay NaN. Returns ``(grad (T, N, 3)
-    K/mm, value (T, N) degC, the centre spacing factor used)``.
+    K/mm, value (T, N) degC, the centre spacing factor used)``; ``dual`` None:
+    the values only (the gradient stays NaN).
     """
     from ..surface import SpatialInterpolant
 
@@ -396,10 +464,11 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
     else:
         k = float(smoothing)
     v0, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=True)
-    g = d1.T[..., None] * dual[np.ix_(times, have)][:, :, 0] + d2.T[..., None] * dual[np.ix_(times, have)][:, :, 1]
-    out = np.full((times.size, N, 3), np.nan)
-    out[:, have] = g
-    grad[times] = out
+    if dual is not None:
+        g = d1.T[..., None] * dual[np.ix_(times, have)][:, :, 0] + d2.T[..., None] * dual[np.ix_(times, have)][:, :, 1]
+        out = np.full((times.size, N, 3), np.nan)
+        out[:, have] = g
+        grad[times] = out
     grad[~visible] = np.nan
     vt = np.full((times.size, N), np.nan)
     vt[:, have] = v0.T

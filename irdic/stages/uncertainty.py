@@ -17,6 +17,9 @@ are propagated through those same operators:
   (``c = J v``) has ``σ_r² + σ_g² |c|²``.
 - Temporal regression: the rate is ``W1 Θ`` per point series, so its
   variance is ``σ_T² Σ_j W1_ij²`` (the weights of the chosen regression).
+  With the spatial regression too, the fields regress in space first and
+  then in time (:func:`irdic.stages.fields._space_time`): the rate
+  ``W1 (S Θ)``, value and gradient of ``S (W0 (S Θ))``, all by the probes.
 - Spatial regression and strain: propagated by random probes, ``K`` noise
   realisations run through the same operator with the smoothing parameters
   frozen at the chosen values; the standard deviation over the probes.
@@ -110,8 +113,8 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         ``temperature_smoothing`` and ``temperature_smoothing_space``: the
         centre spacing factors used (None: interpolation).
     regress_space : callable
-        ``regress_space(theta (T', N), dual (T', N, 2, 3), k) -> (grad, value)``:
-        the spatial regression of the fields stage.
+        ``regress_space(theta (T', N), dual (T', N, 2, 3) or None, k) -> (grad, value)``:
+        the spatial regression of the fields stage (dual None: values only).
     seed : int
         Seed of the probes (fixed: the stores are reproducible).
     window : Window, optional
@@ -120,10 +123,12 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         record's own ends are flagged as series ends.
     spatial : tuple, optional
         With the spatial regression of the temperatures: ``(theta (T, N),
-        grad (T, N, 3), value_in (T, N), value (T, N))``, the point
+        grad (T, N, 3), value_in (T, N), value (T, N)[, d_rate (T, N)])``, the point
         temperatures and the regressed gradient, and the regression's input
         (``theta`` or its temporal regression) and output; their differences
-        to the exact interpolation give the regression's bias.
+        to the exact interpolation give the regression's bias. ``d_rate``: the
+        rate of the space-time regression minus that of the exact temporal
+        interpolation of the points' own series (its bias).
 
     Returns
     -------
@@ -212,30 +217,47 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         dual = np.tile(geo.dual, (PROBES, 1, 1, 1))
         g_pr, v_pr = regress_space(noise.reshape(PROBES * T, N), dual, ks)
         grad_std = _probe_std(g_pr.reshape(PROBES, T, N, 3), 0.0)
+        noise_c = noise
         if W0 is not None:
             if window is not None:
                 # the temporal regression of a chunk mixes its window's noise
                 noise = rng.standard_normal((PROBES, window.t.size, N)) * s_T
                 noise[:, ~np.isfinite(window.theta)] = np.nan
-            smoothed = np.einsum("ij,kjn->kin", W0, np.nan_to_num(noise))
+                off = int(np.searchsorted(window.t, t[0]))
+                noise_c = noise[:, off:off + T]
+            # in space at each time first, then in time (irdic.stages.fields._space_time)
+            tw = noise.shape[1]
+            _, s_pr = regress_space(noise.reshape(PROBES * tw, N), None, ks)
+            s_pr = np.nan_to_num(s_pr.reshape(PROBES, tw, N))
+            rate_std = _probe_std(np.einsum("ij,kjn->kin", W1, s_pr), 0.0)
+            smoothed = np.einsum("ij,kjn->kin", W0, s_pr)
             smoothed[:, ~visible] = np.nan
-            _, v_pr = regress_space(smoothed.reshape(PROBES * T, N), dual, ks)
-            value_in_pr = smoothed
+            g_pr, v_pr = regress_space(smoothed.reshape(PROBES * T, N), dual, ks)
+            grad_std = _probe_std(g_pr.reshape(PROBES, T, N, 3), 0.0)
+            # the bias is judged against the temporal regression of the points' own series
+            value_in_pr = np.einsum("ij,kjn->kin", W0, np.nan_to_num(noise))
         else:
             value_in_pr = noise
         v_pr = v_pr.reshape(PROBES, T, N)
         temp_std = _probe_std(v_pr, 0.0)
         if spatial is not None:
-            theta, grad, value_in, value = spatial
+            theta, grad, value_in, value = spatial[:4]
             # the same probes through the exact interpolation (k = 1): the noise expected in the
             # difference regression - interpolation, which is subtracted from the data's difference
-            g_int = regress_space(noise.reshape(PROBES * T, N), dual, 1.0)[0].reshape(PROBES, T, N, 3)
+            g_int = regress_space(noise_c.reshape(PROBES * T, N), dual, 1.0)[0].reshape(PROBES, T, N, 3)
             g_var = np.mean(np.square(g_pr.reshape(PROBES, T, N, 3) - g_int), axis=0)
             d_grad = grad - regress_space(theta, geo.dual, 1.0)[0]
             grad_std = np.hypot(grad_std, _local_bias(d_grad, g_var, sf.psi, trusted))
             # the exact interpolation of the input at the points is the input itself
             v_var = np.mean(np.square(v_pr - value_in_pr), axis=0)
             temp_std = np.hypot(temp_std, _local_bias(value - value_in, v_var, sf.psi, trusted))
+            if len(spatial) > 4 and W0 is not None:
+                # the regressions' bias of the rate, against the exact interpolation in space and time
+                ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
+                                         window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
+                r_var = np.mean(np.square(np.einsum("ij,kjn->kin", W1, s_pr)
+                                          - np.einsum("ij,kjn->kin", ti.weights(t, 1), np.nan_to_num(noise))), axis=0)
+                rate_std = np.hypot(rate_std, _local_bias(spatial[4], r_var, sf.psi, trusted))
     return temp_std, grad_std, rate_std
 
 

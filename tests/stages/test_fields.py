@@ -164,3 +164,16 @@ def test_uncertainty_coverage_monte_carlo():
     for v, w in within.items():
         one, two = np.mean(w, axis=0)
         assert 0.55 <= one <= 0.82 and 0.86 <= two <= 0.99, (v, one, two)
+
+
+def test_space_time_regression_space_first_tube_rate():
+    """Issue 15: the tube's temperature is smooth in space but fast in time; regressing each stage in space
+    before the series in time keeps GCV in time from smoothing the heating away (rate 7.8 % before, 4.2 % now)."""
+    dic, ir, cal, truth = synthetic_inputs("tube", "tiny", ir_noise=0.05, dic_noise=0.003, seed=5)
+    pts = couple(dic, ir, cal)
+    truth = truth.sel(point=pts.point)
+    m = _inner(pts, truth)
+    f = fields(pts, cal)
+    assert f.attrs["temperature_smoothing_space_chosen"] == "gcv"
+    r = truth.temperature_rate.values
+    assert _rms((f.temperature_rate.values - r)[m]) <= 0.06 * _rms(r[m])
