@@ -221,11 +221,7 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     method = choice(method, "method", METHODS)
     chunk = as_int(chunk, "chunk", 1)
     frames, (n_frames, H, W) = _frame_shape(frames)
-    ft = float_array(frame_times, "frame_times")
-    if ft.shape != (n_frames,):
-        raise ConfigError(
-            f"frame_times must have shape (n_frames,) = ({n_frames},) like frames, got {ft.shape}"
-        )
+    ft = _frame_times(frame_times, n_frames)
     temporal = TemporalInterpolant(ft, c=c_time, R0=R0_time, window=time_window)
     te = float_array(eval_times, "eval_times")
     if te.ndim != 1:
@@ -242,6 +238,14 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     interp_args = dict(method=method, c=c, R0=R0, halo=halo, tile=tile)
     out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
     return SeriesEvaluation(*out, in_span)
+
+
+def _frame_times(frame_times, n_frames):
+    """Checked frame times (n_frames,) s."""
+    ft = float_array(frame_times, "frame_times")
+    if ft.shape != (n_frames,):
+        raise ConfigError(f"frame_times must have shape (n_frames,) = ({n_frames},) like frames, got {ft.shape}")
+    return ft
 
 
 def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args):

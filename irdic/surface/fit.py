@@ -119,17 +119,14 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     t_eval : array_like, shape (T,), optional
         Evaluation times (s); default ``times``. Outside the stage span: NaN.
     c, R0 : float
-        Spatial IMQ shape factor and distance normalisation (mm); the paper:
-        c = 0.969 half-shell, 0.9328 tube, R0 = 1 mm.
+        Spatial IMQ shape factor, distance normalisation (mm); the paper: 0.969 / 0.9328, 1 mm.
     c_t, R0_t : float
         Temporal shape factor and normalisation (s); the paper: 1, 1 s.
     smoothing, smoothing_t : None, float >= 1 or "gcv"
         Spatial / temporal regression (:mod:`irdic.surface` Notes); None = interpolation.
-        ``smoothing="gcv"`` chooses two spacings: one for the shape (the
-        first stage's positions, GCV on them) and one for the motion (the
-        displacements from it, :func:`gcv_displacement`); ``smoothing`` may
-        also be such a pair ``(k_shape, k_motion)``, as ``info`` records them
-        (``smoothing_shape``, ``smoothing``).
+        ``"gcv"`` chooses a spacing for the shape (the first stage) and one for
+        the motion (the displacements, :func:`gcv_displacement`); ``smoothing``
+        may be such a pair, as ``info`` records it (``smoothing_shape``, ``smoothing``).
     solver : {"auto", "global", "local"}
         Spatial interpolation solver (:mod:`irdic.surface` Notes).
     halo : float, optional
@@ -137,37 +134,27 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     parametrisation : {"auto", "plane", "cylinder"}
         Used when ``psi`` is None.
     min_stage_fraction : float
-        Stages with fewer valid points than this fraction are left out of the
-        temporal fit (and warned about); the reference stage must pass.
+        Stages with fewer valid points are left out (warned); not the reference.
     fill : {"both", "space", "time"}
-        How a point missing in a stage is filled: from the stage's valid
-        points, from the point's own valid stages (gaps of at most
-        ``max_gap`` stages, else in space), or (default) positions and
-        tangents from the former, velocities from the latter
+        Missing points filled in space, in time (gaps of at most ``max_gap``
+        stages) or both: positions and tangents in space, velocities in time
         (:mod:`irdic.surface` Notes, Missing points).
     max_gap : int
-        Longest run of missing stages filled in time.
-    record_times : array_like, optional
-        The whole record's stage times when ``x`` holds a time chunk's
-        window of stages: the temporal operator's window
-        (:func:`~irdic.numerics.temporal.temporal_window`) is the record's.
-        Default ``times``.
-    shape_stage : array_like, shape (N, 3), optional
-        Coordinates (mm) of the stage the shape regression is fitted on
-        when ``smoothing`` is a pair of different spacings; default the
-        first of ``x``. A time chunk passes the record's stage 0, so that
-        shape and motion split as in the whole record.
+    record_times, shape_stage : array_like, optional
+        For a time chunk's window of stages: the whole record's stage times
+        (M_rec,) s, whose :func:`~irdic.numerics.temporal.temporal_window`
+        the temporal operator uses, and the record's stage 0 (N, 3) mm, on
+        which the shape is fitted when ``smoothing`` is a pair. Default
+        ``times`` and the first stage of ``x``.
     operators : dict, optional
-        A cache of the spatial operators (their factorisations), shared by
-        calls on the same points and missing-point pattern with other
-        coordinates (noise probes): pass the same empty dict to each call.
+        Cache of the spatial factorisations, shared by calls on the same
+        points and missing pattern (noise probes): the same dict each call.
 
     Returns
     -------
     SurfaceFields
-        Points with the same surface parameters as an earlier point (duplicate
-        DIC points) are left out with a logged warning: NaN results, listed in
-        ``info["duplicates"]``.
+        Duplicate DIC points (the surface parameters of an earlier point) are
+        left out, warned about and listed in ``info["duplicates"]``: NaN.
 
     Raises
     ------
@@ -177,44 +164,55 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     GeometryError
         Folded parametrisation.
     """
-    t0 = _time.perf_counter()
-    X, t, frac = _check_stages(x, times, fill, max_gap, min_stage_fraction)
+    t0, (X, t, frac) = _time.perf_counter(), _check_stages(x, times, fill, max_gap, min_stage_fraction)
     M, N, _ = X.shape
+    ks, kt = _smoothings(smoothing, smoothing_t)
+    info = {}
+    psi = _parameters(X, psi, parametrisation, info)
+    valid = np.isfinite(X).all(axis=2)
+    nodes = _nodes(psi, valid, info)
+    used = _used_stages(valid[:, nodes].sum(axis=1), frac, nodes.size)
+    ops = {} if operators is None else operators
+    sp = _operator(ops, psi[nodes], valid[:, nodes], c=c, R0=R0, solver=solver, halo=halo)
+    te = t if t_eval is None else np.atleast_1d(float_array(t_eval, "t_eval"))
+    Xu, Vu = X[:, nodes][used], valid[:, nodes][used]
+    Xs, Xt = _fill_missing(sp, Xu, Vu, t[used], te.size, ks, fill, c_t, R0_t, max_gap, info)
+    record = t if record_times is None else float_array(record_times, "record_times")
+    x0 = None if shape_stage is None else _shape_stage(sp, shape_stage, nodes, N)
+    fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, t[used], te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record,
+                         x0, ops)
+    return _assemble(fields, psi, te, nodes, used, ~Vu, edge_distance(psi[nodes]), (M, N), info,
+                     (c, R0, c_t, R0_t), t0)
+
+
+def _smoothings(smoothing, smoothing_t):
+    """Checked spatial smoothing (a number, "gcv" or a (shape, motion) pair) and temporal smoothing."""
     if isinstance(smoothing, tuple) and len(smoothing) == 2:
         # (shape, motion): the spacings GCV chose for the reference and the displacement, frozen
         ks = tuple(smoothing_factor(k, "smoothing", allow_gcv=False) for k in smoothing)
     else:
         ks = smoothing_factor(smoothing, "smoothing")
-    kt = smoothing_factor(smoothing_t, "smoothing_t")
-    info = {}
+    return ks, smoothing_factor(smoothing_t, "smoothing_t")
+
+
+def _parameters(X, psi, parametrisation, info):
+    """The surface parameters (N, 2): given (checked) or from the stages ``X`` (M, N, 3)."""
     if psi is None:
         psi, info["parametrisation"] = surface_parameters(X, parametrisation)
-    else:
-        psi = psi_array(psi, "psi")
-        if psi.shape[0] != N:
-            raise ConfigError(f"psi has {psi.shape[0]} rows but x has {N} points")
-    valid = np.isfinite(X).all(axis=2)
-    nodes = _nodes(psi, valid, info)
-    n = nodes.size
-    used = _used_stages(valid[:, nodes].sum(axis=1), frac, n)
-    ops = {} if operators is None else operators
-    sp = _operator(ops, psi[nodes], valid[:, nodes], c=c, R0=R0, solver=solver, halo=halo)
-    te = t if t_eval is None else np.atleast_1d(float_array(t_eval, "t_eval"))
-    tu = t[used]
-    ed_nodes = edge_distance(psi[nodes])
-    Xu, Vu = X[:, nodes][used], valid[:, nodes][used]
-    Xs, Xt = _fill_missing(sp, Xu, Vu, tu, te.size, ks, fill, c_t, R0_t, max_gap, info)
-    record = t if record_times is None else float_array(record_times, "record_times")
-    x0 = None
-    if shape_stage is not None:
-        s0 = float_array(shape_stage, "shape_stage")
-        if s0.shape != (N, 3):
-            raise ConfigError(f"shape_stage must have shape (points, 3) = ({N}, 3), got {s0.shape}")
-        s0 = s0[nodes]
-        x0 = sp.fill(s0[None], np.isfinite(s0).all(axis=1)[None])[0][0]
-    fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, tu, te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record, x0,
-                         ops)
-    return _assemble(fields, psi, te, nodes, used, ~Vu, ed_nodes, (M, N), info, (c, R0, c_t, R0_t), t0)
+        return psi
+    psi = psi_array(psi, "psi")
+    if psi.shape[0] != X.shape[1]:
+        raise ConfigError(f"psi has {psi.shape[0]} rows but x has {X.shape[1]} points")
+    return psi
+
+
+def _shape_stage(sp, shape_stage, nodes, N):
+    """The stage the shape is fitted on, at the nodes, missing points filled in space (n, 3)."""
+    s0 = float_array(shape_stage, "shape_stage")
+    if s0.shape != (N, 3):
+        raise ConfigError(f"shape_stage must have shape (points, 3) = ({N}, 3), got {s0.shape}")
+    s0 = s0[nodes]
+    return sp.fill(s0[None], np.isfinite(s0).all(axis=1)[None])[0][0]
 
 
 def gcv_displacement(psi, X, valid=None, *, c=0.95, R0=1.0):
