@@ -86,7 +86,13 @@ def ls_design(psi, k, h, c, R0):
     return centres, R0k, ctr, Qm, Rm
 
 
-def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0)):
+#: Points GCV judges at most: a larger cloud is judged on the round patch of this many points about its
+#: middle (a QR of the design is O(N p²) per candidate, minutes at 13k points and spacing 2)
+GCV_MAX_POINTS = 4000
+
+
+def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0),
+                max_points=GCV_MAX_POINTS):
     """Choose the spatial regression's centre spacing by generalised cross-validation.
 
     Parameters
@@ -99,17 +105,34 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
         Kernel (as :class:`SpatialInterpolant`).
     candidates : sequence of float
         Centre spacing factors to try (> 1).
+    max_points : int
+        Larger clouds are judged on the ``max_points`` points nearest to the
+        middle of their parameter box.
 
     Returns
     -------
     k : float
         The factor with the least ``GCV = n RSS / (n - p)^2`` (pooled over the series).
     table : list of (k, n_parameters, gcv)
+
+    Notes
+    -----
+    The spacing is a multiple of the median point spacing ``h``, and what
+    GCV weighs (the noise against the signal's curvature on the scale of a
+    few spacings) is local, so a round patch of a few thousand points with
+    the cloud's density chooses as the whole cloud does, at a fraction of
+    the cost.
     """
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
     h = median_spacing(p)
+    if p.shape[0] > max_points:
+        from scipy.spatial import cKDTree
+
+        mid = 0.5 * (p.min(axis=0) + p.max(axis=0))
+        near = np.sort(cKDTree(p).query(mid, k=int(max_points))[1])
+        p, F = p[near], F[near]
     n = p.shape[0]
     table = []
     for k in sorted(set(float(x) for x in candidates)):

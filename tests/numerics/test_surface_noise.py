@@ -86,3 +86,17 @@ def test_a_time_chunk_of_a_long_record_fits_the_whole_record_surface():
     # without the record's stage 0 the shape would be fitted on the window's first stage
     stray = fit_surface(x[w], t[w], whole.psi, t_eval=t[a:b], record_times=t, **kw)
     assert np.abs(stray.tangents - whole.tangents[a:b]).max() > 1e-7
+
+
+def test_gcv_of_a_large_cloud_on_its_middle_patch_chooses_as_the_whole_cloud():
+    from irdic.surface.regression import gcv_spatial
+
+    rng = np.random.default_rng(2)
+    s, h = np.meshgrid(np.arange(100) * 0.4, np.arange(60) * 0.4)
+    psi = np.c_[s.ravel(), h.ravel()]
+    f = np.c_[np.sin(psi[:, 0] / 6.0) * np.cos(psi[:, 1] / 5.0), 0.02 * psi[:, 0] ** 2 / 40]
+    f = f + rng.normal(0, 0.01, f.shape)
+    whole, table_w = gcv_spatial(psi, f, max_points=psi.shape[0])
+    patch, table_p = gcv_spatial(psi, f, max_points=2500)
+    assert patch == whole, (table_w, table_p)
+    assert table_p[0][1] < table_w[0][1]  # the patch's design is the smaller one
