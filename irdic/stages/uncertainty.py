@@ -349,10 +349,11 @@ def _window_probe(window, t, psi, kw, dx, dref):
     """A surface fit of a chunk as the fields stage fits it, with the coordinate noise ``dx`` (window) and
     ``dref`` (the record's first two stages) added: over its window, at its times ``t``, with the strain's
     reference from the record's first two stages."""
+    dref = np.zeros(window.x_ref.shape) + (0.0 if dref is None else dref)
     pf = fit_surface(window.x + dx, window.t, psi, t_eval=t, record_times=window.record,
-                     shape_stage=window.x_ref[0] + (0.0 if dref is None else dref[0]), **kw)
+                     shape_stage=window.x_ref[0] + dref[0], **kw)
     if window.t[0] > window.t_ref[0]:
-        ref = fit_surface(window.x_ref + (0.0 if dref is None else dref), window.t_ref, psi,
+        ref = fit_surface(window.x_ref + dref, window.t_ref, psi,
                           t_eval=window.t_ref[:1], **{**kw, "smoothing_t": None})
         pf = pf._replace(ref_x=ref.ref_x, ref_tangents=ref.ref_tangents)
     return pf
