@@ -81,11 +81,12 @@ class TemporalInterpolant:
     record's to rounding: an evaluation time's window is fixed by its place
     among the samples, so any subset of the record holding that window (a
     chunk's samples plus ``n + 1`` on each side, :func:`irdic.chunks.window`)
-    gives the same weights. Inside the record it equals the one global
-    operator to the tolerance :func:`temporal_window` was chosen for; within
-    ``n`` samples of the first and last sample it is the windowed operator's
-    own boundary behaviour, which the global one's slowly decaying tail
-    there (:func:`temporal_reach`) would otherwise tie to the whole record.
+    gives the same weights. Inside the record the windowed interpolant
+    equals the global one to the tolerance of :func:`temporal_reach`; within
+    ``n`` samples of the first and last sample it is the window's own
+    boundary behaviour, which the global one's slowly decaying tail there
+    would otherwise tie to the whole record. A windowed regression is a
+    local regression (:func:`temporal_window`, Notes).
     It also keeps long records tractable: ``O(M n^2)`` work instead of an
     ``(M + 2)^2`` system.
     """
