@@ -17,14 +17,14 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 import xarray as xr
 
 from .errors import ConfigError, DataError
 
-__all__ = ["n_chunks", "chunk_slice", "window", "chunk_path", "gather"]
+__all__ = ["n_chunks", "chunk_slice", "window", "chunk_path", "gather", "gathered"]
 
 
 def n_chunks(n_times: int, chunk_frames: int) -> int:
@@ -75,15 +75,20 @@ def chunk_path(folder: str | os.PathLike, kind: str, index: int) -> str:
     return os.path.join(os.fspath(folder), "chunks", f"{kind}-{index}.zarr")
 
 
-def gather(parts: Sequence[xr.Dataset]) -> xr.Dataset:
-    """Concatenate chunk datasets along time; variables without time come from the first chunk.
+def gathered(parts: Sequence[xr.Dataset]) -> tuple[xr.Dataset, Iterator[xr.Dataset]]:
+    """The first chunk (loaded) and the others one by one (loaded as they come), for
+    :func:`irdic.store.write_dataset`'s ``append``: a gather that holds one chunk in memory at a time.
 
     Raises
     ------
     DataError
-        The chunks overlap or are out of order in time (a chunk store from
-        an older run with another chunk count, for instance).
+        As :func:`gather` (order checked before anything is loaded).
     """
+    _check_order(parts)
+    return parts[0].load(), (p.load() for p in parts[1:])
+
+
+def _check_order(parts: Sequence[xr.Dataset]) -> None:
     if not parts:
         raise DataError("no chunk stores to gather")
     ends = [(float(p["time"][0]), float(p["time"][-1])) for p in parts]
@@ -93,6 +98,18 @@ def gather(parts: Sequence[xr.Dataset]) -> xr.Dataset:
                 f"chunk stores overlap or are out of order in time ({a0:g}..{a1:g} s, then from {b0:g} s): "
                 f"delete the results' chunks folder and run the workflow again"
             )
+
+
+def gather(parts: Sequence[xr.Dataset]) -> xr.Dataset:
+    """Concatenate chunk datasets along time; variables without time come from the first chunk.
+
+    Raises
+    ------
+    DataError
+        The chunks overlap or are out of order in time (a chunk store from
+        an older run with another chunk count, for instance).
+    """
+    _check_order(parts)
     timed = [n for n, v in parts[0].data_vars.items() if "time" in v.dims]
     static = parts[0].drop_dims("time")
     out = xr.concat([p[timed] for p in parts], dim="time", data_vars="all", coords="minimal", compat="override",

@@ -32,7 +32,7 @@ import json
 import os
 import warnings
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numcodecs
 import numpy as np
@@ -183,6 +183,7 @@ def write_dataset(
     params: Mapping | None = None,
     inputs: Sequence | None = None,
     encoding: Mapping | None = None,
+    append: Iterable[xr.Dataset] = (),
 ) -> Path:
     """Write ``ds`` to the zarr store ``path`` atomically, with provenance.
 
@@ -197,12 +198,37 @@ def write_dataset(
         See :func:`provenance`.
     encoding : mapping, optional
         Per-variable zarr encoding (chunks, ...), passed to ``to_zarr``.
+    append : iterable of xarray.Dataset, optional
+        Further parts along ``time``, each appended after ``ds`` (their
+        variables with a time dimension): a store gathered from time chunks
+        holds one part in memory at a time. The store is complete, and
+        opens, only once every part is in.
 
     Returns
     -------
     pathlib.Path
         ``path``.
     """
+    ds = _prepared(ds)
+    ds.attrs.update(provenance(stage, params, inputs))
+    ds.attrs.pop(COMPLETE_ATTR, None)
+    ds.attrs.pop(CHUNKS_ATTR, None)
+    with atomic_directory(path) as tmp:
+        ds.to_zarr(str(tmp), mode="w", encoding=dict(encoding or {}), consolidated=False, zarr_format=3)
+        for part in append:
+            part = _prepared(part)
+            timed = [n for n, v in part.data_vars.items() if "time" in v.dims]
+            part = part[timed]
+            part = part.drop_vars([c for c in part.coords if "time" not in part[c].dims])
+            part.attrs = dict(ds.attrs)  # an append rewrites the store's attributes with the part's
+            part.to_zarr(str(tmp), append_dim="time", consolidated=False, zarr_format=3)
+            del part
+        _mark_complete(tmp)
+    return Path(path)
+
+
+def _prepared(ds: xr.Dataset) -> xr.Dataset:
+    """A copy of ``ds`` as stores hold it: variable-length strings, shared coordinate attributes."""
     ds = ds.copy()
     # fixed-width unicode arrays are not yet stable in the zarr v3 spec; variable-length strings are
     for name in list(ds.variables):
@@ -212,13 +238,7 @@ def write_dataset(
         # a coordinate without a long_name gets the shared one, so every store describes its indices alike
         if "long_name" not in c.attrs and name in COORD_ATTRS:
             ds.variables[name].attrs.update({**COORD_ATTRS[name], **c.attrs})
-    ds.attrs.update(provenance(stage, params, inputs))
-    ds.attrs.pop(COMPLETE_ATTR, None)
-    ds.attrs.pop(CHUNKS_ATTR, None)
-    with atomic_directory(path) as tmp:
-        ds.to_zarr(str(tmp), mode="w", encoding=dict(encoding or {}), consolidated=False, zarr_format=3)
-        _mark_complete(tmp)
-    return Path(path)
+    return ds
 
 
 def _identity(path: Path) -> tuple | None:

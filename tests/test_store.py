@@ -320,3 +320,23 @@ def test_plain_xarray_opens_a_store_without_warnings(tmp_path):
         got = xr.open_zarr(tmp_path / "s.zarr")
         xr.testing.assert_equal(got.a.load(), ds.a)
     assert open_store(tmp_path / "s.zarr").attrs["irdic_complete"]
+
+
+def test_a_store_written_in_parts_equals_one_written_whole(tmp_path):
+    """write_dataset(append=...) (the gather of time chunks, one part in memory at a time) gives the same store."""
+    from irdic.chunks import gather, gathered
+
+    rng = np.random.default_rng(0)
+    parts = []
+    for i, n in enumerate((3, 4, 2)):  # later parts longer and shorter than the first (its zarr chunks)
+        t = np.arange(n) + 10.0 * i
+        parts.append(xr.Dataset({"v": (("time", "point"), rng.normal(size=(n, 5)), {"units": "K"}),
+                                 "w": (("time", "point", "component"), rng.normal(size=(n, 5, 3))),
+                                 "ref": (("point",), np.arange(5.0))},
+                                coords={"time": t, "point": np.arange(5)}, attrs={"note": "first" if i == 0 else "x"}))
+    write_dataset(gather(parts), tmp_path / "whole.zarr", stage="test")
+    first, rest = gathered(parts)
+    write_dataset(first, tmp_path / "parts.zarr", stage="test", append=rest)
+    a, b = open_store(tmp_path / "whole.zarr"), open_store(tmp_path / "parts.zarr")
+    xr.testing.assert_identical(a.drop_attrs(), b.drop_attrs())
+    assert b.attrs["note"] == "first" and b.attrs["irdic_stage"] == a.attrs["irdic_stage"]

@@ -41,7 +41,7 @@ import numpy as np
 import xarray as xr
 
 from ..camera import load_camera
-from ..chunks import chunk_slice, gather, window
+from ..chunks import chunk_slice, gathered, window
 from ..numerics.temporal import temporal_window
 from ..errors import ConfigError, DataError
 from ..image_rbf import evaluate_series
@@ -344,9 +344,14 @@ def run_gather(inputs: Mapping[str, Sequence[str | os.PathLike]], outputs: Mappi
     parts = [os.fspath(q) for q in paths(inputs, "couple-gather", "inputs", ("chunks",))["chunks"]]
     with stage_context("couple-gather", log, threads):
         stores = [open_store(q) for q in parts]
-        ds = gather(stores)
+        # the status counts of the record, one chunk's status at a time
+        counts = {}
+        for c in stores:
+            for k, v in count_attrs(c["status"].values).items():
+                counts[k] = counts.get(k, 0) + v
+        ds, rest = gathered(stores)
         ds.attrs = {k: v for k, v in ds.attrs.items() if not k.startswith("count_") and k != "chunk"}
-        ds.attrs.update(count_attrs(ds["status"].values))
+        ds.attrs.update(counts)
         ds.attrs.update(_gathered_noise([c.attrs for c in stores]))
-        write_dataset(ds, o["store"], stage="couple", params=params, inputs=parts,
+        write_dataset(ds, o["store"], stage="couple", params=params, inputs=parts, append=rest,
                       encoding={"temperature": {"chunks": (1, ds.sizes["point"])}})

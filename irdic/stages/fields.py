@@ -37,7 +37,7 @@ from ..errors import ConfigError, DataError
 from ..store import open_store, write_dataset
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry, surface_parameters
-from ..chunks import chunk_slice, gather, window
+from ..chunks import chunk_slice, gathered, window
 from ..numerics.temporal import smooth_series, temporal_window
 from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
@@ -514,5 +514,6 @@ def run_gather(inputs: Mapping[str, Sequence[str | os.PathLike]], outputs: Mappi
     o = paths(outputs, "fields", "outputs", ("store",))
     parts = [os.fspath(q) for q in paths(inputs, "fields-gather", "inputs", ("chunks",))["chunks"]]
     with stage_context("fields-gather", log, threads):
-        write_dataset(gather([open_store(q) for q in parts]), o["store"], stage="fields", params=params,
+        first, rest = gathered([open_store(q) for q in parts])
+        write_dataset(first, o["store"], stage="fields", params=params, append=rest,
                       inputs=parts)
