@@ -85,7 +85,8 @@ def gathered(parts: Sequence[xr.Dataset]) -> tuple[xr.Dataset, Iterator[xr.Datas
         As :func:`gather` (order checked before anything is loaded).
     """
     _check_order(parts)
-    return parts[0].load(), (p.load() for p in parts[1:])
+    # compute(), not load(): a loaded copy that is freed once written, while the caller's lazy stores stay lazy
+    return parts[0].compute(), (p.compute() for p in parts[1:])
 
 
 def _check_order(parts: Sequence[xr.Dataset]) -> None:
