@@ -4,8 +4,8 @@ A long record is split into ``n`` chunks of consecutive DIC times
 (``execution.chunk_frames`` per chunk); each chunk is a separate job (a
 Snakemake rule instance, a SLURM job) that reads only the IR frames or DIC
 stages its temporal interpolant needs: its own times plus the reach of the
-temporal kernel on each side (:func:`irdic.numerics.temporal.temporal_reach`).
-The gather step concatenates the chunk stores along time into the usual
+temporal operators on each side (:func:`irdic.numerics.temporal.temporal_window`).
+The gather step appends the chunk stores along time, one at a time, to the usual
 ``points.zarr`` / ``fields.zarr``: the store contract does not change.
 
 The split is by position (:func:`numpy.array_split` of the DIC times into
@@ -24,7 +24,7 @@ import xarray as xr
 
 from .errors import ConfigError, DataError
 
-__all__ = ["n_chunks", "chunk_slice", "window", "chunk_path", "gather", "gathered"]
+__all__ = ["n_chunks", "chunk_slice", "window", "chunk_path", "gathered"]
 
 
 def n_chunks(n_times: int, chunk_frames: int) -> int:
@@ -82,7 +82,9 @@ def gathered(parts: Sequence[xr.Dataset]) -> tuple[xr.Dataset, Iterator[xr.Datas
     Raises
     ------
     DataError
-        As :func:`gather` (order checked before anything is loaded).
+        The chunks overlap or are out of order in time (a chunk store from
+        an older run with another chunk count, for instance), checked
+        before anything is loaded.
     """
     _check_order(parts)
     # compute(), not load(): a loaded copy that is freed once written, while the caller's lazy stores stay lazy
@@ -99,21 +101,3 @@ def _check_order(parts: Sequence[xr.Dataset]) -> None:
                 f"chunk stores overlap or are out of order in time ({a0:g}..{a1:g} s, then from {b0:g} s): "
                 f"delete the results' chunks folder and run the workflow again"
             )
-
-
-def gather(parts: Sequence[xr.Dataset]) -> xr.Dataset:
-    """Concatenate chunk datasets along time; variables without time come from the first chunk.
-
-    Raises
-    ------
-    DataError
-        The chunks overlap or are out of order in time (a chunk store from
-        an older run with another chunk count, for instance).
-    """
-    _check_order(parts)
-    timed = [n for n, v in parts[0].data_vars.items() if "time" in v.dims]
-    static = parts[0].drop_dims("time")
-    out = xr.concat([p[timed] for p in parts], dim="time", data_vars="all", coords="minimal", compat="override",
-                    join="override", combine_attrs="override")
-    merged = xr.merge([out, static], combine_attrs="override", join="exact")
-    return merged[list(parts[0].data_vars)]

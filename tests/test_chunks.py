@@ -10,7 +10,7 @@ import pytest
 import xarray as xr
 import yaml
 
-from irdic.chunks import chunk_slice, gather, n_chunks, window
+from irdic.chunks import chunk_slice, gathered, n_chunks, window
 from irdic.errors import ConfigError, DataError
 from irdic.numerics.temporal import TemporalInterpolant, temporal_reach
 
@@ -58,7 +58,7 @@ def test_gather_refuses_overlapping_chunks():
     a = xr.Dataset({"v": (("time",), [1.0, 2.0])}, coords={"time": [0.0, 1.0]})
     b = xr.Dataset({"v": (("time",), [3.0])}, coords={"time": [1.0]})
     with pytest.raises(DataError, match="overlap or are out of order.*delete the results' chunks folder"):
-        gather([a, b])
+        gathered([a, b])
 
 
 def _write(path, text=""):

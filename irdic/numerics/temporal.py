@@ -395,7 +395,7 @@ def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0,
     return SeriesFit(val.reshape((T,) + tail), rate.reshape((T,) + tail), float(k), table)
 
 
-def temporal_reach(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL, model=401):
+def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):
     """Samples on each side of a time window that make it reproduce the whole-series interpolant.
 
     Parameters
@@ -404,15 +404,11 @@ def temporal_reach(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL, model
         Sample times (s) of the whole series, strictly increasing.
     c, R0 : float
         Kernel of the interpolant (as :class:`TemporalInterpolant`).
-    smoothing : None or float >= 1
-        The operator's smoothing (:class:`TemporalInterpolant`): a
-        regression's weights spread over its kernel, six centre spacings.
     tol : float
         Largest tail of the cardinal weights (dimensionless) allowed.
     model : int
-        Samples of the uniform model series the weights are measured on
-        (at least 200 per unit of ``smoothing``); a reach beyond
-        ``model // 2`` counts as the whole series.
+        Samples of the uniform model series the weights are measured on; a
+        reach beyond ``model // 2`` counts as the whole series.
 
     Returns
     -------
@@ -451,20 +447,19 @@ def temporal_reach(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL, model
     the model, give the whole series.
     """
     t = increasing_times(times, "times", "n_times")
-    k = smoothing_factor(smoothing, "smoothing", allow_gcv=False)
     if t.size < 8:
         return t.size
-    reach = _model_reach(float(np.median(np.diff(t))), float(c), float(R0), float(k), float(tol), int(model))
+    reach = _model_reach(float(np.median(np.diff(t))), float(c), float(R0), float(tol), int(model))
     return t.size if reach is None else min(reach, t.size)
 
 
 @functools.lru_cache(maxsize=256)
-def _model_reach(h, c, R0, k, tol, model):
+def _model_reach(h, c, R0, tol, model):
     """:func:`temporal_reach` on the uniform model series of spacing ``h``; None: the whole series."""
-    if k == 1.0 and c * R0 > 8.0 * h:
+    if c * R0 > 8.0 * h:
         # flatter kernels: the saddle system loses the digits the tail is made of
         return None
-    n = int(max(model, 200 * k))
+    n = int(model)
     n -= 1 - n % 2  # odd: the evaluation point sits in the middle
     m = n // 2
     tm = (np.arange(n) - m) * h
@@ -472,7 +467,7 @@ def _model_reach(h, c, R0, k, tol, model):
     # tail over the whole record that no bounded window reproduces (Notes)
     pos = np.array([m + 0.25, m + 0.5])
     try:
-        ti = TemporalInterpolant(tm, c=c, R0=R0, smoothing=k)
+        ti = TemporalInterpolant(tm, c=c, R0=R0)
         te = tm[0] + pos * h
         W = np.abs(np.r_[ti.weights(te, 0), ti.weights(te, 1) * h])
     except (DataError, GeometryError):
@@ -495,8 +490,10 @@ def temporal_window(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL):
     times : array_like, shape (M,)
         Sample times (s) of the whole record (IR frames or DIC stages), not
         of a time chunk: every chunk and the whole-record run must agree.
-    c, R0, smoothing, tol
+    c, R0, tol
         As :func:`temporal_reach`.
+    smoothing : None or float >= 1
+        The operator's smoothing (:class:`TemporalInterpolant`).
 
     Returns
     -------
