@@ -245,3 +245,82 @@ def test_noise_dominated_tells_a_smooth_field_from_noise():
     assert noise_dominated(x, smooth + rng.normal(0.0, 0.2, smooth.size))
     assert not noise_dominated(x, smooth + rng.normal(0.0, 0.005, smooth.size))
     assert not noise_dominated(x[:10], smooth[:10])  # too few points to judge
+
+
+def test_resolved_fraction_against_zero():
+    """Analytic: values 0, 1, 3, 5 with std 1: |v| > 2 std for 3 and 5; a zero std is exact, not judged."""
+    from irdic.plot.uncertainty import resolved_fraction
+
+    assert resolved_fraction([0.0, 1.0, -3.0, 5.0], [1.0, 1.0, 1.0, 1.0]) == 0.5
+    assert resolved_fraction([0.0, 1.0, -3.0, 5.0, np.nan], [0.0, 1.0, 1.0, 1.0, 1.0]) == pytest.approx(2 / 3)
+    assert np.isnan(resolved_fraction([0.0, 0.0], [0.0, 0.0]))  # the reference stage's strain
+
+
+def _with_std(fields, name, std, bias=None):
+    """``fields`` with ``<name>_std`` (and ``<name>_bias_dominated``) of the variable's shape."""
+    da = fields[name]
+    f = fields.assign({f"{name}_std": (da.dims, np.broadcast_to(std, da.shape).copy())})
+    if bias is not None:
+        f = f.assign({f"{name}_bias_dominated": (da.dims, np.broadcast_to(bias, da.shape).copy())})
+    return f
+
+
+@pytest.mark.parametrize("name, func", [("temperature_rate", plot_rate), ("max_principal_strain", plot_strain)])
+def test_captions_say_when_a_map_is_noise_dominated_by_its_uncertainty(stores, tmp_path, name, func):
+    """A std ten times the values' size makes the map noise-dominated; a std a hundredth of it does not."""
+    from irdic.report import figure_caption
+
+    points, fields = stores
+    k = [int(np.argmin(np.abs(points.time.values - t))) for t in (1.0, 2.0)]
+    size = float(np.nanmax(np.abs(fields[name].values[k])))
+    assert size > 0
+
+    def caption(f):
+        if func is plot_rate:
+            return figure_caption(plot_rate(points, tmp_path / "r.png", fields=f, times=[1.0, 2.0]))
+        return figure_caption(plot_strain(f, tmp_path / "s.png", points=points, times=[1.0, 2.0]))
+
+    noisy = caption(_with_std(fields, name, 10 * size))
+    assert noisy.startswith("Noise-dominated at t = 1 s, 2 s: most values lie within 2 standard uncertainties of zero")
+    assert f"fields.{name}_std" in noisy
+    assert "0-0 % of the points per panel lie more than 2 std from zero" in noisy
+    clean = caption(_with_std(fields, name, size / 100, bias=np.zeros(fields[name].shape, bool)))
+    assert not clean.startswith("Noise-dominated") and "method's bias" not in clean
+    assert f"median {size / 100 * (100 if name == 'max_principal_strain' else 1):.3g}" in clean
+    flagged = np.zeros(fields[name].shape, bool)
+    flagged[:, :7] = True  # 7 of the 63 points of each time
+    clean = caption(_with_std(fields, name, size / 100, bias=flagged))
+    assert "at 11 % of the points the method's bias" in clean
+
+
+def test_temperature_caption_uses_the_noise_estimated_by_couple(stores, tmp_path):
+    """points.zarr's IR noise x the interpolation's gain, against the map's 5-95 % range."""
+    from irdic.report import figure_caption
+
+    points, _ = stores
+    k = [int(np.argmin(np.abs(points.time.values - t))) for t in (1.0, 2.0)]
+    v = points.temperature.values[k]
+    spread = np.nanpercentile(v[0], 95) - np.nanpercentile(v[0], 5)
+    p = points.copy()
+    p.attrs.update(ir_noise_k=0.05, ir_noise_gain_temperature=1.0)
+    quiet = figure_caption(plot_temperature(p, tmp_path / "t.png", times=[1.0, 2.0]))
+    assert "Standard uncertainty (the IR noise estimated by couple, through the interpolation): median 0.05 °C" in quiet
+    assert not quiet.startswith("Noise-dominated")
+    p.attrs.update(ir_noise_k=float(spread))  # std = the range: a pattern of noise
+    assert figure_caption(plot_temperature(p, tmp_path / "t.png", times=[1.0, 2.0])).startswith(
+        "Noise-dominated at t = 1 s")
+
+
+def test_history_shades_the_rate_uncertainty(stores, tmp_path, figures):
+    from irdic.report import figure_caption
+
+    points, fields = stores
+    f = _with_std(fields, "temperature_rate", 0.01)
+    out = plot_history(points, tmp_path / "h.png", fields=f, point_ids=[1000])
+    ax_r = figures[-1].axes[1]
+    bands = [c for c in ax_r.collections if c.get_label() == "material rate ± 2 std"]
+    assert len(bands) == 1
+    ys = bands[0].get_paths()[0].vertices[:, 1]
+    rate = fields.temperature_rate.sel(point=1000).values
+    np.testing.assert_allclose([ys.min(), ys.max()], [np.nanmin(rate) - 0.02, np.nanmax(rate) + 0.02], atol=1e-12)
+    assert "± 2 standard uncertainties" in figure_caption(out)

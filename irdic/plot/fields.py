@@ -13,6 +13,7 @@ from ..errors import ConfigError, DataError, IrdicWarning
 from .maps import (View, colour_limits, map_caption, colour_norm, draw_map, experiment_name, grid_sample, map_figure,
                    no_temperature_note, note, pick_source, point_values, round_scale, save_figure, time_indices,
                    unit_label)
+from .uncertainty import field_uncertainty, pixel_uncertainty
 
 __all__ = ["plot_temperature", "plot_gradient", "plot_rate", "plot_strain"]
 
@@ -51,8 +52,9 @@ def plot_temperature(points, path, *, times=None, experiment=None):
     unit = unit_label(points['temperature'], 'degC')
     cb.set_label(f"temperature ({unit})")
     no_temperature_note(fig, xs, vals)
+    unc = pixel_uncertainty(points, "temperature", idx, points.sizes["point"])
     return save_figure(fig, path, caption=map_caption(f"Temperature ({unit}) at the DIC points", name, t[idx], xs,
-                                                      vals))
+                                                      vals, unc=unc, unit=unit))
 
 
 def plot_gradient(points, path, *, fields=None, times=None, experiment=None, arrows: int = 18):
@@ -125,8 +127,12 @@ def plot_gradient(points, path, *, fields=None, times=None, experiment=None, arr
     no_temperature_note(fig, xs, vals)
     arrows_what = ("in-plane temperature gradient (current configuration), projected on the view plane" if surface
                    else "temperature gradient in the IR image plane")
+    # the arrows' length is the gradient's magnitude (in the view plane): judged by its 3-D magnitude's std
+    unc = (field_uncertainty(ds, var, idx, vector=True) if surface
+           else pixel_uncertainty(points, "gradient_per_px", idx, points.sizes["point"], factor=np.sqrt(2.0)))
+    mags3 = [np.linalg.norm(point_values(ds, var, i).astype(float), axis=-1) for i in idx]
     caption = map_caption(f"Temperature (colours) and {arrows_what} (arrows, {unit})", name, t[idx], xs,
-                          [np.hypot(*vv) for vv in vecs])
+                          mags3, unc=unc, unit=unit)
     return save_figure(fig, path, caption=caption)
 
 
@@ -176,7 +182,9 @@ def plot_rate(points, path, *, fields=None, times=None, experiment=None):
     no_temperature_note(fig, xs, vals)
     what = ("Material temperature rate (following each material point)" if surface
             else "Local temperature rate at the fixed IR pixel")
-    return save_figure(fig, path, caption=map_caption(f"{what} ({unit})", name, t[idx], xs, vals))
+    unc = (field_uncertainty(ds, var, idx) if surface
+           else pixel_uncertainty(points, "rate_per_s", idx, points.sizes["point"]))
+    return save_figure(fig, path, caption=map_caption(f"{what} ({unit})", name, t[idx], xs, vals, unc=unc, unit=unit))
 
 
 def plot_strain(fields, path, *, points=None, times=None, experiment=None, segments: int = 18):
@@ -250,5 +258,6 @@ def plot_strain(fields, path, *, points=None, times=None, experiment=None, segme
         note(fig, "segments: direction of E_max (current configuration)" if dname.endswith("current")
               else "segments: direction of E_max (reference configuration)")
     caption = map_caption("Maximum principal Green-Lagrange strain E_max (%, relative to the reference stage)",
-                          name, t[idx], xs, vals)
+                          name, t[idx], xs, vals, unc=field_uncertainty(fields, "max_principal_strain", idx,
+                                                                        scale=100.0), unit="%")
     return save_figure(fig, path, caption=caption)

@@ -73,6 +73,9 @@ def plot_history(points, path, *, fields=None, point_ids=None, experiment=None):
                f"of {name} over t = {t[0]:g} .. {t[-1]:g} s; hollow markers: extrapolated from the specimen mask "
                "edge. Right: where the points are (IR camera view), their DIC-frame position and how many times "
                "have a temperature.")
+    if fields is not None and "temperature_rate_std" in fields:
+        caption += (" Shaded: the material rate ± 2 standard uncertainties (fields.temperature_rate_std; not a bound "
+                    "where fields.temperature_rate_bias_dominated is set: mask edge, first and last time).")
     return save_figure(fig, path, caption=caption)
 
 
@@ -107,12 +110,19 @@ def _history_rate(ax_r, points, fields, t, ids, sel, colors):
         a = np.asarray(da.transpose("time", "point").values, dtype=float)
         for k, c in enumerate(colors):
             ax_r.plot(t, a[:, k], ls, color=c, lw=1.2, label=lab if k == 0 else None)
+    if parts and fields is not None and "temperature_rate_std" in fields:
+        a = np.asarray(fields["temperature_rate"].sel(point=ids).transpose("time", "point").values, dtype=float)
+        s = np.asarray(fields["temperature_rate_std"].sel(point=ids).transpose("time", "point").values, dtype=float)
+        for k, c in enumerate(colors):
+            ax_r.fill_between(t, a[:, k] - 2 * s[:, k], a[:, k] + 2 * s[:, k], color=c, alpha=0.15, lw=0,
+                              label="material rate ± 2 std" if k == 0 else None)
     ax_r.axhline(0.0, color="0.5", lw=0.6)
     ax_r.set_ylabel("temperature rate (K/s)")
     ax_r.set_xlabel("time (s)")
     ax_r.grid(True, alpha=0.3)
     if parts:  # above the axes: rate curves fill the whole box
-        ax_r.legend(fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncols=len(parts), frameon=False)
+        n = len(ax_r.get_legend_handles_labels()[0])
+        ax_r.legend(fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncols=n, frameon=False)
 
 
 def _history_positions(fig, ax_m, points, t, ids, sel, colors):

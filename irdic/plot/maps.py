@@ -105,14 +105,39 @@ def noise_dominated(x, values) -> bool:
     return rough > NOISE_RATIO * spread
 
 
-def map_caption(what: str, name: str, times, xs, vals) -> str:
-    """Caption of a map figure: what, at which times, in which configuration, and a noise warning."""
+def map_caption(what: str, name: str, times, xs, vals, *, unc=None, unit: str = "") -> str:
+    """Caption of a map figure: what, at which times, in which configuration, and how far to trust it.
+
+    Parameters
+    ----------
+    what, name : str
+        What is drawn (with its unit) and the experiment's name.
+    times : sequence of float
+        Panel times, s.
+    xs, vals : sequence of ndarray
+        Point positions (N, 3) mm and mapped values (N,) per panel.
+    unc : irdic.plot.uncertainty.Uncertainty, optional
+        The values' standard uncertainty: the caption then gives it and calls
+        a panel noise-dominated by it too (:mod:`irdic.plot.uncertainty`).
+    unit : str
+        Unit of ``vals`` (for the uncertainty sentence).
+    """
+    from .uncertainty import uncertainty_sentence
+
     t = ", ".join(f"{float(v):g}" for v in times)
     text = (f"{what} of experiment {name} at t = {t} s (DIC times), drawn on the current (deformed) surface as the "
             "IR camera sees it (orthographic, mm).")
-    noisy = [f"{float(ti):g} s" for ti, x, v in zip(times, xs, vals) if noise_dominated(x, v)]
-    if noisy:
-        text = (f"Noise-dominated at t = {', '.join(noisy)}: the point-to-point scatter exceeds a fifth of the "
+    by_std, sentence = uncertainty_sentence(unc, times, vals, unit)
+    rough = [f"{float(ti):g} s" for ti, x, v in zip(times, xs, vals) if noise_dominated(x, v)]
+    if sentence:
+        text += " " + sentence
+    if by_std:
+        why = ("most values lie within 2 standard uncertainties of zero" if unc.against == "zero"
+               else "the standard uncertainty exceeds a fifth of the map's range")
+        text = (f"Noise-dominated at t = {', '.join(by_std)}: {why}, so the pattern shown is mostly noise "
+                "(smoothing: docs/parameters.md). " + text)
+    elif rough and not sentence:  # the uncertainty, where known, is the better judge
+        text = (f"Noise-dominated at t = {', '.join(rough)}: the point-to-point scatter exceeds a fifth of the "
                 "map's range, so the pattern shown is mostly noise (smoothing: docs/parameters.md). " + text)
     return text
 
