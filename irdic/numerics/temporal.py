@@ -328,18 +328,28 @@ def _fill_series(F2, t, c, R0, window=None):
     """Fill NaN entries of each column from its own valid times; returns the dead columns."""
     bad = ~np.isfinite(F2)
     dead = np.zeros(F2.shape[1], bool)
-    for j in np.flatnonzero(bad.any(axis=0)):
-        ok = ~bad[:, j]
+    cols = np.flatnonzero(bad.any(axis=0))
+    if cols.size == 0:
+        return dead
+    # columns with the same gaps share one interpolant (a point cloud repeats few patterns)
+    _, group = np.unique(np.packbits(bad[:, cols], axis=0), axis=1, return_inverse=True)
+    group = np.ravel(group)
+    for g in range(int(group.max()) + 1):
+        js = cols[group == g]
+        ok = ~bad[:, js[0]]
         if ok.sum() < 2:
-            dead[j] = True
-            F2[:, j] = 0.0
+            dead[js] = True
+            F2[:, js] = 0.0
             continue
-        fill = TemporalInterpolant(t[ok], c=c, R0=R0, window=window).weights(t[~ok]) @ F2[ok, j]
-        # outside the valid span: nearest valid value (flat)
-        nanf = ~np.isfinite(fill)
-        if nanf.any():
-            fill[nanf] = np.interp(t[~ok][nanf], t[ok], F2[ok, j])
-        F2[~ok, j] = fill
+        fill = TemporalInterpolant(t[ok], c=c, R0=R0, window=window).weights(t[~ok]) @ F2[np.ix_(ok, js)]
+        # outside the valid span: nearest valid value (flat), as np.interp
+        tv, tb = t[ok], t[~ok]
+        for r in np.flatnonzero(~np.isfinite(fill).all(axis=1)):
+            i1 = int(np.clip(np.searchsorted(tv, tb[r]), 1, tv.size - 1))
+            w = float(np.clip((tb[r] - tv[i1 - 1]) / (tv[i1] - tv[i1 - 1]), 0.0, 1.0))
+            lin = (1 - w) * F2[np.flatnonzero(ok)[i1 - 1], js] + w * F2[np.flatnonzero(ok)[i1], js]
+            fill[r] = np.where(np.isfinite(fill[r]), fill[r], lin)
+        F2[np.ix_(~ok, js)] = fill
     return dead
 
 

@@ -135,12 +135,13 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
                                                       "temperature_smoothing_space")})
     p.update(chosen)
     configured = p["temperature_smoothing"]
-    points, sf, p, series = _surface(points, x, t, chunk, p)
+    ops = _fill_operators(points, x, p)
+    points, sf, p, series = _surface(points, x, t, chunk, p, ops)
     t = points["time"].values.astype(float)
     T, N = sf.x.shape[:2]
     geo = surface_geometry(sf.tangents)
     grad, total, loc, convective, best, unc = _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs,
-                                                                  series)
+                                                                  series, ops)
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
              _time.perf_counter() - started, _method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
@@ -160,15 +161,38 @@ def _checked_settings(points, params) -> dict:
     return p
 
 
-def _surface(points, x, t, chunk, p):
+def _fill_operators(points, x, p) -> dict:
+    """The stage's cache of spatial operators (:func:`irdic.surface.shared_interpolant`), its fill rows built.
+
+    The surface fit, the GCV trials, the temperature regressions and their
+    noise probes all fill missing points with the same interpolant (the
+    kernel of ``c_space``, ``R0_space`` on the surface parameters). Its rows
+    of ``G`` come from one pass over the local tiles, for every point that
+    lacks a position or a temperature anywhere in the record, so no later
+    fill factorises the tiles again.
+    """
+    from ..surface import shared_interpolant
+
+    ops = {}
+    psi = surface_parameters(x, p["parametrisation"])[0]
+    have = np.isfinite(psi).all(axis=1)
+    theta = points["temperature"].values
+    gaps = (~np.isfinite(x).all(axis=2) | ~np.isfinite(theta)).any(axis=0)[have]
+    if gaps.any() and have.sum() >= 6:
+        shared_interpolant(ops, psi[have], c=p["c_space"], R0=p["R0_space"],
+                           solver=p["solver"]).coefficient_rows(np.flatnonzero(gaps))
+    return ops
+
+
+def _surface(points, x, t, chunk, p, ops=None):
     """``(points, surface, p, window)`` of the whole record, or of a time chunk (:func:`_chunk_surface`)."""
     if chunk is not None:
-        return _chunk_surface(points, x, t, chunk, p)
+        return _chunk_surface(points, x, t, chunk, p, ops)
     if t.size > GCV_STAGES:
-        p = _resolve_gcv(points, x, t, surface_parameters(x, p["parametrisation"])[0], p)
+        p = _resolve_gcv(points, x, t, surface_parameters(x, p["parametrisation"])[0], p, ops)
     sf = fit_surface(x, t, c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"],
                      smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"],
-                     solver=p["solver"], parametrisation=p["parametrisation"])
+                     solver=p["solver"], parametrisation=p["parametrisation"], operators=ops)
     return points, sf, p, None
 
 
@@ -184,16 +208,16 @@ def _record_reach(t, p):
     return None if any(r is None for r in reach) else max(reach)
 
 
-def _chunk_surface(points, x, t, chunk, p):
+def _chunk_surface(points, x, t, chunk, p, ops=None):
     """Points of the chunk's window, the surface at the chunk's times, and ``p`` with GCV choices resolved."""
     sl = chunk_slice(t.size, *chunk)
     psi, how = surface_parameters(x, p["parametrisation"])
-    p = _resolve_gcv(points, x, t, psi, p)
+    p = _resolve_gcv(points, x, t, psi, p, ops)
     reach = _record_reach(t, p)
     w = window(t, t[sl.start], t[sl.stop - 1], reach)
     log.info("fields: chunk %d of %d, DIC times %d..%d, stages %d..%d (kernel reach %s stages)", chunk[0] + 1,
              chunk[1], sl.start, sl.stop - 1, w.start, w.stop - 1, "all" if reach is None else reach)
-    kw = _surface_kw(p)
+    kw = {**_surface_kw(p), "operators": ops}
     sf = fit_surface(x[w], t[w], psi, t_eval=t[sl], smoothing=p["surface_smoothing"],
                      smoothing_t=p["surface_smoothing_time"], record_times=t, shape_stage=x[0], **kw)
     if w.start > 0:
@@ -210,7 +234,7 @@ def _chunk_surface(points, x, t, chunk, p):
     return points.isel(time=sl), sf, p, series
 
 
-def _resolve_gcv(points, x, t, psi, p):
+def _resolve_gcv(points, x, t, psi, p, ops=None):
     """``p`` with every "gcv" smoothing replaced by the number GCV picks on the record's first
     :data:`GCV_STAGES` stages: the same in every chunk and in the whole-record run."""
     gcv = [k for k in _SMOOTHING if p[k] == "gcv"]
@@ -220,7 +244,7 @@ def _resolve_gcv(points, x, t, psi, p):
     p = dict(p)
     if "surface_smoothing" in gcv or "surface_smoothing_time" in gcv:
         info = fit_surface(x[w], t[w], psi, smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"],
-                           **_surface_kw(p)).info
+                           operators=ops, **_surface_kw(p)).info
         p["surface_smoothing"] = info["smoothing"] if p["surface_smoothing"] is not None else None
         if p["surface_smoothing"] is not None and "smoothing_shape" in info:
             # GCV chose a spacing for the shape and one for the motion (irdic.surface.fit_surface): keep both
@@ -228,14 +252,14 @@ def _resolve_gcv(points, x, t, psi, p):
         p["surface_smoothing_time"] = info["smoothing_t"] if p["surface_smoothing_time"] is not None else None
     theta = points["temperature"].isel(time=w).values.astype(float)
     if p["temperature_smoothing_space"] == "gcv":
-        k = _space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"])
+        k = _space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"], ops=ops)
         if k is not None:  # no time with 6 visible points among them: each chunk chooses its own
             p["temperature_smoothing_space"] = k
     if p["temperature_smoothing"] == "gcv":
         if p["temperature_smoothing_space"] not in (None, "gcv"):
             # judged on the spatially regressed series, as the fields regress them (see _space_time)
             theta = _regressed_gradient(theta, psi, None, p["temperature_smoothing_space"], c=p["c_space"],
-                                        R0=p["R0_space"])[1]
+                                        R0=p["R0_space"], ops=ops)[1]
         p["temperature_smoothing"] = smooth_series(theta, t[w], smoothing="gcv", c=p["c_time"],
                                                    R0=p["R0_time"]).smoothing
     log.info("fields: smoothing chosen once on DIC times %d..%d: %s", w.start, w.stop - 1,
@@ -243,7 +267,7 @@ def _resolve_gcv(points, x, t, psi, p):
     return p
 
 
-def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=None):
+def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=None, ops=None):
     """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
     and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
     uncertainties of :func:`irdic.stages.uncertainty.uncertainties`.
@@ -270,9 +294,10 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
     best = theta
     chosen_k = {"temperature_smoothing": None, "temperature_smoothing_space": None}
     spatial = None
+    ops = {} if ops is None else ops  # the spatial operators of the regressions and their probes, factorised once
     if p["temperature_smoothing_space"] is not None:
         grad, total, loc, best, spatial, chosen_k = _space_time(theta, t, sf, geo, p, series, rate.convective, visible,
-                                                                (total, loc))
+                                                                (total, loc), ops)
     elif p["temperature_smoothing"] is not None:
         # a chunk regresses its window's series and evaluates it at its own times
         th, ts = (series.theta, series.t) if series is not None else (theta, t)
@@ -284,14 +309,14 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
         best = np.where(visible, fit.value, np.nan)
 
     def regress_space(th, dual, k):
-        return _regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"])[:2]
+        return _regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"], ops=ops)[:2]
 
     unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
-                        g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial)
+                        g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial, ops=ops)
     return grad, total, loc, rate.convective, best, unc
 
 
-def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate):
+def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, ops=None):
     """Gradient, rate (material, local) and value of the space-time regression of the point temperatures.
 
     Parameters
@@ -309,6 +334,8 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate):
     visible : ndarray of bool, shape (T, N)
     paper_rate : (total, local)
         The paper's rate and local part, kept when there is no regression in time.
+    ops : dict, optional
+        Cache of the spatial operators (:func:`irdic.surface.shared_interpolant`).
 
     Returns
     -------
@@ -333,7 +360,7 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate):
     series. Measured on the tube (demo, seed 3, 0.05 K, 2 decimals): rate
     9.6 -> 3.6 %, gradient 13.1 -> 7.8 %, temperature 0.019 -> 0.008 K.
     """
-    kw = dict(c=p["c_space"], R0=p["R0_space"])
+    kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
     chosen = {"temperature_smoothing": None, "temperature_smoothing_space": None}
     grad, value, ks = _regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], **kw)
     chosen["temperature_smoothing_space"] = ks
@@ -425,29 +452,35 @@ def _space_gcv_filled(filled, p, *, c, R0):
     return k
 
 
-def _space_gcv(theta, psi, *, c, R0):
+def _space_gcv(theta, psi, *, c, R0, ops=None):
     """:func:`_space_gcv_filled` of the times of ``theta`` (T, N) with 6 or more visible points."""
-    from ..surface import SpatialInterpolant
+    from ..surface import shared_interpolant
 
     have = np.isfinite(psi).all(axis=1)
     visible = np.isfinite(theta) & have
     times = np.flatnonzero(visible.sum(axis=1) >= 6)
     if times.size == 0:
         return None
-    filled, _ = SpatialInterpolant(psi[have], c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
+    filled, _ = shared_interpolant({} if ops is None else ops, psi[have], c=c, R0=R0).fill(
+        theta[np.ix_(times, have)], visible[np.ix_(times, have)])
     return _space_gcv_filled(filled, psi[have], c=c, R0=R0)
 
 
-def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
+def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
     """In-plane gradient and value from a spatial regression of the point temperatures of each time.
 
     Missing values of a time are filled from that time's visible points first;
     times with fewer than 6 visible points stay NaN. Returns ``(grad (T, N, 3)
     K/mm, value (T, N) degC, the centre spacing factor used)``; ``dual`` None:
-    the values only (the gradient stays NaN).
+    the values only (the gradient stays NaN). ``dual`` (T_d, N, 2, 3) may hold
+    fewer times than ``theta``: row ``m`` of ``theta`` then uses the dual basis
+    of time ``m % T_d`` (noise probes stacked along time). ``ops``: a cache of
+    the spatial operators (:func:`irdic.surface.shared_interpolant`) shared by
+    the calls of one stage run.
     """
-    from ..surface import SpatialInterpolant
+    from ..surface import shared_interpolant
 
+    ops = {} if ops is None else ops
     T, N = theta.shape
     grad = np.full((T, N, 3), np.nan)
     val = np.full((T, N), np.nan)
@@ -458,21 +491,24 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0):
         log.warning("temperature_smoothing_space: no time with 6 or more visible points; gradient left NaN")
         return grad, val, smoothing
     p = psi[have]
-    filled, _ = SpatialInterpolant(p, c=c, R0=R0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
+    filled, _ = shared_interpolant(ops, p, c=c, R0=R0, smoothing=1.0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
     if smoothing == "gcv":
         k = _space_gcv_filled(filled, p, c=c, R0=R0)
     else:
         k = float(smoothing)
-    v0, d1, d2 = SpatialInterpolant(p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=True)
+    v0, d1, d2 = shared_interpolant(ops, p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=True)
+    del filled
+    cols = np.flatnonzero(have)
     if dual is not None:
-        g = d1.T[..., None] * dual[np.ix_(times, have)][:, :, 0] + d2.T[..., None] * dual[np.ix_(times, have)][:, :, 1]
-        out = np.full((times.size, N, 3), np.nan)
-        out[:, have] = g
-        grad[times] = out
+        step = max(1, (1 << 24) // max(1, 6 * cols.size))  # rows per block: ~128 MB of dual basis
+        for s in range(0, times.size, step):
+            tt = times[s:s + step]
+            D = dual[tt % dual.shape[0]][:, cols]
+            g = d1[:, s:s + step].T[..., None] * D[:, :, 0]
+            g += d2[:, s:s + step].T[..., None] * D[:, :, 1]
+            grad[tt[:, None], cols] = g
     grad[~visible] = np.nan
-    vt = np.full((times.size, N), np.nan)
-    vt[:, have] = v0.T
-    val[times] = vt
+    val[times[:, None], cols] = v0.T
     val[~visible] = np.nan
     return grad, val, k
 

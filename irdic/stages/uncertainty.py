@@ -23,13 +23,19 @@ are propagated through those same operators:
 - Spatial regression and strain: propagated by random probes, ``K`` noise
   realisations run through the same operator with the smoothing parameters
   frozen at the chosen values; the standard deviation over the probes.
+  In a record longer than :data:`PROBE_TIMES` DIC times the probes are
+  evaluated at that many times spread over it, and every other time takes
+  the nearest probed time's standard deviation: the noise propagated by a
+  fixed operator follows the geometry, which changes slowly from stage to
+  stage, and the probes' cost no longer grows with the record.
 - Calibration: the temperature gets ``pixel_std |∇_pix Θ|`` (the projected
   position's uncertainty times the pixel gradient) in quadrature.
 - Regression bias: a regression's error is noise plus bias. For the spatial
   temperature regression (value, gradient) and the surface regression
   (strain) the difference ``d`` to the exact interpolation of the same input
   has ``E d² = b² + v`` (``v``: the noise variance of ``d``, from the same
-  probes through both operators); ``b² = <d²> - <v>`` averaged locally
+  probes through both operators, the first :data:`BIAS_PROBES` of them);
+  ``b² = <d²> - <v>`` averaged locally
   (:func:`_local_bias`) is added to the variance.
 
 Where the method's own bias dominates the noise the std is not a bound on the
@@ -59,6 +65,14 @@ log = logging.getLogger(__name__)
 
 #: random probes of the operators propagated by Monte Carlo
 PROBES = 16
+#: probes run through the spatial regressions together (their memory is PROBE_GROUP x times x points)
+PROBE_GROUP = 4
+#: the first BIAS_PROBES probes also run through the exact interpolation, for the noise variance of a
+#: regression's difference to it (the costliest operator; the variance is averaged locally anyway)
+BIAS_PROBES = 4
+#: the noise probes are evaluated at at most this many times spread over the record; each other time takes
+#: the nearest probed time's standard deviation (the noise follows the slowly changing geometry)
+PROBE_TIMES = 32
 #: points closer than this to the mask edge (px) have interpolation bias rather than noise
 EDGE_PX = 2.0
 #: nearest points (surface parameters) over which a regression's bias is averaged, at each time and its neighbours
@@ -90,17 +104,14 @@ def _probe_std(samples, base):
     return np.sqrt(np.mean(np.square(samples - base), axis=0))
 
 
-def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None, spatial=None):
+def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None, spatial=None,
+                  ops=None):
     """Standard uncertainties and bias flags of the fields (see the module docstring).
 
     Parameters
     ----------
-    points : xarray.Dataset
-        ``points.zarr``.
-    sf : irdic.surface.SurfaceFields
-        The fitted surface.
-    geo : irdic.surface.SurfaceGeometry
-        Its geometry (dual basis).
+    points, sf, geo
+        ``points.zarr``, the fitted surface and its geometry (dual basis).
     J : ndarray, shape (T, N, 2, 3)
         Projection Jacobian (px/mm).
     g_pix : ndarray, shape (T, N, 2)
@@ -129,6 +140,8 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         to the exact interpolation give the regression's bias. ``d_rate``: the
         rate of the space-time regression minus that of the exact temporal
         interpolation of the points' own series (its bias).
+    ops : dict, optional
+        The stage's spatial operators (:func:`irdic.surface.shared_interpolant`).
 
     Returns
     -------
@@ -154,7 +167,7 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
     temp_std = np.sqrt(temp_std ** 2 + cal ** 2)
     s_x = float(a.get("dic_noise_mm", np.nan))
-    strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias)
+    strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
     for arr in (temp_std, rate_std):
@@ -201,64 +214,112 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     temp_std = np.full((T, N), s_T)
 
     kt, ks = chosen_k.get("temperature_smoothing"), chosen_k.get("temperature_smoothing_space")
-    W0 = None
+    W = None
     if kt is not None:
         # a chunk's regression runs over its window (T_w samples) and is evaluated at its own times
         record = t if window is None else window.record
         ts = TemporalInterpolant(t if window is None else window.t, c=p["c_time"], R0=p["R0_time"], smoothing=kt,
                                  window=temporal_window(record, c=p["c_time"], R0=p["R0_time"], smoothing=kt))
-        W0, W1 = ts.weights(t, 0), ts.weights(t, 1)
-        rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W1 ** 2, axis=1))[:, None], (T, N)).copy()
-        temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W0 ** 2, axis=1))[:, None], (T, N)).copy()
+        ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
+                                 window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
+        W = (ts.weights(t, 0), ts.weights(t, 1), ti.weights(t, 1))
+        rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
+        temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
     if ks is not None:
-        # probes stacked along time: one regression call for all of them
-        noise = rng.standard_normal((PROBES, T, N)) * s_T
-        noise[:, ~visible] = np.nan
-        dual = np.tile(geo.dual, (PROBES, 1, 1, 1))
-        g_pr, v_pr = regress_space(noise.reshape(PROBES * T, N), dual, ks)
-        grad_std = _probe_std(g_pr.reshape(PROBES, T, N, 3), 0.0)
-        noise_c = noise
-        if W0 is not None:
-            if window is not None:
-                # the temporal regression of a chunk mixes its window's noise
-                noise = rng.standard_normal((PROBES, window.t.size, N)) * s_T
-                noise[:, ~np.isfinite(window.theta)] = np.nan
-                off = int(np.searchsorted(window.t, t[0]))
-                noise_c = noise[:, off:off + T]
-            # in space at each time first, then in time (irdic.stages.fields._space_time)
-            tw = noise.shape[1]
-            _, s_pr = regress_space(noise.reshape(PROBES * tw, N), None, ks)
-            s_pr = np.nan_to_num(s_pr.reshape(PROBES, tw, N))
-            rate_std = _probe_std(np.einsum("ij,kjn->kin", W1, s_pr), 0.0)
-            smoothed = np.einsum("ij,kjn->kin", W0, s_pr)
-            smoothed[:, ~visible] = np.nan
-            g_pr, v_pr = regress_space(smoothed.reshape(PROBES * T, N), dual, ks)
-            grad_std = _probe_std(g_pr.reshape(PROBES, T, N, 3), 0.0)
-            # the bias is judged against the temporal regression of the points' own series
-            value_in_pr = np.einsum("ij,kjn->kin", W0, np.nan_to_num(noise))
-        else:
-            value_in_pr = noise
-        v_pr = v_pr.reshape(PROBES, T, N)
-        temp_std = _probe_std(v_pr, 0.0)
+        acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, spatial is not None)
+        temp_std, grad_std = np.sqrt(acc["v"]), np.sqrt(acc["g"])
+        if W is not None:
+            rate_std = np.sqrt(acc["r"])
         if spatial is not None:
             theta, grad, value_in, value = spatial[:4]
+            d_grad = grad - regress_space(theta, geo.dual, 1.0)[0]
+            grad_std = np.hypot(grad_std, _local_bias(d_grad, acc["g_var"], sf.psi, trusted))
+            # the exact interpolation of the input at the points is the input itself
+            temp_std = np.hypot(temp_std, _local_bias(value - value_in, acc["v_var"], sf.psi, trusted))
+            if len(spatial) > 4 and W is not None:
+                rate_std = np.hypot(rate_std, _local_bias(spatial[4], acc["r_var"], sf.psi, trusted))
+    return temp_std, grad_std, rate_std
+
+
+def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias):
+    """Noise probes through the spatial (and temporal) regression of the temperatures.
+
+    :data:`PROBES` white-noise fields of the point noise ``s_T`` (K) run
+    through the regressions with the smoothing frozen, :data:`PROBE_GROUP` at
+    a time (one regression call each, so memory does not grow with the
+    probes). Returns the mean squares over the probes (T, N): ``v`` (value),
+    ``g`` (T, N, 3, gradient), ``r`` (rate, with ``W``); with ``bias``, the
+    noise variance of the regression's difference to the exact interpolation
+    (``v_var``, ``g_var``, ``r_var``), which :func:`_local_bias` subtracts.
+    The probes are evaluated at the :data:`PROBE_TIMES` times of
+    :func:`_probe_times` (the regression in time mixes all of them first);
+    every other time takes the nearest one's mean squares (:func:`_spread`).
+    """
+    T, N = visible.shape
+    W0, W1, W1_exact = W if W is not None else (None, None, None)
+    sub, near = _probe_times(T)
+    acc = {"v": 0.0, "g": 0.0, "r": 0.0, "v_var": 0.0, "g_var": 0.0, "r_var": 0.0}
+    tw, off = T, 0
+    if W0 is not None and window is not None:
+        # the temporal regression of a chunk mixes its window's noise; the record-length draw is discarded
+        for start in range(0, PROBES, PROBE_GROUP):
+            rng.standard_normal((min(PROBE_GROUP, PROBES - start), T, N))
+        tw, off = window.t.size, int(np.searchsorted(window.t, t[0]))
+    seen = visible if tw == T else np.isfinite(window.theta)
+    for start in range(0, PROBES, PROBE_GROUP):
+        b = min(PROBE_GROUP, PROBES - start)
+        noise = rng.standard_normal((b, tw, N)) * s_T
+        noise[:, ~seen] = np.nan
+        noise_c = noise[:, off:off + T][:, sub]
+        m = b * sub.size
+        if W0 is None:
+            g, v = regress_space(noise_c.reshape(m, N), geo.dual[sub], ks)
+            value_in = noise_c
+        else:
+            # in space at each time first, then in time (irdic.stages.fields._space_time)
+            s = np.nan_to_num(regress_space(noise.reshape(b * tw, N), None, ks)[1].reshape(b, tw, N))
+            r = np.einsum("ij,kjn->kin", W1[sub], s)
+            acc["r"] = acc["r"] + np.sum(r ** 2, axis=0) / PROBES
+            smoothed = np.einsum("ij,kjn->kin", W0[sub], s)
+            smoothed[:, ~visible[sub]] = np.nan
+            g, v = regress_space(smoothed.reshape(m, N), geo.dual[sub], ks)
+            # the bias is judged against the temporal regression of the points' own series
+            value_in = np.einsum("ij,kjn->kin", W0[sub], np.nan_to_num(noise))
+            if bias:
+                r_int = np.einsum("ij,kjn->kin", W1_exact[sub], np.nan_to_num(noise))
+                acc["r_var"] = acc["r_var"] + np.sum((r - r_int) ** 2, axis=0) / PROBES
+        g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)
+        acc["v"] = acc["v"] + np.sum(v ** 2, axis=0) / PROBES
+        acc["g"] = acc["g"] + np.sum(g ** 2, axis=0) / PROBES
+        if bias:
+            acc["v_var"] = acc["v_var"] + np.sum((v - value_in) ** 2, axis=0) / PROBES
+        if bias and start < BIAS_PROBES:
             # the same probes through the exact interpolation (k = 1): the noise expected in the
             # difference regression - interpolation, which is subtracted from the data's difference
-            g_int = regress_space(noise_c.reshape(PROBES * T, N), dual, 1.0)[0].reshape(PROBES, T, N, 3)
-            g_var = np.mean(np.square(g_pr.reshape(PROBES, T, N, 3) - g_int), axis=0)
-            d_grad = grad - regress_space(theta, geo.dual, 1.0)[0]
-            grad_std = np.hypot(grad_std, _local_bias(d_grad, g_var, sf.psi, trusted))
-            # the exact interpolation of the input at the points is the input itself
-            v_var = np.mean(np.square(v_pr - value_in_pr), axis=0)
-            temp_std = np.hypot(temp_std, _local_bias(value - value_in, v_var, sf.psi, trusted))
-            if len(spatial) > 4 and W0 is not None:
-                # the regressions' bias of the rate, against the exact interpolation in space and time
-                ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
-                                         window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
-                r_var = np.mean(np.square(np.einsum("ij,kjn->kin", W1, s_pr)
-                                          - np.einsum("ij,kjn->kin", ti.weights(t, 1), np.nan_to_num(noise))), axis=0)
-                rate_std = np.hypot(rate_std, _local_bias(spatial[4], r_var, sf.psi, trusted))
-    return temp_std, grad_std, rate_std
+            g_int = regress_space(noise_c.reshape(m, N), geo.dual[sub], 1.0)[0].reshape(b, sub.size, N, 3)
+            acc["g_var"] = acc["g_var"] + np.sum((g - g_int) ** 2, axis=0) / min(PROBES, BIAS_PROBES)
+    return {k: _spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
+
+
+def _probe_times(T):
+    """The probed times of ``T`` (at most :data:`PROBE_TIMES`, spread evenly, first and last included; all
+    when there are no more) and, for each of the ``T`` times, the position of the nearest probed one."""
+    sub = np.unique(np.linspace(0, T - 1, min(T, PROBE_TIMES)).round().astype(int))
+    return sub, np.searchsorted((sub[1:] + sub[:-1]) / 2, np.arange(T))
+
+
+def _spread(a, near):
+    """Per-time values ``a`` (S, N, ...) at the probed times -> (T, N, ...): the nearest probed time's; a
+    point without a value there (hidden then) takes its median over the probed times."""
+    out = a[near]
+    if a.shape[0] == near.size:  # every time probed
+        return out
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # points never seen: all NaN
+        med = np.nanmedian(a, axis=0)
+    return np.where(np.isfinite(out), out, med)
 
 
 def _local_bias(d, noise_var, psi, trusted=None):
@@ -301,7 +362,7 @@ def _local_bias(d, noise_var, psi, trusted=None):
     return np.sqrt(np.maximum(out, 0.0))
 
 
-def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None):
+def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None):
     """Standard uncertainty of the max principal strain: DIC noise probes through the surface fit
     (smoothing frozen) and the strain; NaN when the DIC noise is unknown or zero."""
     T, N = sf.x.shape[:2]
@@ -315,29 +376,34 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None):
     if kw["smoothing"] is not None and sf.info.get("smoothing_shape") not in (None, sf.info["smoothing"]):
         # the fit's own pair of spacings (shape, motion), so that the probes regress as the fit did
         kw["smoothing"] = (sf.info["smoothing_shape"], sf.info["smoothing"])
-    # every probe fits the same points with the same missing pattern: the spatial factorisations are shared
-    kw["operators"] = {}
+    # every probe fits the same points: the spatial factorisations are shared (with the fields stage's own)
+    kw["operators"] = {} if ops is None else ops
     # a surface regression's bias: against the exact interpolation of the same coordinates (see _local_bias)
     regressed = kw["smoothing"] is not None or kw["smoothing_t"] is not None
     kws = [kw, {**kw, "smoothing": None, "smoothing_t": None}] if regressed else [kw]
     shape = x.shape if window is None else window.x.shape
+    # the probes are evaluated at the probed times only (every other time takes the nearest one's)
+    sub, near = _probe_times(T)
+    base = base[sub]
 
     def e_max(kwi, dx, dref):
-        pf = fit_surface(x + dx, t, psi=sf.psi, **kwi) if window is None else _window_probe(window, t, sf.psi, kwi,
-                                                                                             dx, dref)
+        pf = (fit_surface(x + dx, t, psi=sf.psi, t_eval=t[sub], **kwi) if window is None
+              else _window_probe(window, t[sub], sf.psi, kwi, dx, dref))
         return strain(pf.tangents, pf.ref_tangents, tensors=False).e_max
 
     bases = [base] + [e_max(kwi, 0.0, 0.0) for kwi in kws[1:]]
     samples = [[] for _ in kws]
-    for _ in range(PROBES):
+    for i in range(PROBES):
         dx = rng.standard_normal(shape) * s_x
         dref = rng.standard_normal(window.x_ref.shape) * s_x if window is not None else None
-        for s, kwi in zip(samples, kws):
+        for s, kwi in zip(samples, kws[:1] if i >= BIAS_PROBES else kws):
             s.append(e_max(kwi, dx, dref))
     std = _probe_std(np.array(samples[0]), base)
     if regressed:
-        var = np.mean(np.square((np.array(samples[0]) - base) - (np.array(samples[1]) - bases[1])), axis=0)
-        std = np.hypot(std, _local_bias(base - bases[1], var, sf.psi, trusted))
+        k = len(samples[1])
+        var = np.mean(np.square((np.array(samples[0][:k]) - base) - (np.array(samples[1]) - bases[1])), axis=0)
+        std = np.hypot(std, _local_bias(base - bases[1], var, sf.psi, None if trusted is None else trusted[sub]))
+    std = _spread(std, near)
     # the strain is zero by definition at the reference stage (stage 0 of the record): no uncertainty there,
     # whatever rounding the probes leave
     t_ref = t[0] if window is None else window.t_ref[0]

@@ -120,13 +120,14 @@ shrinks the signal (GCV then chose ``lam`` too small: rate error reduced only
 from ..numerics.temporal import SeriesFit, smooth_series
 from .fit import SurfaceFields, fit_surface
 from .geometry import Geometry, edge_distance, surface_geometry
-from .interpolation import SpatialInterpolant
+from .interpolation import SpatialInterpolant, shared_interpolant
 from .parametrisation import surface_parameters
 from .regression import gcv_spatial
 
 __all__ = [
     "surface_parameters",
     "SpatialInterpolant",
+    "shared_interpolant",
     "SeriesFit",
     "smooth_series",
     "gcv_spatial",

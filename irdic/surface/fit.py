@@ -16,7 +16,7 @@ from ..numerics.saddle import solve_dense
 from ..numerics.temporal import TemporalInterpolant, gcv_temporal, temporal_window
 from ..validation import as_int, choice, float_array, increasing_times, psi_array, smoothing_factor
 from .geometry import edge_distance
-from .interpolation import SpatialInterpolant
+from .interpolation import shared_interpolant
 from .parametrisation import MIN_POINTS, surface_parameters
 from .regression import SURFACE_CANDIDATES, gcv_spatial
 
@@ -173,7 +173,7 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     nodes = _nodes(psi, valid, info)
     used = _used_stages(valid[:, nodes].sum(axis=1), frac, nodes.size)
     ops = {} if operators is None else operators
-    sp = _operator(ops, psi[nodes], valid[:, nodes], c=c, R0=R0, solver=solver, halo=halo)
+    sp = shared_interpolant(ops, psi[nodes], c=c, R0=R0, solver=solver, halo=halo)
     te = t if t_eval is None else np.atleast_1d(float_array(t_eval, "t_eval"))
     Xu, Vu = X[:, nodes][used], valid[:, nodes][used]
     Xs, Xt = _fill_missing(sp, Xu, Vu, t[used], te.size, ks, fill, c_t, R0_t, max_gap, info)
@@ -265,19 +265,6 @@ def gcv_displacement(psi, X, valid=None, *, c=0.95, R0=1.0):
     return gcv_spatial(psi[rows], U, c=c, R0=R0, candidates=SURFACE_CANDIDATES)
 
 
-def _operator(ops, psi_n, valid, **kw):
-    """The :class:`SpatialInterpolant` of ``kw`` on ``psi_n``, from the cache ``ops`` when it was built there
-    for the same points and missing-point pattern (its factorisations are cached on the instance)."""
-    built = ops.setdefault(tuple(sorted(kw.items())), [])
-    for p, v, sp in built:
-        if np.array_equal(p, psi_n) and np.array_equal(v, valid):
-            return sp
-    sp = SpatialInterpolant(psi_n, **kw)
-    built.append((psi_n, valid, sp))
-    del built[:-4]  # a few patterns (a chunk's window and the record's first stages)
-    return sp
-
-
 def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info, record, x0=None, ops=None):
     """Temporal then spatial operator on the filled stage data: value, d1, d2 (n, 3 T_ok + 3), velocity, ok times."""
     n = psi_n.shape[0]
@@ -297,7 +284,7 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
         kg, ks = ks
     ops = {} if ops is None else ops
     if ks > 1.0:
-        sp_motion = _operator(ops, psi_n, Vu, c=c, R0=R0, smoothing=ks)
+        sp_motion = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=ks)
     else:
         sp_motion = sp
     cols = np.flatnonzero(np.repeat(ok_t, 3))
@@ -312,7 +299,7 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
     val, d1, d2 = sp_motion.evaluate(Yall)
     del Yall
     if split:
-        sp_shape = _operator(ops, psi_n, Vu, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
+        sp_shape = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
         for a, b in zip((val, d1, d2), sp_shape.evaluate(x0)):
             a += np.tile(b, cols.size // 3 + 1)
     # the velocity's temporal weights sum to 0: it is a displacement rate, the motion's operator alone

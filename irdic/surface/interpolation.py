@@ -24,7 +24,7 @@ from ..validation import choice, float_array, positive, psi_array, smoothing_fac
 from .parametrisation import MIN_POINTS
 from .regression import ls_design, monomials
 
-__all__ = ["SOLVERS", "SpatialInterpolant", "LocalOperator"]
+__all__ = ["SOLVERS", "SpatialInterpolant", "LocalOperator", "shared_interpolant"]
 
 log = logging.getLogger(__name__)
 
@@ -219,6 +219,7 @@ class SpatialInterpolant:
         self._global = None
         self._ls = None
         self._local = None
+        self._g = None
         self._chosen = None
         self.info = {"spacing": self.h, "halo": self.halo, "smoothing": self.k}
 
@@ -360,7 +361,10 @@ class SpatialInterpolant:
         log.info("local tiles: %d tiles, mean %d points, core %.2f mm, halo %.2f mm: %.1f s",
                  len(uc), ksum // max(len(uc), 1), tiles.core, tiles.halo, _time.perf_counter() - t0)
         op = LocalOperator(pts.shape[0], kinds, tiles_e, rows, G, psi_eval is None)
-        self._local = op
+        if kinds:  # an operator of G rows alone does not replace the evaluation operator
+            self._local = op
+        if rows.size:
+            self._g = (rows, G)
         return op
 
     def _eval_local(self, F, pts, kinds, tiles, at_nodes):
@@ -386,11 +390,13 @@ class SpatialInterpolant:
         G : scipy.sparse.csr_matrix, shape (len(rows), N)
         """
         rows = np.unique(np.asarray(rows, dtype=np.int64))
-        op = self._local
-        if op is not None and op.G is not None and np.isin(rows, op.g_rows).all():
-            return op.g_rows, op.G
-        op = self.local_operator(kinds=(), g_rows=rows)
-        return op.g_rows, op.G
+        if self._g is not None:
+            if np.isin(rows, self._g[0]).all():
+                return self._g
+            # the rows asked for so far stay: a shared instance (shared_interpolant) is not rebuilt back and forth
+            rows = np.union1d(rows, self._g[0])
+        self.local_operator(kinds=(), g_rows=rows)
+        return self._g
 
     # ---- regression ------------------------------------------------------
 
@@ -511,20 +517,55 @@ class SpatialInterpolant:
         pos = np.full(self.n, -1)
         pos[rows] = np.arange(rows.size)
         tail = X.shape[2:]
-        for m in np.flatnonzero(miss.any(axis=1)):
-            Q = np.flatnonzero(miss[m])
+        width = int(np.prod(tail, dtype=np.int64))
+        stages = np.flatnonzero(miss.any(axis=1))
+        # stages with the same missing points share one factorisation (noise probes repeat each pattern)
+        _, first, group = np.unique(np.packbits(miss[stages], axis=1), axis=0, return_index=True,
+                                    return_inverse=True)
+        group = np.ravel(group)
+        batch = max(1, (1 << 23) // max(1, self.n * width))  # stages per right-hand side block: ~64 MB
+        for g in range(first.size):
+            ms = stages[group == g]
+            Q = np.flatnonzero(miss[ms[0]])
             GQ = G[pos[Q]]
-            f = np.where(V[m].reshape((-1,) + (1,) * len(tail)), X[m], 0.0).reshape(self.n, -1)
-            rhs = -(GQ @ f)
-            GQQ = GQ[:, Q].toarray()
             try:
-                fq = scipy.linalg.solve(GQQ, rhs, check_finite=False)
+                lu = scipy.linalg.lu_factor(GQ[:, Q].toarray(), check_finite=False)
+                if not np.all(np.isfinite(lu[0])) or np.any(np.diag(lu[0]) == 0):
+                    raise np.linalg.LinAlgError
             except (np.linalg.LinAlgError, ValueError):
                 raise DataError(
-                    f"stage {m}: the {V[m].sum()} valid points do not determine the {Q.size} missing ones "
+                    f"stage {ms[0]}: the {V[ms[0]].sum()} valid points do not determine the {Q.size} missing ones "
                     "(valid points on a line?)"
                 ) from None
-            out[m, Q] = fq.reshape((Q.size,) + tail)
+            for b in range(0, ms.size, batch):
+                mb = ms[b:b + batch]
+                f = np.where(V[mb].reshape(V[mb].shape + (1,) * len(tail)), X[mb], 0.0).reshape(mb.size, self.n, -1)
+                rhs = -(GQ @ f.transpose(1, 0, 2).reshape(self.n, -1))
+                fq = scipy.linalg.lu_solve(lu, rhs, check_finite=False).reshape(Q.size, mb.size, width)
+                out[mb[:, None], Q] = fq.transpose(1, 0, 2).reshape((mb.size, Q.size) + tail)
         log.info("filled %d missing (stage, point) values in %d stage(s): %.1f s", int(miss.sum()),
                  int(miss.any(axis=1).sum()), _time.perf_counter() - t0)
         return out, miss
+
+
+def shared_interpolant(cache: dict, psi, **kw) -> SpatialInterpolant:
+    """The :class:`SpatialInterpolant` of ``kw`` on ``psi``, from ``cache`` when one was built there for the
+    same points and settings (its factorisations, tiles and rows of ``G`` are cached on the instance).
+
+    One stage run owns the ``cache`` (a plain dict): its spatial operators
+    (the surface fit, the GCV trials, the temperature regressions, the noise
+    probes, the fill of missing points) are then factorised once. Settings
+    left out take :class:`SpatialInterpolant`'s defaults, so equal operators
+    share one entry however they were asked for. At most 4 point sets are
+    kept per setting (a chunk's window and the record's first stages).
+    """
+    kw = {"c": 0.95, "R0": 1.0, "solver": "auto", "halo": None, "core": None, **kw}
+    kw["smoothing"] = smoothing_factor(kw.get("smoothing"), "smoothing", allow_gcv=False)
+    built = cache.setdefault(tuple(sorted(kw.items())), [])
+    for p, sp in built:
+        if p is psi or np.array_equal(p, psi):
+            return sp
+    sp = SpatialInterpolant(psi, **kw)
+    built.append((psi, sp))
+    del built[:-4]
+    return sp

@@ -274,6 +274,28 @@ def test_fill_equals_the_interpolant_of_the_valid_points():
     assert np.abs(filled[1, miss] - truth).max() < 0.2 * np.abs(direct - truth).max()
 
 
+def test_fill_of_stages_sharing_a_pattern_equals_each_stage_alone():
+    """Stages with the same missing points are solved together (noise probes): same values as one by one."""
+    rng = np.random.default_rng(5)
+    psi = grid(0.6, 12) + rng.uniform(-0.05, 0.05, (grid(0.6, 12).shape[0], 2))
+    n = psi.shape[0]
+    a, b = rng.choice(n, 40, replace=False), rng.choice(n, 25, replace=False)
+    valid = np.ones((7, n), bool)
+    for m, q in zip(range(7), (a, b, a, None, b, a, b)):
+        if q is not None:
+            valid[m, q] = False
+    X = curved(psi)[None] + rng.normal(size=(7,) + curved(psi).shape)
+    X[~valid] = np.nan
+    sp = SpatialInterpolant(psi)
+    together, flag = sp.fill(X, valid)
+    np.testing.assert_array_equal(flag, ~valid)
+    for m in range(7):
+        alone = sp.fill(X[m:m + 1], valid[m:m + 1])[0][0]
+        np.testing.assert_allclose(together[m], alone, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(together[valid], X[valid])
+    assert np.isfinite(together).all()
+
+
 def test_regression_reduces_noise_in_derivatives():
     rng = np.random.default_rng(4)
     psi = grid(0.7, 14)
