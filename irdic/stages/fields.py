@@ -416,12 +416,19 @@ def _with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
 
 
 def _space_gcv_filled(filled, p, *, c, R0):
-    """GCV centre spacing of the spatial regression from up to 8 filled times (rows of ``filled``)."""
-    from ..surface import gcv_spatial
+    """Centre spacing of the spatial regression from up to 8 filled times (rows of ``filled``).
+
+    Chosen by the estimated risk of the gradient
+    (:func:`irdic.surface.regression.gradient_risk_spatial`), not by GCV of
+    the values: the gradient is what this regression is for, and GCV's curve
+    is flat over the spacings where the gradient's error still halves.
+    """
+    from ..surface.regression import gradient_risk_spatial
 
     sample = filled[np.linspace(0, filled.shape[0] - 1, min(filled.shape[0], 8)).astype(int)].T
-    k, _ = gcv_spatial(p, sample, c=c, R0=R0)
-    log.info("temperature_smoothing_space: GCV chose a centre spacing of %.1f point spacings", k)
+    k, _ = gradient_risk_spatial(p, sample, c=c, R0=R0)
+    log.info("temperature_smoothing_space: the gradient's estimated risk chose a centre spacing of %.1f point "
+             "spacings", k)
     return k
 
 
