@@ -32,7 +32,7 @@ SURFACE_CANDIDATES = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 1
 #: Centre spacing factors the gradient-risk criterion tries for the temperature (:func:`gradient_risk_spatial`).
 #: Wider than GCV's: a smooth temperature field's gradient keeps falling in error up to 10-16 spacings at
 #: 0.05 K (tube demo: 7.8 % at GCV's 5-8, 4.7 % at 12), which GCV, judging values, does not see.
-GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0)
+GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0)
 
 log = logging.getLogger(__name__)
 
@@ -97,9 +97,9 @@ def ls_design(psi, k, h, c, R0):
 GCV_MAX_POINTS = 4000
 
 
-def _judged_patch(p, F, max_points):
-    """``(psi, samples, h)`` of the round patch of ``max_points`` points about the middle of the parameter box
-    (all points of a smaller cloud); ``h`` the median spacing of the whole cloud."""
+def _judged_patch(p, F, max_points, judged=None):
+    """``(psi, samples, h, judged)`` of the round patch of ``max_points`` points about the middle of the
+    parameter box (all points of a smaller cloud); ``h`` the median spacing of the whole cloud."""
     h = median_spacing(p)
     if p.shape[0] > max_points:
         from scipy.spatial import cKDTree
@@ -107,7 +107,8 @@ def _judged_patch(p, F, max_points):
         mid = 0.5 * (p.min(axis=0) + p.max(axis=0))
         near = np.sort(cKDTree(p).query(mid, k=int(max_points))[1])
         p, F = p[near], F[near]
-    return p, F, h
+        judged = None if judged is None else judged[near]
+    return p, F, h, judged
 
 
 def _candidates(candidates):
@@ -163,7 +164,7 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
-    p, F, h = _judged_patch(p, F, max_points)
+    p, F, h, _ = _judged_patch(p, F, max_points)
     n = p.shape[0]
     table = []
     for k in _candidates(candidates):
@@ -193,7 +194,7 @@ def _gradient_operator(p, design, c, R0):
 
 
 def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_CANDIDATES,
-                          max_points=GCV_MAX_POINTS):
+                          max_points=GCV_MAX_POINTS, judged=None):
     """Choose the spatial regression's centre spacing by the estimated mean squared error of its gradient.
 
     Parameters
@@ -210,6 +211,11 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
         pilot (see Notes).
     max_points : int
         As :func:`gcv_spatial`.
+    judged : array_like of bool, shape (N,), optional
+        The points whose gradient error counts (all fit the regressions);
+        default all. Points whose data carry an error that is not noise
+        (mixed pixels at the IR mask's edge, the cloud's rim, where the
+        least smoothed pilot follows the data's own error) belong outside.
 
     Returns
     -------
@@ -233,7 +239,7 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     so ``R_k = |g_k - g_0|² - σ² (‖D_0‖²_F - 2 tr(D_k D_0ᵀ))`` estimates the
     risk without bias up to the pilot's own bias (a Mallows-type criterion
     aimed at the derivative). σ² is the pilot's residual variance,
-    ``RSS_0 / (n - p_0)``. ``tr(D_k D_0ᵀ) = Σ (M_k Q_kᵀ Q_0) ∘ M_0`` with
+    ``RSS_0 / Σ (1 - H_ii)`` over the judged points (``H = Q_0 Q_0ᵀ``). ``tr(D_k D_0ᵀ) = Σ (M_k Q_kᵀ Q_0) ∘ M_0`` with
     ``M = B R⁻¹``: ``p × p`` products only.
 
     GCV (:func:`gcv_spatial`) judges the values, whose error a smooth field
@@ -246,8 +252,13 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
-    p, F, h = _judged_patch(p, F, max_points)
+    judged = None if judged is None else np.asarray(judged, dtype=bool).reshape(p.shape[0])
+    p, F, h, judged = _judged_patch(p, F, max_points, judged)
     n, ns = p.shape[0], F.shape[1]
+    rows = np.ones(2 * n, bool) if judged is None else np.r_[judged, judged]
+    nj = int(rows.sum()) // 2
+    if nj == 0:
+        raise DataError("gradient_risk_spatial: no point is judged (judged is all False)")
     pilot = None
     table = []
     for k in _candidates(candidates):
@@ -257,15 +268,17 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
             continue
         Qm = design[3]
         coef = Qm.T @ F
-        M = _gradient_operator(p, design, c, R0)
+        M = _gradient_operator(p, design, c, R0)[rows]
         g = M @ coef
         if pilot is None:
-            rss = float(np.sum((F - Qm @ coef) ** 2))
-            var = rss / ns / (n - Qm.shape[1])
+            # the residual r_i has variance σ² (1 - H_ii), H = Q Qᵀ; summed over the judged points
+            jr = rows[:n]
+            rss = float(np.sum((F - Qm @ coef)[jr] ** 2))
+            var = rss / ns / (nj - float(np.sum(Qm[jr] ** 2)))
             pilot = (Qm, M, g, float(np.sum(M ** 2)), var)
         Q0, M0, g0, norm0, var = pilot
         cross = float(np.sum((M @ (Qm.T @ Q0)) * M0))
-        risk = (float(np.sum((g - g0) ** 2)) / ns - var * (norm0 - 2.0 * cross)) / n
+        risk = (float(np.sum((g - g0) ** 2)) / ns - var * (norm0 - 2.0 * cross)) / nj
         table.append((k, Qm.shape[1], risk))
     if not table:
         raise DataError(f"gradient_risk_spatial: no candidate spacing fits {n} points (too few points)")
