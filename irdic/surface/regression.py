@@ -30,8 +30,10 @@ __all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "gradient_ris
 SURFACE_CANDIDATES = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 16.0)
 
 #: Centre spacing factors the gradient-risk criterion tries for the temperature (:func:`gradient_risk_spatial`).
-#: Wider than GCV's: a smooth temperature field's gradient keeps falling in error up to 10-16 spacings at
-#: 0.05 K (tube demo: 7.8 % at GCV's 5-8, 4.7 % at 12), which GCV, judging values, does not see.
+#: Wider than GCV's: a smooth temperature field's gradient keeps falling in error up to 12 spacings at
+#: 0.05 K (tube demo: 7.8 % at GCV's 5-8, 4.7 % at 12), which GCV, judging values, does not see. Not wider:
+#: with the 6-9 centres of 16-20 spacings on the demo clouds the estimate (a small difference of the
+#: pilot's large variance terms) no longer resolves the bias (tube demo: it chose 20, 5.6 %).
 GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0)
 
 log = logging.getLogger(__name__)
