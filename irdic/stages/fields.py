@@ -37,6 +37,7 @@ from ..errors import ConfigError, DataError
 from ..store import open_store, write_dataset
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry, surface_parameters
+from ..surface.parametrisation import median_spacing
 from ..chunks import chunk_slice, gathered, window
 from ..numerics.temporal import smooth_series, temporal_window
 from ..gradient import material_rate, surface_gradient
@@ -53,6 +54,10 @@ log = logging.getLogger(__name__)
 #: Smoothing chosen by GCV is chosen on the record's first stages (at most this many), by every time chunk
 #: and by the whole-record run alike, so that all of them regress with the same smoothing.
 GCV_STAGES = 256
+
+#: The temperature regression's spacing is judged on points more than this many point spacings inside the
+#: cloud's edge (:func:`_space_gcv_filled`).
+JUDGED_MARGIN = 3.0
 
 _SMOOTHING = ("surface_smoothing", "surface_smoothing_time", "temperature_smoothing", "temperature_smoothing_space")
 
@@ -443,12 +448,23 @@ def _with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
 
 
 def _space_gcv_filled(filled, p, *, c, R0):
-    """GCV centre spacing of the spatial regression from up to 8 filled times (rows of ``filled``)."""
-    from ..surface import gcv_spatial
+    """Centre spacing of the spatial regression from up to 8 filled times (rows of ``filled``).
+
+    Chosen by the estimated risk of the gradient
+    (:func:`irdic.surface.regression.gradient_risk_spatial`), not by GCV of
+    the values: the gradient is what this regression is for, and GCV's curve
+    is flat over the spacings where the gradient's error still halves.
+    """
+    from ..surface import edge_distance
+    from ..surface.regression import gradient_risk_spatial
 
     sample = filled[np.linspace(0, filled.shape[0] - 1, min(filled.shape[0], 8)).astype(int)].T
-    k, _ = gcv_spatial(p, sample, c=c, R0=R0)
-    log.info("temperature_smoothing_space: GCV chose a centre spacing of %.1f point spacings", k)
+    # the rim's data carry more than noise (mixed edge pixels, extrapolation), which the least smoothed
+    # pilot follows: judged inside it, all points fitted
+    judged = edge_distance(p) >= JUDGED_MARGIN * median_spacing(p)
+    k, _ = gradient_risk_spatial(p, sample, c=c, R0=R0, judged=judged if judged.sum() >= 6 else None)
+    log.info("temperature_smoothing_space: the gradient's estimated risk chose a centre spacing of %.1f point "
+             "spacings", k)
     return k
 
 

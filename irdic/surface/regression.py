@@ -20,13 +20,21 @@ from ..numerics.imq import imq_planar, regression_R0
 from ..validation import float_array, positive, psi_array
 from .parametrisation import MIN_POINTS, median_spacing
 
-__all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "SURFACE_CANDIDATES"]
+__all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "gradient_risk_spatial", "SURFACE_CANDIDATES",
+           "GRADIENT_CANDIDATES"]
 
 #: Centre spacing factors GCV tries for the DIC surface. Wider than the default of
 #: :func:`gcv_spatial`: the displacement of a static or uniformly strained specimen
 #: is best fitted by very few centres (a static half-shell at 0.003 mm noise: strain
 #: noise 1.2e-4 RMS at 8 spacings, 4.4e-5 at 16).
 SURFACE_CANDIDATES = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 16.0)
+
+#: Centre spacing factors the gradient-risk criterion tries for the temperature (:func:`gradient_risk_spatial`).
+#: Wider than GCV's: a smooth temperature field's gradient keeps falling in error up to 12 spacings at
+#: 0.05 K (tube demo: 7.8 % at GCV's 5-8, 4.7 % at 12), which GCV, judging values, does not see. Not wider:
+#: with the 6-9 centres of 16-20 spacings on the demo clouds the estimate (a small difference of the
+#: pilot's large variance terms) no longer resolves the bias (tube demo: it chose 20, 5.6 %).
+GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0)
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +99,38 @@ def ls_design(psi, k, h, c, R0):
 GCV_MAX_POINTS = 4000
 
 
+def _judged_patch(p, F, max_points, judged=None):
+    """``(psi, samples, h, judged)`` of the round patch of ``max_points`` points about the middle of the
+    parameter box (all points of a smaller cloud); ``h`` the median spacing of the whole cloud."""
+    h = median_spacing(p)
+    if p.shape[0] > max_points:
+        from scipy.spatial import cKDTree
+
+        mid = 0.5 * (p.min(axis=0) + p.max(axis=0))
+        near = np.sort(cKDTree(p).query(mid, k=int(max_points))[1])
+        p, F = p[near], F[near]
+        judged = None if judged is None else judged[near]
+    return p, F, h, judged
+
+
+def _candidates(candidates):
+    ks = sorted(set(float(x) for x in candidates))
+    for k in ks:
+        if k <= 1:
+            raise ConfigError(f"candidates must be > 1 (1 is interpolation, GCV undefined), got {k}")
+    return ks
+
+
+def _fit_design(p, k, h, c, R0):
+    """:func:`ls_design`, or GeometryError when spacing ``k`` leaves too few or too many centres for
+    a regression judged on ``p`` (fewer than 6, or more than half the points)."""
+    n = p.shape[0]
+    nc = grid_subset(p, k * h).size
+    if nc + 3 > n // 2 or nc < MIN_POINTS:
+        raise GeometryError(f"{nc} centres for {n} points")
+    return ls_design(p, k, h, c, R0)
+
+
 def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0),
                 max_points=GCV_MAX_POINTS):
     """Choose the spatial regression's centre spacing by generalised cross-validation.
@@ -126,23 +166,12 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
-    h = median_spacing(p)
-    if p.shape[0] > max_points:
-        from scipy.spatial import cKDTree
-
-        mid = 0.5 * (p.min(axis=0) + p.max(axis=0))
-        near = np.sort(cKDTree(p).query(mid, k=int(max_points))[1])
-        p, F = p[near], F[near]
+    p, F, h, _ = _judged_patch(p, F, max_points)
     n = p.shape[0]
     table = []
-    for k in sorted(set(float(x) for x in candidates)):
-        if k <= 1:
-            raise ConfigError(f"candidates must be > 1 (1 is interpolation, GCV undefined), got {k}")
-        nc = grid_subset(p, k * h).size
-        if nc + 3 > n // 2 or nc < MIN_POINTS:
-            continue
+    for k in _candidates(candidates):
         try:
-            _, _, _, Qm, _ = ls_design(p, k, h, c, R0)
+            _, _, _, Qm, _ = _fit_design(p, k, h, c, R0)
         except GeometryError:
             continue
         rss = float(np.sum((F - Qm @ (Qm.T @ F)) ** 2))
@@ -152,4 +181,110 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
         raise DataError(f"gcv_spatial: no candidate spacing fits {n} points (too few points)")
     best = min(table, key=lambda r: r[2])
     log.info("spatial GCV: centre spacing %.3g x %.3g mm (%d parameters)", best[0], h, best[1])
+    return best[0], table
+
+
+def _gradient_operator(p, design, c, R0):
+    """``M`` (2n, p) with ``M Qᵀ F`` the regression's derivatives d/dPsi1 (rows :n) and d/dPsi2 (rows n:)
+    at the points ``p`` (1/mm), from the QR ``design`` of :func:`ls_design`."""
+    centres, R0k, ctr, _, Rm = design
+    _, m1, m2 = imq_planar(p[:, None, 0] - centres[None, :, 0], p[:, None, 1] - centres[None, :, 1], c, R0k, True)
+    B = np.concatenate([np.concatenate([m1, monomials(p, ctr, R0, 1)], axis=1),
+                        np.concatenate([m2, monomials(p, ctr, R0, 2)], axis=1)], axis=0)
+    # B R^-1, i.e. solve R^T X^T = B^T
+    return scipy.linalg.solve_triangular(Rm, B.T, trans="T", check_finite=False).T
+
+
+def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_CANDIDATES,
+                          max_points=GCV_MAX_POINTS, judged=None):
+    """Choose the spatial regression's centre spacing by the estimated mean squared error of its gradient.
+
+    Parameters
+    ----------
+    psi : array_like, shape (N, 2)
+        Surface parameters (mm).
+    samples : array_like, shape (N, n_series)
+        Data (e.g. the point temperatures of a few times, filled), each
+        series with white noise of one unknown standard deviation.
+    c, R0 : float
+        Kernel (as :class:`SpatialInterpolant`).
+    candidates : sequence of float
+        Centre spacing factors to try (> 1); the smallest that fits is the
+        pilot (see Notes).
+    max_points : int
+        As :func:`gcv_spatial`.
+    judged : array_like of bool, shape (N,), optional
+        The points whose gradient error counts (all fit the regressions);
+        default all. Points whose data carry an error that is not noise
+        (mixed pixels at the IR mask's edge, the cloud's rim, where the
+        least smoothed pilot follows the data's own error) belong outside.
+
+    Returns
+    -------
+    k : float
+        The factor with the least estimated gradient risk.
+    table : list of (k, n_parameters, risk)
+        ``risk``: the estimated mean squared error of ``∂f/∂Ψ`` per point
+        and series (data units² / mm²).
+
+    Notes
+    -----
+    The regression's derivatives are linear in the data, ``g_k = D_k f`` with
+    ``D_k = B_k R_k⁻¹ Q_kᵀ`` (``B_k``: the derivatives of the design's
+    columns at the points). For white noise of variance σ² and the truth
+    ``g``, the risk ``E |g_k - g|²`` is ``|b_k|² + σ² ‖D_k‖²_F`` (``b_k``:
+    the bias). With the least smoothed candidate as an (almost) unbiased
+    pilot ``g_0 = D_0 f``,
+
+    ``E |g_k - g_0|² = |b_k - b_0|² + σ² ‖D_k - D_0‖²_F``,
+
+    so ``R_k = |g_k - g_0|² - σ² (‖D_0‖²_F - 2 tr(D_k D_0ᵀ))`` estimates the
+    risk without bias up to the pilot's own bias (a Mallows-type criterion
+    aimed at the derivative). σ² is the pilot's residual variance,
+    ``RSS_0 / Σ (1 - H_ii)`` over the judged points (``H = Q_0 Q_0ᵀ``). ``tr(D_k D_0ᵀ) = Σ (M_k Q_kᵀ Q_0) ∘ M_0`` with
+    ``M = B R⁻¹``: ``p × p`` products only.
+
+    GCV (:func:`gcv_spatial`) judges the values, whose error a smooth field
+    leaves flat over a wide range of spacings; the derivative weighs the
+    noise by the square of its wavenumber, so its risk keeps falling with
+    wider spacings until the bias sets in. On the tube demo (0.05 K IR
+    noise, 2-decimal exports) GCV's flat curve chose 5-8 spacings and a
+    7.8 % gradient error; see benchmarks/README.md (issue 15).
+    """
+    p = psi_array(psi, "psi")
+    F = float_array(samples, "samples").reshape(p.shape[0], -1)
+    c, R0 = positive(c, "c"), positive(R0, "R0")
+    judged = None if judged is None else np.asarray(judged, dtype=bool).reshape(p.shape[0])
+    p, F, h, judged = _judged_patch(p, F, max_points, judged)
+    n, ns = p.shape[0], F.shape[1]
+    rows = np.ones(2 * n, bool) if judged is None else np.r_[judged, judged]
+    nj = int(rows.sum()) // 2
+    if nj == 0:
+        raise DataError("gradient_risk_spatial: no point is judged (judged is all False)")
+    pilot = None
+    table = []
+    for k in _candidates(candidates):
+        try:
+            design = _fit_design(p, k, h, c, R0)
+        except GeometryError:
+            continue
+        Qm = design[3]
+        coef = Qm.T @ F
+        M = _gradient_operator(p, design, c, R0)[rows]
+        g = M @ coef
+        if pilot is None:
+            # the residual r_i has variance σ² (1 - H_ii), H = Q Qᵀ; summed over the judged points
+            jr = rows[:n]
+            rss = float(np.sum((F - Qm @ coef)[jr] ** 2))
+            var = rss / ns / (nj - float(np.sum(Qm[jr] ** 2)))
+            pilot = (Qm, M, g, float(np.sum(M ** 2)), var)
+        Q0, M0, g0, norm0, var = pilot
+        cross = float(np.sum((M @ (Qm.T @ Q0)) * M0))
+        risk = (float(np.sum((g - g0) ** 2)) / ns - var * (norm0 - 2.0 * cross)) / nj
+        table.append((k, Qm.shape[1], risk))
+    if not table:
+        raise DataError(f"gradient_risk_spatial: no candidate spacing fits {n} points (too few points)")
+    best = min(table, key=lambda r: r[2])
+    log.info("spatial gradient risk: centre spacing %.3g x %.3g mm (%d parameters); %s", best[0], h, best[1],
+             ", ".join(f"{k:g}: {r:.3g}" for k, _, r in table))
     return best[0], table

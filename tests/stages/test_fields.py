@@ -180,3 +180,17 @@ def test_space_time_regression_space_first_tube_rate():
     assert f.attrs["temperature_smoothing_space_chosen"] == "gcv"
     r = truth.temperature_rate.values
     assert _rms((f.temperature_rate.values - r)[m]) <= 0.06 * _rms(r[m])
+
+
+def test_tube_gradient_spacing_chosen_for_the_gradient():
+    """Issue 15: the temperature's spatial spacing is chosen by the gradient's estimated risk, not by GCV of the
+    values (flat on the tube's smooth field): tube tiny, seed 1, gradient 16.9 % with GCV, 13.1 % now."""
+    dic, ir, cal, truth = synthetic_inputs("tube", "tiny", ir_noise=0.05, dic_noise=0.005, seed=1)
+    pts = couple(dic, ir, cal)
+    truth = truth.sel(point=pts.point)
+    m = _inner(pts, truth)
+    f = fields(pts, cal)
+    assert f.attrs["temperature_smoothing_space_chosen"] == "gcv"
+    g = truth.temperature_gradient.values
+    err = _rms(np.linalg.norm(f.temperature_gradient.values - g, axis=-1)[m]) / _rms(np.linalg.norm(g[m], axis=-1))
+    assert err <= 0.145, err
