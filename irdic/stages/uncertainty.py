@@ -123,12 +123,17 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         record's own ends are flagged as series ends.
     spatial : tuple, optional
         With the spatial regression of the temperatures: ``(theta (T, N),
-        grad (T, N, 3), value_in (T, N), value (T, N)[, d_rate (T, N)])``, the point
-        temperatures and the regressed gradient, and the regression's input
-        (``theta`` or its temporal regression) and output; their differences
-        to the exact interpolation give the regression's bias. ``d_rate``: the
-        rate of the space-time regression minus that of the exact temporal
-        interpolation of the points' own series (its bias).
+        grad (T, N, 3), value_in (T, N), value (T, N)[, d_rate_t, d_rate_s,
+        d_value_t (T, N)])``, the point temperatures and the regressed
+        gradient, and the regression's input (``theta`` or its temporal
+        regression) and output; their differences to the exact interpolation
+        give the regression's bias. With a regression in time too
+        (:func:`irdic.stages.fields._space_time`, ``S_t`` in time, ``S`` in
+        space, ``I_t`` the exact interpolation in time): ``d_rate_t`` the
+        rate of ``S_t S Θ`` minus that of ``I_t S Θ`` (the temporal
+        regression's bias, against a reference as little noisy as the
+        regressed series), ``d_rate_s`` minus that of ``S_t Θ`` (the spatial
+        regression's), ``d_value_t`` the value of ``S_t S Θ`` minus ``S Θ``.
 
     Returns
     -------
@@ -147,8 +152,14 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes, ends)
     # the bias is averaged over points where the exact interpolation is itself accurate (unflagged)
     trusted = ~(near_edge(points, sf, visible) | strain_bias)
-    temp_std, grad_std, rate_std = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
-                                           s_T, s_g, s_r, window, spatial, trusted)
+    temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
+                                                        s_T, s_g, s_r, window, spatial, trusted)
+    if rate_biased is not None:
+        rate_bias |= rate_biased & visible
+        if rate_biased.any():
+            notes.append(f"temperature_rate: the temporal regression's estimated bias exceeds the noise at "
+                         f"{rate_biased[visible].mean():.0%} of the visible points (flagged temperature_rate_"
+                         "bias_dominated; there the std is the local RMS of the bias, not a Gaussian width)")
     # calibration: the projected position's uncertainty moves the sample along the pixel gradient
     pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
     cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
@@ -185,8 +196,8 @@ def _ir_noise(a):
 
 def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None, spatial=None,
             trusted=None):
-    """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise (and the spatial
-    regression's bias, :func:`_local_bias`)."""
+    """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
+    bias (:func:`_local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
@@ -201,7 +212,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     temp_std = np.full((T, N), s_T)
 
     kt, ks = chosen_k.get("temperature_smoothing"), chosen_k.get("temperature_smoothing_space")
-    W0 = None
+    W0 = rate_biased = None
     if kt is not None:
         # a chunk's regression runs over its window (T_w samples) and is evaluated at its own times
         record = t if window is None else window.record
@@ -252,13 +263,42 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             v_var = np.mean(np.square(v_pr - value_in_pr), axis=0)
             temp_std = np.hypot(temp_std, _local_bias(value - value_in, v_var, sf.psi, trusted))
             if len(spatial) > 4 and W0 is not None:
-                # the regressions' bias of the rate, against the exact interpolation in space and time
-                ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
-                                         window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
-                r_var = np.mean(np.square(np.einsum("ij,kjn->kin", W1, s_pr)
-                                          - np.einsum("ij,kjn->kin", ti.weights(t, 1), np.nan_to_num(noise))), axis=0)
-                rate_std = np.hypot(rate_std, _local_bias(spatial[4], r_var, sf.psi, trusted))
-    return temp_std, grad_std, rate_std
+                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:], ts, t, p, record, s_pr, noise,
+                                                                   sf.psi, trusted, temp_std, rate_std)
+    return temp_std, grad_std, rate_std, rate_biased
+
+
+def _space_time_bias(d, ts, t, p, record, s_pr, noise, psi, trusted, temp_std, rate_std):
+    """Temperature and rate std with the space-time regression's bias added, and where the rate's temporal
+    bias exceeds its noise.
+
+    ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`;
+    ``ts``: the temporal regression (over the window), evaluated at ``t``;
+    ``s_pr`` (K, T_w, N) / ``noise`` (K, T_w, N): noise probes after / before
+    the spatial regression. Each difference's noise variance comes from the
+    same probes through the same operators (:func:`_local_bias`). The
+    temporal bias is judged against the exact interpolation in time of the
+    spatially regressed series, whose noise is that of the regressed series
+    only: the bias of a fast transient is then resolved well below the
+    rate's noise.
+    (Against the interpolation of the points' own series its estimate
+    scattered by more than the rate's std and was clipped to 0 at half of
+    the points.)
+    """
+    d_rate_t, d_rate_s, d_value_t = d
+    W0, W1 = ts.weights(t, 0), ts.weights(t, 1)
+    ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
+                             window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
+    I0, I1 = ti.weights(t, 0), ti.weights(t, 1)
+    apply = lambda W, x: np.einsum("ij,kjn->kin", W, x)  # noqa: E731
+    var = lambda x: np.mean(np.square(x), axis=0)  # noqa: E731
+    b_t = _local_bias(d_rate_t, var(apply(W1 - I1, s_pr)), psi, trusted)
+    b_s = _local_bias(d_rate_s, var(apply(W1, s_pr - np.nan_to_num(noise))), psi, trusted)
+    # only the temporal bias is resolved well enough to flag by (the spatial one scatters with the points' noise)
+    biased = b_t > rate_std
+    rate_std = np.sqrt(rate_std ** 2 + b_t ** 2 + b_s ** 2)
+    temp_std = np.hypot(temp_std, _local_bias(d_value_t, var(apply(W0 - I0, s_pr)), psi, trusted))
+    return temp_std, rate_std, biased
 
 
 def _local_bias(d, noise_var, psi, trusted=None):
