@@ -36,8 +36,10 @@ Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
 extrapolated (temperature, gradient, rate), the first and last DIC time
 (rate: the one-sided end of the series), the export step larger than the
-noise (rounding is then a deterministic error, not noise), and for the strain
-points within two point spacings of the point cloud's edge.
+noise (rounding is then a deterministic error, not noise), the rate where the
+space-time regression's estimated temporal bias exceeds its noise
+(:func:`_space_time_bias`), and for the strain points within two point
+spacings of the point cloud's edge.
 """
 
 from __future__ import annotations
@@ -157,9 +159,10 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     if rate_biased is not None:
         rate_bias |= rate_biased & visible
         if rate_biased.any():
-            notes.append(f"temperature_rate: the temporal regression's estimated bias exceeds the noise at "
-                         f"{rate_biased[visible].mean():.0%} of the visible points (flagged temperature_rate_"
-                         "bias_dominated; there the std is the local RMS of the bias, not a Gaussian width)")
+            # no count: a time chunk's note becomes the gathered store's
+            notes.append("temperature_rate: the temporal regression's estimated bias exceeds the noise where "
+                         "temperature_rate_bias_dominated is set; there the std holds the local RMS of that "
+                         "estimate, not a Gaussian width")
     # calibration: the projected position's uncertainty moves the sample along the pixel gradient
     pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
     cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
