@@ -386,12 +386,13 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, o
     grad, value, _ = _regressed_gradient(smoothed, sf.psi, geo.dual, ks, **kw)
     # the spatial regression's bias is judged against the temporal regression of the points' own series
     own = smooth_series(th_in, ts_in, t_eval, smoothing=fit.smoothing, c=p["c_time"], R0=p["R0_time"],
-                        record_times=record).value
-    # the regressions' bias of the rate: against the exact interpolation (in space and time) of the points' series
-    exact = smooth_series(th_in, ts_in, t_eval, smoothing=None, c=p["c_time"], R0=p["R0_time"],
-                          record_times=record).rate
-    return (grad, total, total - convective, value,
-            (theta, grad, np.where(visible, own, np.nan), value, total - exact), chosen)
+                        record_times=record)
+    # the temporal regression's bias: against the exact interpolation in time of the same (regressed) series,
+    # whose noise is the regressed series' (against the points' own series the estimate drowned in their noise)
+    exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, c=p["c_time"], R0=p["R0_time"], record_times=record)
+    bias_inputs = (theta, grad, np.where(visible, own.value, np.nan), value, total - exact.rate, total - own.rate,
+                   smoothed - exact.value)
+    return grad, total, total - convective, value, bias_inputs, chosen
 
 
 def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, temperature_smoothing,

@@ -42,8 +42,10 @@ Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
 extrapolated (temperature, gradient, rate), the first and last DIC time
 (rate: the one-sided end of the series), the export step larger than the
-noise (rounding is then a deterministic error, not noise), and for the strain
-points within two point spacings of the point cloud's edge.
+noise (rounding is then a deterministic error, not noise), the rate where the
+space-time regression's estimated temporal bias exceeds its noise
+(:func:`_space_time_bias`), and for the strain points within two point
+spacings of the point cloud's edge.
 """
 
 from __future__ import annotations
@@ -112,20 +114,17 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     ----------
     points, sf, geo
         ``points.zarr``, the fitted surface and its geometry (dual basis).
-    J : ndarray, shape (T, N, 2, 3)
-        Projection Jacobian (px/mm).
-    g_pix : ndarray, shape (T, N, 2)
-        Pixel gradients (K/px).
+    J, g_pix : ndarray, shape (T, N, 2, 3) and (T, N, 2)
+        Projection Jacobian (px/mm) and pixel gradients (K/px).
     t : ndarray, shape (T,)
         DIC times (s).
     p : dict
         The fields settings, smoothing options resolved.
     chosen_k : dict
-        ``temperature_smoothing`` and ``temperature_smoothing_space``: the
-        centre spacing factors used (None: interpolation).
+        The centre spacing factors used (None: interpolation) by name.
     regress_space : callable
-        ``regress_space(theta (T', N), dual (T', N, 2, 3) or None, k) -> (grad, value)``:
-        the spatial regression of the fields stage (dual None: values only).
+        ``(theta (T', N), dual (T_d, N, 2, 3) or None, k) -> (grad, value)``:
+        the fields stage's spatial regression (dual None: values only).
     seed : int
         Seed of the probes (fixed: the stores are reproducible).
     window : Window, optional
@@ -133,13 +132,15 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         strain probes run over it, as the chunk's fields do, and only the
         record's own ends are flagged as series ends.
     spatial : tuple, optional
-        With the spatial regression of the temperatures: ``(theta (T, N),
-        grad (T, N, 3), value_in (T, N), value (T, N)[, d_rate (T, N)])``, the point
-        temperatures and the regressed gradient, and the regression's input
-        (``theta`` or its temporal regression) and output; their differences
-        to the exact interpolation give the regression's bias. ``d_rate``: the
-        rate of the space-time regression minus that of the exact temporal
-        interpolation of the points' own series (its bias).
+        With the spatial regression of the temperatures: ``(theta, grad,
+        value_in, value[, d_rate_t, d_rate_s, d_value_t])`` (T, N[, 3]): the
+        point temperatures, the regressed gradient, the regression's input
+        and output (their differences to the exact interpolation give its
+        bias); with a regression in time too (``S_t`` in time, ``S`` in
+        space, ``I_t`` the exact interpolation in time): the rate of
+        ``S_t S Θ`` minus that of ``I_t S Θ`` (the temporal bias), minus that
+        of ``S_t Θ`` (the spatial one), and the value of ``S_t S Θ`` minus
+        ``S Θ``.
     ops : dict, optional
         The stage's spatial operators (:func:`irdic.surface.shared_interpolant`).
 
@@ -160,8 +161,9 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes, ends)
     # the bias is averaged over points where the exact interpolation is itself accurate (unflagged)
     trusted = ~(near_edge(points, sf, visible) | strain_bias)
-    temp_std, grad_std, rate_std = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
-                                           s_T, s_g, s_r, window, spatial, trusted)
+    temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
+                                                        s_T, s_g, s_r, window, spatial, trusted)
+    rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
     # calibration: the projected position's uncertainty moves the sample along the pixel gradient
     pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
     cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
@@ -185,6 +187,18 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     }
 
 
+def _rate_bias_flags(rate_biased, visible, notes):
+    """Where the temporal regression's estimated bias exceeds the rate's noise (T, N), with its note."""
+    if rate_biased is None:
+        return np.zeros(visible.shape, bool)
+    if rate_biased.any():
+        # no count: a time chunk's note becomes the gathered store's
+        notes.append("temperature_rate: the temporal regression's estimated bias exceeds the noise where "
+                     "temperature_rate_bias_dominated is set; there the std holds the local RMS of that "
+                     "estimate, not a Gaussian width")
+    return rate_biased & visible
+
+
 def _ir_noise(a):
     """Pixel noise (K) of points.zarr's attrs: temporal noise, quantisation step, their sum, and the
     point-level noise of temperature, pixel gradient and local rate (via the interpolation's noise gains)."""
@@ -198,8 +212,8 @@ def _ir_noise(a):
 
 def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None, spatial=None,
             trusted=None):
-    """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise (and the spatial
-    regression's bias, :func:`_local_bias`)."""
+    """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
+    bias (:func:`_local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
@@ -214,7 +228,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     temp_std = np.full((T, N), s_T)
 
     kt, ks = chosen_k.get("temperature_smoothing"), chosen_k.get("temperature_smoothing_space")
-    W = None
+    W = rate_biased = None
     if kt is not None:
         # a chunk's regression runs over its window (T_w samples) and is evaluated at its own times
         record = t if window is None else window.record
@@ -222,7 +236,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
                                  window=temporal_window(record, c=p["c_time"], R0=p["R0_time"], smoothing=kt))
         ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
                                  window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
-        W = (ts.weights(t, 0), ts.weights(t, 1), ti.weights(t, 1))
+        W = (ts.weights(t, 0), ts.weights(t, 1), ti.weights(t, 0), ti.weights(t, 1))
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
     if ks is not None:
@@ -237,8 +251,9 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             # the exact interpolation of the input at the points is the input itself
             temp_std = np.hypot(temp_std, _local_bias(value - value_in, acc["v_var"], sf.psi, trusted))
             if len(spatial) > 4 and W is not None:
-                rate_std = np.hypot(rate_std, _local_bias(spatial[4], acc["r_var"], sf.psi, trusted))
-    return temp_std, grad_std, rate_std
+                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:], acc, sf.psi, trusted, temp_std,
+                                                                   rate_std)
+    return temp_std, grad_std, rate_std, rate_biased
 
 
 def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias):
@@ -250,15 +265,16 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     probes). Returns the mean squares over the probes (T, N): ``v`` (value),
     ``g`` (T, N, 3, gradient), ``r`` (rate, with ``W``); with ``bias``, the
     noise variance of the regression's difference to the exact interpolation
-    (``v_var``, ``g_var``, ``r_var``), which :func:`_local_bias` subtracts.
+    (``v_var``, ``g_var``; ``rt_var``, ``rs_var``, ``vt_var`` of
+    :func:`_space_time_bias`), which :func:`_local_bias` subtracts.
     The probes are evaluated at the :data:`PROBE_TIMES` times of
     :func:`_probe_times` (the regression in time mixes all of them first);
     every other time takes the nearest one's mean squares (:func:`_spread`).
     """
     T, N = visible.shape
-    W0, W1, W1_exact = W if W is not None else (None, None, None)
+    W0, W1, I0, I1 = W if W is not None else (None,) * 4
     sub, near = _probe_times(T)
-    acc = {"v": 0.0, "g": 0.0, "r": 0.0, "v_var": 0.0, "g_var": 0.0, "r_var": 0.0}
+    acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var"), 0.0)
     tw, off = T, 0
     if W0 is not None and window is not None:
         # the temporal regression of a chunk mixes its window's noise; the record-length draw is discarded
@@ -285,9 +301,10 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             g, v = regress_space(smoothed.reshape(m, N), geo.dual[sub], ks)
             # the bias is judged against the temporal regression of the points' own series
             value_in = np.einsum("ij,kjn->kin", W0[sub], np.nan_to_num(noise))
-            if bias:
-                r_int = np.einsum("ij,kjn->kin", W1_exact[sub], np.nan_to_num(noise))
-                acc["r_var"] = acc["r_var"] + np.sum((r - r_int) ** 2, axis=0) / PROBES
+            if bias:  # the noise in the space-time regression's differences (_space_time_bias)
+                for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - np.nan_to_num(noise)),
+                                   ("vt_var", W0 - I0, s)):
+                    acc[key] = acc[key] + np.sum(np.einsum("ij,kjn->kin", Wd[sub], x) ** 2, axis=0) / PROBES
         g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)
         acc["v"] = acc["v"] + np.sum(v ** 2, axis=0) / PROBES
         acc["g"] = acc["g"] + np.sum(g ** 2, axis=0) / PROBES
@@ -320,6 +337,31 @@ def _spread(a, near):
         warnings.simplefilter("ignore", RuntimeWarning)  # points never seen: all NaN
         med = np.nanmedian(a, axis=0)
     return np.where(np.isfinite(out), out, med)
+
+
+def _space_time_bias(d, acc, psi, trusted, temp_std, rate_std):
+    """Temperature and rate std with the space-time regression's bias added, and where the rate's temporal
+    bias exceeds its noise.
+
+    ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`;
+    ``acc``: the probes' noise variances of those differences
+    (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each
+    through the same operators as the difference (:func:`_local_bias`). The
+    temporal bias is judged against the exact interpolation in time of the
+    spatially regressed series, whose noise is that of the regressed series
+    only: the bias of a fast transient is then resolved well below the
+    rate's noise. (Against the interpolation of the points' own series its
+    estimate scattered by more than the rate's std and was clipped to 0 at
+    half of the points.)
+    """
+    d_rate_t, d_rate_s, d_value_t = d
+    b_t = _local_bias(d_rate_t, acc["rt_var"], psi, trusted)
+    b_s = _local_bias(d_rate_s, acc["rs_var"], psi, trusted)
+    # only the temporal bias is resolved well enough to flag by (the spatial one scatters with the points' noise)
+    biased = b_t > rate_std
+    rate_std = np.sqrt(rate_std ** 2 + b_t ** 2 + b_s ** 2)
+    temp_std = np.hypot(temp_std, _local_bias(d_value_t, acc["vt_var"], psi, trusted))
+    return temp_std, rate_std, biased
 
 
 def _local_bias(d, noise_var, psi, trusted=None):

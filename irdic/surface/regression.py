@@ -184,6 +184,33 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
     return best[0], table
 
 
+def _gradient_risks(p, F, h, c, R0, rows, nj, candidates):
+    """``(k, n_parameters, risk)`` of each candidate that fits (Notes of :func:`gradient_risk_spatial`)."""
+    n, ns = p.shape[0], F.shape[1]
+    pilot = None
+    table = []
+    for k in _candidates(candidates):
+        try:
+            design = _fit_design(p, k, h, c, R0)
+        except GeometryError:
+            continue
+        Qm = design[3]
+        coef = Qm.T @ F
+        M = _gradient_operator(p, design, c, R0)[rows]
+        g = M @ coef
+        if pilot is None:
+            # the residual r_i has variance σ² (1 - H_ii), H = Q Qᵀ; summed over the judged points
+            jr = rows[:n]
+            rss = float(np.sum((F - Qm @ coef)[jr] ** 2))
+            var = rss / ns / (nj - float(np.sum(Qm[jr] ** 2)))
+            pilot = (Qm, M, g, float(np.sum(M ** 2)), var)
+        Q0, M0, g0, norm0, var = pilot
+        cross = float(np.sum((M @ (Qm.T @ Q0)) * M0))
+        risk = (float(np.sum((g - g0) ** 2)) / ns - var * (norm0 - 2.0 * cross)) / nj
+        table.append((k, Qm.shape[1], risk))
+    return table
+
+
 def _gradient_operator(p, design, c, R0):
     """``M`` (2n, p) with ``M Qᵀ F`` the regression's derivatives d/dPsi1 (rows :n) and d/dPsi2 (rows n:)
     at the points ``p`` (1/mm), from the QR ``design`` of :func:`ls_design`."""
@@ -256,32 +283,12 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     c, R0 = positive(c, "c"), positive(R0, "R0")
     judged = None if judged is None else np.asarray(judged, dtype=bool).reshape(p.shape[0])
     p, F, h, judged = _judged_patch(p, F, max_points, judged)
-    n, ns = p.shape[0], F.shape[1]
+    n = p.shape[0]
     rows = np.ones(2 * n, bool) if judged is None else np.r_[judged, judged]
     nj = int(rows.sum()) // 2
     if nj == 0:
         raise DataError("gradient_risk_spatial: no point is judged (judged is all False)")
-    pilot = None
-    table = []
-    for k in _candidates(candidates):
-        try:
-            design = _fit_design(p, k, h, c, R0)
-        except GeometryError:
-            continue
-        Qm = design[3]
-        coef = Qm.T @ F
-        M = _gradient_operator(p, design, c, R0)[rows]
-        g = M @ coef
-        if pilot is None:
-            # the residual r_i has variance σ² (1 - H_ii), H = Q Qᵀ; summed over the judged points
-            jr = rows[:n]
-            rss = float(np.sum((F - Qm @ coef)[jr] ** 2))
-            var = rss / ns / (nj - float(np.sum(Qm[jr] ** 2)))
-            pilot = (Qm, M, g, float(np.sum(M ** 2)), var)
-        Q0, M0, g0, norm0, var = pilot
-        cross = float(np.sum((M @ (Qm.T @ Q0)) * M0))
-        risk = (float(np.sum((g - g0) ** 2)) / ns - var * (norm0 - 2.0 * cross)) / nj
-        table.append((k, Qm.shape[1], risk))
+    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates)
     if not table:
         raise DataError(f"gradient_risk_spatial: no candidate spacing fits {n} points (too few points)")
     best = min(table, key=lambda r: r[2])

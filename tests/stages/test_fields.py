@@ -163,6 +163,11 @@ def test_uncertainty_coverage_monte_carlo():
             within[v].append((np.mean(z <= 1), np.mean(z <= 2)))
     for v, w in within.items():
         one, two = np.mean(w, axis=0)
+        if v in ("temperature", "temperature_rate"):
+            # the issue's bands, 2 std widened by the spread of seeds (1-3: temperature 0.63-0.71 / 0.91-0.95,
+            # rate 0.65-0.69 / 0.88-0.92)
+            assert 0.60 <= one <= 0.76 and 0.89 <= two <= 0.98, (v, one, two)
+            continue
         # the strain's std is conservative (0.90 within 1 std): its bias term is estimated against an exact
         # interpolation far noisier than the regression, and that estimate's scatter adds to it
         top = 0.93 if v == "max_principal_strain" else 0.82
@@ -194,3 +199,21 @@ def test_tube_gradient_spacing_chosen_for_the_gradient():
     g = truth.temperature_gradient.values
     err = _rms(np.linalg.norm(f.temperature_gradient.values - g, axis=-1)[m]) / _rms(np.linalg.norm(g[m], axis=-1))
     assert err <= 0.145, err
+
+
+def test_temporal_regression_bias_in_the_std_and_flags_tube():
+    """Issue 15: on the demo tube (21 stages at 2 Hz, fast heating) GCV in time smooths with centres every 3
+    stages, a bias larger than the rate's noise. The denoised temperature's std includes the temporal bias
+    (within 1 / 2 std on the benchmark's scene, 0.38 / 0.68 before, 0.65 / 0.92 now), and the rate says it is
+    bias-dominated (90 % of the interior points) instead of claiming a noise std (0.25 / 0.43 coverage before)."""
+    dic, ir, cal, truth = synthetic_inputs("tube", "demo", ir_noise=0.05, dic_noise=0.003, seed=3)
+    pts = couple(dic, ir, cal)
+    truth = truth.sel(point=pts.point)
+    f = fields(pts, cal)
+    m = _inner(pts, truth)
+    flag = f.temperature_rate_bias_dominated.values
+    assert flag[m].mean() > 0.5, flag[m].mean()
+    assert "temporal regression's estimated bias exceeds the noise" in f.attrs["uncertainty_notes"]
+    mm = m & ~f.temperature_bias_dominated.values
+    z = np.abs(f.temperature.values - truth.temperature.values)[mm] / f.temperature_std.values[mm]
+    assert 0.55 <= np.mean(z <= 1) <= 0.80 and 0.88 <= np.mean(z <= 2) <= 0.99, (np.mean(z <= 1), np.mean(z <= 2))
