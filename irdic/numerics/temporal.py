@@ -331,11 +331,13 @@ def _fill_series(F2, t, c, R0, window=None):
     cols = np.flatnonzero(bad.any(axis=0))
     if cols.size == 0:
         return dead
+    if window is not None:
+        return _fill_series_windowed(F2, bad, cols, dead, t, c, R0, window)
     # columns with the same gaps share one interpolant (a point cloud repeats few patterns)
     _, group = np.unique(np.packbits(bad[:, cols], axis=0), axis=1, return_inverse=True)
-    group = np.ravel(group)
-    for g in range(int(group.max()) + 1):
-        js = cols[group == g]
+    order = np.argsort(np.ravel(group), kind="stable")
+    bounds = np.flatnonzero(np.diff(np.ravel(group)[order])) + 1
+    for js in np.split(cols[order], bounds):
         ok = ~bad[:, js[0]]
         if ok.sum() < 2:
             dead[js] = True
@@ -350,6 +352,41 @@ def _fill_series(F2, t, c, R0, window=None):
             lin = (1 - w) * F2[np.flatnonzero(ok)[i1 - 1], js] + w * F2[np.flatnonzero(ok)[i1], js]
             fill[r] = np.where(np.isfinite(fill[r]), fill[r], lin)
         F2[np.ix_(~ok, js)] = fill
+    return dead
+
+
+def _fill_series_windowed(F2, bad, cols, dead, t, c, R0, window):
+    """:func:`_fill_series` with the windowed operator: each gap from the samples of its own window.
+
+    A gap's weights are those of :meth:`TemporalInterpolant._windowed`: the
+    global interpolant of the column's valid samples within ``window`` of
+    the gap's bracket. They depend only on those samples' times relative to
+    the gap, so they are cached by that pattern: a point cloud with scattered
+    failed points has nearly as many gap patterns per column as columns, but
+    few local ones.
+    """
+    cache = {}
+    snap = TIME_SNAP * R0
+    for j in cols:
+        idx = np.flatnonzero(~bad[:, j])
+        if idx.size < 2:
+            dead[j] = True
+            F2[:, j] = 0.0
+            continue
+        tv, miss = t[idx], np.flatnonzero(bad[:, j])
+        te = t[miss]
+        jj = np.clip(np.searchsorted(tv, te + snap, side="right"), 1, tv.size - 1)
+        lo, hi = np.maximum(jj - 1 - window, 0), np.minimum(jj + 1 + window, tv.size)
+        for r, m in enumerate(miss):
+            if not tv[0] - snap <= te[r] <= tv[-1] + snap:
+                F2[m, j] = np.interp(te[r], tv, F2[idx, j])  # outside the valid span: nearest valid value
+                continue
+            a, b = int(lo[r]), int(hi[r])
+            key = tuple(np.round((tv[a:b] - te[r]) / R0, 9))
+            w = cache.get(key)
+            if w is None:
+                w = cache[key] = TemporalInterpolant(tv[a:b], c=c, R0=R0).weights(te[r:r + 1])[0]
+            F2[m, j] = w @ F2[idx[a:b], j]
     return dead
 
 

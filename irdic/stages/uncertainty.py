@@ -393,8 +393,12 @@ def _local_bias(d, noise_var, psi, trusted=None):
     nb = have[cKDTree(psi[have]).query(psi[have], k=k)[1].reshape(have.size, k)]
     s = np.zeros_like(a)
     n = np.zeros(a.shape)
-    s[:, have] = a[:, nb].sum(axis=2)
-    n[:, have] = ok[:, nb].sum(axis=2)
+    # neighbour by neighbour: a[:, nb] at once would hold T x N x k (x 3) values (GBs at paper scale)
+    sh, nh = np.zeros(a[:, have].shape), np.zeros(a[:, have].shape)
+    for j in range(k):
+        sh += a[:, nb[:, j]]
+        nh += ok[:, nb[:, j]]
+    s[:, have], n[:, have] = sh, nh
     s2, n2 = s.copy(), n.copy()
     s2[1:] += s[:-1]
     s2[:-1] += s[1:]

@@ -152,3 +152,32 @@ def test_smooth_series_of_a_chunk_uses_the_record_window():
     part = smooth_series(F[w], t[w], t[600:], smoothing=2.0, record_times=t)
     np.testing.assert_allclose(part.rate, whole.rate[600:], rtol=0, atol=1e-10)
     np.testing.assert_allclose(part.value, whole.value[600:], rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("R0", [0.3, 1.0])
+def test_gap_fill_equals_each_series_own_interpolant(R0):
+    """Series with scattered gaps (failed DIC points), shared gap patterns, series ends and all-but-one gaps:
+    the grouped and the windowed fills give what each column's own (windowed) interpolant gives."""
+    from irdic.numerics.temporal import _fill_series
+
+    rng = np.random.default_rng(0)
+    t = np.arange(200) * 0.1
+    F = np.sin(t)[:, None] + 0.01 * rng.normal(size=(200, 300))
+    bad = rng.random(F.shape) < 0.02
+    bad[:, 100:150] = bad[:, [100]]  # one pattern shared by 50 series
+    bad[:3, 5], bad[-2:, 6], bad[1:, 8] = True, True, True
+    F[bad] = np.nan
+    n = temporal_window(t, c=1.0, R0=R0)
+    assert (n is None) == (R0 == 1.0)  # both operators are exercised
+    got = F.copy()
+    dead = _fill_series(got, t, 1.0, R0, n)
+    assert np.flatnonzero(dead).tolist() == [8]
+    for j in range(F.shape[1]):
+        ok = np.isfinite(F[:, j])
+        if ok.all() or j == 8:
+            continue
+        want = TemporalInterpolant(t[ok], c=1.0, R0=R0, window=n).weights(t[~ok]) @ F[ok, j]
+        out = ~np.isfinite(want)  # outside the valid span: the nearest valid value
+        want[out] = np.interp(t[~ok][out], t[ok], F[ok, j])
+        np.testing.assert_allclose(got[~ok, j], want, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(got[ok, j], F[ok, j])
