@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import warnings
 import time as _time
 
 import numpy as np
@@ -529,7 +530,9 @@ class SpatialInterpolant:
             Q = np.flatnonzero(miss[ms[0]])
             GQ = G[pos[Q]]
             try:
-                lu = scipy.linalg.lu_factor(GQ[:, Q].toarray(), check_finite=False)
+                with warnings.catch_warnings():  # a zero pivot warns; it is the DataError below
+                    warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
+                    lu = scipy.linalg.lu_factor(GQ[:, Q].toarray(), check_finite=False)
                 if not np.all(np.isfinite(lu[0])) or np.any(np.diag(lu[0]) == 0):
                     raise np.linalg.LinAlgError
             except (np.linalg.LinAlgError, ValueError):
