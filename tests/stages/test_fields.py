@@ -30,6 +30,15 @@ def _inner(pts, truth):
     return m
 
 
+def _noisy(scene, scale, *, dic_noise, seed, ir_noise=0.05):
+    """A noisy synthetic scene coupled and through fields (default config): points, truth at them, fields,
+    and the interior mask of :func:`_inner`."""
+    dic, ir, cal, truth = synthetic_inputs(scene, scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
+    pts = couple(dic, ir, cal)
+    truth = truth.sel(point=pts.point)
+    return pts, truth, fields(pts, cal), _inner(pts, truth)
+
+
 def test_noise_free_accuracy(case):
     name, pts, cal, truth = case
     f = fields(pts, cal)
@@ -115,10 +124,7 @@ def test_bad_arguments(case):
 
 def test_uncertainty_variables_and_rate_coverage():
     """Issue 15 part 4: std and bias flags beside each field; the rate's std matches its error against the truth."""
-    dic, ir, cal, truth = synthetic_inputs("halfshell", "tiny", ir_noise=0.05, dic_noise=0.003, seed=1)
-    pts = couple(dic, ir, cal)
-    truth = truth.sel(point=pts.point)
-    f = fields(pts, cal)
+    pts, truth, f, m = _noisy("halfshell", "tiny", dic_noise=0.003, seed=1)
     for v in ("temperature", "temperature_gradient", "temperature_rate", "max_principal_strain"):
         assert f[f"{v}_std"].dims == f[v].dims and f[f"{v}_bias_dominated"].dims == f[v].dims
         assert f[f"{v}_std"].attrs["units"] == f[v].attrs["units"]
@@ -150,11 +156,7 @@ def test_uncertainty_coverage_monte_carlo():
     within = {v: [] for v in ("temperature", "temperature_gradient", "temperature_rate", "max_principal_strain")}
     truth_name = {"max_principal_strain": "strain_max"}
     for seed in (1, 2):
-        dic, ir, cal, truth = synthetic_inputs("halfshell", "tiny", ir_noise=0.05, dic_noise=0.003, seed=seed)
-        pts = couple(dic, ir, cal)
-        truth = truth.sel(point=pts.point)
-        f = fields(pts, cal)
-        m = _inner(pts, truth)
+        pts, truth, f, m = _noisy("halfshell", "tiny", dic_noise=0.003, seed=seed)
         for v in within:
             mm = (m if f[v].ndim == 2 else m[..., None]) & ~f[f"{v}_bias_dominated"].values
             err = f[v].values - truth[truth_name.get(v, v)].values
@@ -177,11 +179,7 @@ def test_uncertainty_coverage_monte_carlo():
 def test_space_time_regression_space_first_tube_rate():
     """Issue 15: the tube's temperature is smooth in space but fast in time; regressing each stage in space
     before the series in time keeps GCV in time from smoothing the heating away (rate 7.8 % before, 4.2 % now)."""
-    dic, ir, cal, truth = synthetic_inputs("tube", "tiny", ir_noise=0.05, dic_noise=0.003, seed=5)
-    pts = couple(dic, ir, cal)
-    truth = truth.sel(point=pts.point)
-    m = _inner(pts, truth)
-    f = fields(pts, cal)
+    pts, truth, f, m = _noisy("tube", "tiny", dic_noise=0.003, seed=5)
     assert f.attrs["temperature_smoothing_space_chosen"] == "gcv"
     r = truth.temperature_rate.values
     assert _rms((f.temperature_rate.values - r)[m]) <= 0.06 * _rms(r[m])
@@ -190,11 +188,7 @@ def test_space_time_regression_space_first_tube_rate():
 def test_tube_gradient_spacing_chosen_for_the_gradient():
     """Issue 15: the temperature's spatial spacing is chosen by the gradient's estimated risk, not by GCV of the
     values (flat on the tube's smooth field): tube tiny, seed 1, gradient 16.9 % with GCV, 13.1 % now."""
-    dic, ir, cal, truth = synthetic_inputs("tube", "tiny", ir_noise=0.05, dic_noise=0.005, seed=1)
-    pts = couple(dic, ir, cal)
-    truth = truth.sel(point=pts.point)
-    m = _inner(pts, truth)
-    f = fields(pts, cal)
+    pts, truth, f, m = _noisy("tube", "tiny", dic_noise=0.005, seed=1)
     assert f.attrs["temperature_smoothing_space_chosen"] == "gcv"
     g = truth.temperature_gradient.values
     err = _rms(np.linalg.norm(f.temperature_gradient.values - g, axis=-1)[m]) / _rms(np.linalg.norm(g[m], axis=-1))
@@ -206,11 +200,7 @@ def test_temporal_regression_bias_in_the_std_and_flags_tube():
     stages, a bias larger than the rate's noise. The denoised temperature's std includes the temporal bias
     (within 1 / 2 std on the benchmark's scene, 0.38 / 0.68 before, 0.65 / 0.92 now), and the rate says it is
     bias-dominated (90 % of the interior points) instead of claiming a noise std (0.25 / 0.43 coverage before)."""
-    dic, ir, cal, truth = synthetic_inputs("tube", "demo", ir_noise=0.05, dic_noise=0.003, seed=3)
-    pts = couple(dic, ir, cal)
-    truth = truth.sel(point=pts.point)
-    f = fields(pts, cal)
-    m = _inner(pts, truth)
+    pts, truth, f, m = _noisy("tube", "demo", dic_noise=0.003, seed=3)
     flag = f.temperature_rate_bias_dominated.values
     assert flag[m].mean() > 0.5, flag[m].mean()
     assert "temporal regression's estimated bias exceeds the noise" in f.attrs["uncertainty_notes"]
