@@ -22,6 +22,7 @@ import scipy.linalg
 from ..errors import ConfigError, DataError, GeometryError
 from ..validation import as_int, float_array, increasing_times, positive, smoothing_factor
 from .imq import imq, imq_dr, regression_R0
+from .patterns import same_patterns
 from .saddle import SaddleFactor
 
 __all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "SeriesFit", "smooth_series", "temporal_reach",
@@ -334,23 +335,19 @@ def _fill_series(F2, t, c, R0, window=None):
     if window is not None:
         return _fill_series_windowed(F2, bad, cols, dead, t, c, R0, window)
     # columns with the same gaps share one interpolant (a point cloud repeats few patterns)
-    _, group = np.unique(np.packbits(bad[:, cols], axis=0), axis=1, return_inverse=True)
-    order = np.argsort(np.ravel(group), kind="stable")
-    bounds = np.flatnonzero(np.diff(np.ravel(group)[order])) + 1
-    for js in np.split(cols[order], bounds):
+    for js in same_patterns(bad[:, cols].T):
+        js = cols[js]
         ok = ~bad[:, js[0]]
         if ok.sum() < 2:
             dead[js] = True
             F2[:, js] = 0.0
             continue
-        fill = TemporalInterpolant(t[ok], c=c, R0=R0, window=window).weights(t[~ok]) @ F2[np.ix_(ok, js)]
-        # outside the valid span: nearest valid value (flat), as np.interp
-        tv, tb = t[ok], t[~ok]
-        for r in np.flatnonzero(~np.isfinite(fill).all(axis=1)):
-            i1 = int(np.clip(np.searchsorted(tv, tb[r]), 1, tv.size - 1))
-            w = float(np.clip((tb[r] - tv[i1 - 1]) / (tv[i1] - tv[i1 - 1]), 0.0, 1.0))
-            lin = (1 - w) * F2[np.flatnonzero(ok)[i1 - 1], js] + w * F2[np.flatnonzero(ok)[i1], js]
-            fill[r] = np.where(np.isfinite(fill[r]), fill[r], lin)
+        fill = TemporalInterpolant(t[ok], c=c, R0=R0).weights(t[~ok]) @ F2[np.ix_(ok, js)]
+        # NaN rows lie outside the valid span: the nearest valid value (flat), as np.interp
+        out = ~np.isfinite(fill).all(axis=1)
+        if out.any():
+            valid = np.flatnonzero(ok)
+            fill[out] = F2[np.where(t[~ok][out] < t[valid[0]], valid[0], valid[-1])][:, js]
         F2[np.ix_(~ok, js)] = fill
     return dead
 

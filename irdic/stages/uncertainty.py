@@ -275,6 +275,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     W0, W1, I0, I1 = W if W is not None else (None,) * 4
     sub, near = _probe_times(T)
     acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var"), 0.0)
+    n_bias = 0  # probes through the exact interpolation (whole groups, the first BIAS_PROBES or more)
     tw, off = T, 0
     if W0 is not None and window is not None:
         # the temporal regression of a chunk mixes its window's noise; the record-length draw is discarded
@@ -314,7 +315,10 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             # the same probes through the exact interpolation (k = 1): the noise expected in the
             # difference regression - interpolation, which is subtracted from the data's difference
             g_int = regress_space(noise_c.reshape(m, N), geo.dual[sub], 1.0)[0].reshape(b, sub.size, N, 3)
-            acc["g_var"] = acc["g_var"] + np.sum((g - g_int) ** 2, axis=0) / min(PROBES, BIAS_PROBES)
+            acc["g_var"] = acc["g_var"] + np.sum((g - g_int) ** 2, axis=0)
+            n_bias += b
+    if n_bias:
+        acc["g_var"] = acc["g_var"] / n_bias
     return {k: _spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
 
 

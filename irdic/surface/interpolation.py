@@ -18,6 +18,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, DataError, GeometryError
+from ..numerics.patterns import same_patterns
 from ..numerics.imq import imq_planar
 from ..numerics.saddle import SaddleFactor
 from ..numerics.threads import blas_threads, parallel_map
@@ -520,13 +521,10 @@ class SpatialInterpolant:
         tail = X.shape[2:]
         width = int(np.prod(tail, dtype=np.int64))
         stages = np.flatnonzero(miss.any(axis=1))
-        # stages with the same missing points share one factorisation (noise probes repeat each pattern)
-        _, first, group = np.unique(np.packbits(miss[stages], axis=1), axis=0, return_index=True,
-                                    return_inverse=True)
-        group = np.ravel(group)
         batch = max(1, (1 << 23) // max(1, self.n * width))  # stages per right-hand side block: ~64 MB
-        for g in range(first.size):
-            ms = stages[group == g]
+        # stages with the same missing points share one factorisation (noise probes repeat each pattern)
+        for ms in same_patterns(miss[stages]):
+            ms = stages[ms]
             Q = np.flatnonzero(miss[ms[0]])
             GQ = G[pos[Q]]
             try:

@@ -181,3 +181,15 @@ def test_gap_fill_equals_each_series_own_interpolant(R0):
         want[out] = np.interp(t[~ok][out], t[ok], F[ok, j])
         np.testing.assert_allclose(got[~ok, j], want, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(got[ok, j], F[ok, j])
+
+
+def test_same_patterns_groups_identical_rows():
+    from irdic.numerics.patterns import same_patterns
+
+    m = np.array([[1, 0, 0], [0, 1, 0], [1, 0, 0], [0, 0, 0], [0, 1, 0], [1, 0, 0]], bool)
+    groups = sorted(g.tolist() for g in same_patterns(m))
+    assert groups == [[0, 2, 5], [1, 4], [3]]
+    assert same_patterns(np.zeros((0, 3), bool)) == []
+    wide = np.zeros((2, 20), bool)
+    wide[1, 17] = True  # beyond the first packed byte
+    assert sorted(g.tolist() for g in same_patterns(wide)) == [[0], [1]]
