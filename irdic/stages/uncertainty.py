@@ -431,23 +431,20 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None)
     # a surface regression's bias: against the exact interpolation of the same coordinates (see _local_bias)
     regressed = kw["smoothing"] is not None or kw["smoothing_t"] is not None
     kws = [kw, {**kw, "smoothing": None, "smoothing_t": None}] if regressed else [kw]
-    shape = x.shape if window is None else window.x.shape
     # the probes are evaluated at the probed times only (every other time takes the nearest one's)
     sub, near = _probe_times(T)
-    base = base[sub]
-
-    def e_max(kwi, dx, dref):
-        pf = (fit_surface(x + dx, t, psi=sf.psi, t_eval=t[sub], **kwi) if window is None
-              else _window_probe(window, t[sub], sf.psi, kwi, dx, dref))
-        return strain(pf.tangents, pf.ref_tangents, tensors=False).e_max
-
-    bases = [base] + [e_max(kwi, 0.0, 0.0) for kwi in kws[1:]]
-    samples = [[] for _ in kws]
-    for i in range(PROBES):
-        dx = rng.standard_normal(shape) * s_x
-        dref = rng.standard_normal(window.x_ref.shape) * s_x if window is not None else None
-        for s, kwi in zip(samples, kws[:1] if i >= BIAS_PROBES else kws):
-            s.append(e_max(kwi, dx, dref))
+    probe = _StrainProbe(x, sf, t, sub, window)
+    samples, bases = [[] for _ in kws], [base[sub]]
+    for start in range(0, PROBES, PROBE_GROUP):
+        draws = [probe.draw(rng, s_x) for _ in range(min(PROBE_GROUP, PROBES - start))]
+        samples[0] += probe.e_max(kws[0], draws)
+        if regressed and start < BIAS_PROBES:
+            # the exact interpolation's own result (no noise) with its first probes: one evaluation pass
+            out = probe.e_max(kws[1], ([] if len(bases) > 1 else [probe.zero]) + draws)
+            if len(bases) == 1:
+                bases.append(out.pop(0))
+            samples[1] += out
+    base = bases[0]
     std = _probe_std(np.array(samples[0]), base)
     if regressed:
         k = len(samples[1])
@@ -459,6 +456,61 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None)
     t_ref = t[0] if window is None else window.t_ref[0]
     std[np.asarray(t) == t_ref] = 0.0
     return std
+
+
+class _StrainProbe:
+    """The max principal strain at the probed times ``t[sub]`` of the surface fit with DIC noise added.
+
+    Without a regression in time (the usual case) the surface at a stage's
+    own time is that stage's spatial fit (:func:`irdic.surface.fit_stages`):
+    only the probed stages and the reference stage are fitted, all probes of
+    a group in one evaluation. With one, each probe refits the whole record
+    (or the chunk's window, :func:`_window_probe`) as the fields stage does.
+    """
+
+    def __init__(self, x, sf, t, sub, window):
+        self.x, self.sf, self.t, self.sub, self.window = x, sf, t, sub, window
+        src_t = t if window is None else window.t
+        self.idx = np.searchsorted(src_t, t[sub])
+        self.shape = x.shape if window is None else window.x.shape
+        self.stagewise = sf.info.get("smoothing_t") in (None, 1.0) and bool(np.asarray(sf.stage_used)[self.idx].all())
+        self.nodes = np.flatnonzero(np.isfinite(sf.x).all(axis=-1).any(axis=0))
+        self.zero = (0.0, None if window is None else 0.0)
+
+    def draw(self, rng, s_x):
+        """One probe's coordinate noise: (window or record, reference stages), kept at the stages it needs."""
+        dx = rng.standard_normal(self.shape) * s_x
+        dref = rng.standard_normal(self.window.x_ref.shape) * s_x if self.window is not None else None
+        return (dx[self.idx], dref) if self.stagewise else (dx, dref)
+
+    def e_max(self, kw, draws):
+        """Max principal strain (S, N) at the probed times of each probe of ``draws``."""
+        from ..surface import fit_stages
+
+        sf, w = self.sf, self.window
+        if not self.stagewise:
+            out = []
+            for dx, dref in draws:
+                pf = (fit_surface(self.x + dx, self.t, psi=sf.psi, t_eval=self.t[self.sub], **kw) if w is None
+                      else _window_probe(w, self.t[self.sub], sf.psi, kw, dx, dref))
+                out.append(strain(pf.tangents, pf.ref_tangents, tensors=False).e_max)
+            return out
+        stages, shapes = [], []
+        for dx, dref in draws:
+            if w is None:  # the probed times include stage 0, the reference and the shape stage
+                st = self.x[self.sub] + dx
+                x0 = st[0]
+            else:
+                x0 = w.x_ref[0] + (dref[0] if np.ndim(dref) else 0.0)
+                st = np.concatenate([x0[None], w.x[self.idx] + dx])
+            stages.append(st)
+            shapes.append(np.broadcast_to(x0, st.shape))
+        kws = {k: v for k, v in kw.items() if k not in ("c_t", "R0_t", "smoothing_t")}
+        _, tang = fit_stages(np.concatenate(stages), sf.psi, shape_stage=np.concatenate(shapes), nodes=self.nodes,
+                             **kws)
+        tang = tang.reshape((len(draws), -1) + tang.shape[1:])
+        first = 0 if w is None else 1
+        return [strain(g[first:], g[0], tensors=False).e_max for g in tang]
 
 
 def _window_probe(window, t, psi, kw, dx, dref):

@@ -118,7 +118,7 @@ shrinks the signal (GCV then chose ``lam`` too small: rate error reduced only
 """
 
 from ..numerics.temporal import SeriesFit, smooth_series
-from .fit import SurfaceFields, fit_surface
+from .fit import SurfaceFields, fit_stages, fit_surface
 from .geometry import Geometry, edge_distance, surface_geometry
 from .interpolation import SpatialInterpolant, shared_interpolant
 from .parametrisation import surface_parameters
@@ -133,6 +133,7 @@ __all__ = [
     "gcv_spatial",
     "SurfaceFields",
     "fit_surface",
+    "fit_stages",
     "Geometry",
     "surface_geometry",
     "edge_distance",

@@ -20,7 +20,7 @@ from .interpolation import shared_interpolant
 from .parametrisation import MIN_POINTS, surface_parameters
 from .regression import SURFACE_CANDIDATES, gcv_spatial
 
-__all__ = ["SurfaceFields", "fit_surface"]
+__all__ = ["SurfaceFields", "fit_surface", "fit_stages"]
 
 log = logging.getLogger(__name__)
 
@@ -185,6 +185,71 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
                      (c, R0, c_t, R0_t), t0)
 
 
+def fit_stages(x, psi, *, shape_stage=None, nodes=None, c=0.95, R0=1.0, smoothing=None, solver="auto",
+               operators=None):
+    """Position and tangents of each stage's own surface, without the temporal operator.
+
+    At a stage's own time :func:`fit_surface` interpolating in time
+    (``smoothing_t`` None) gives exactly this: the exact temporal interpolant
+    reproduces its samples, so the surface there is the spatial operator
+    applied to that stage alone. Stages from different sources (noise
+    probes) may be stacked; each is filled from its own valid points.
+
+    Parameters
+    ----------
+    x : array_like, shape (S, N, 3)
+        Stage coordinates (mm); NaN rows are missing points.
+    psi : array_like, shape (N, 2)
+        Surface parameters (mm).
+    shape_stage : array_like, shape (N, 3) or (S, N, 3), optional
+        The stage the shape is fitted on when ``smoothing`` is a (shape,
+        motion) pair (:func:`fit_surface`), for all stages or one per
+        stage; default ``x[0]``.
+    nodes : array_like of int, optional
+        The points the surface is fitted on (those of the :func:`fit_surface`
+        this reproduces); default those with parameters and data in ``x``.
+    c, R0, smoothing, solver, operators
+        As :func:`fit_surface` (``smoothing`` a number >= 1, a (shape,
+        motion) pair or None; not "gcv").
+
+    Returns
+    -------
+    x_fit : ndarray, shape (S, N, 3)
+        Position on each stage's surface (mm); NaN off the nodes.
+    tangents : ndarray, shape (S, N, 2, 3)
+        ``a_alpha = dx/dPsi^alpha`` (dimensionless).
+    """
+    X = float_array(x, "x")
+    if X.ndim != 3 or X.shape[2] != 3:
+        raise ConfigError(f"x must have shape (stages, points, 3), got {X.shape}")
+    if np.isinf(X).any():
+        raise DataError("x: infinite coordinate; missing points must be NaN")
+    S, N, _ = X.shape
+    psi = _parameters(X, psi, "auto", {})
+    if isinstance(smoothing, tuple):
+        kg, ks = _smoothings(smoothing, None)[0]
+    else:
+        kg, ks = None, smoothing_factor(smoothing, "smoothing", allow_gcv=False)
+    nodes = _nodes(psi, np.isfinite(X).all(axis=2), {}) if nodes is None else np.asarray(nodes, dtype=np.int64)
+    n = nodes.size
+    sp = shared_interpolant({} if operators is None else operators, psi[nodes], c=c, R0=R0, solver=solver)
+    Xn = X[:, nodes]
+    Xs = sp.fill(Xn, np.isfinite(Xn).all(axis=2))[0]
+    x0 = Xs[:1] if shape_stage is None else float_array(shape_stage, "shape_stage").reshape(-1, N, 3)[:, nodes]
+    if x0.shape[0] not in (1, S):
+        raise ConfigError(f"shape_stage must have shape ({N}, 3) or ({S}, {N}, 3), got {np.shape(shape_stage)}")
+    if shape_stage is not None:
+        x0 = sp.fill(x0, np.isfinite(x0).all(axis=2))[0]
+    val, d1, d2, _ = _spatial_fields(sp, psi[nodes], Xs.transpose(1, 0, 2).reshape(n, 3 * S),
+                                     x0.transpose(1, 0, 2).reshape(n, -1), ks, kg, c, R0, operators)
+    x_fit = np.full((S, N, 3), np.nan)
+    tangents = np.full((S, N, 2, 3), np.nan)
+    x_fit[:, nodes] = val.reshape(n, S, 3).transpose(1, 0, 2)
+    tangents[:, nodes, 0] = d1.reshape(n, S, 3).transpose(1, 0, 2)
+    tangents[:, nodes, 1] = d2.reshape(n, S, 3).transpose(1, 0, 2)
+    return x_fit, tangents
+
+
 def _smoothings(smoothing, smoothing_t):
     """Checked spatial smoothing (a number, "gcv" or a (shape, motion) pair) and temporal smoothing."""
     if isinstance(smoothing, tuple) and len(smoothing) == 2:
@@ -282,26 +347,12 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
         ks, info["gcv"] = gcv_displacement(psi_n, Xs, Vu, c=c, R0=R0)
     elif isinstance(ks, tuple):
         kg, ks = ks
-    ops = {} if ops is None else ops
-    if ks > 1.0:
-        sp_motion = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=ks)
-    else:
-        sp_motion = sp
     cols = np.flatnonzero(np.repeat(ok_t, 3))
     Yall = np.concatenate([Y0[:, cols], Yr], axis=1)
     del Y0  # the stage data of many times are large: free each as soon as it is used
-    split = kg is not None and kg != ks
-    if split:
-        # shape and motion apart: x = S_shape x_0 + S_motion (x - x_0). The temporal weights of a value
-        # sum to 1 ({1, t} are reproduced), so the columns minus x_0 are the combined displacements
-        x0 = Xs[0] if x0 is None else x0
-        Yall -= np.tile(x0, cols.size // 3 + 1)
-    val, d1, d2 = sp_motion.evaluate(Yall)
+    x0 = Xs[0] if x0 is None else x0
+    val, d1, d2, sp_motion = _spatial_fields(sp, psi_n, Yall, x0, ks, kg, c, R0, ops)
     del Yall
-    if split:
-        sp_shape = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
-        for a, b in zip((val, d1, d2), sp_shape.evaluate(x0)):
-            a += np.tile(b, cols.size // 3 + 1)
     # the velocity's temporal weights sum to 0: it is a displacement rate, the motion's operator alone
     vel = sp_motion.evaluate(Y1[:, cols], derivatives=False)[0]
     del Y1
@@ -310,6 +361,30 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
     if kg is not None:
         info["smoothing_shape"] = float(kg)
     return val, d1, d2, vel, np.flatnonzero(ok_t)
+
+
+def _spatial_fields(sp, psi_n, Y, x0, ks, kg, c, R0, ops):
+    """Value and ``d/dPsi^alpha`` (n, 3 m) of stage columns ``Y`` (n, 3 m: x, y, z of m stages side by side).
+
+    ``ks``: the spacing of the spatial operator (1: ``sp``, the
+    interpolation); with a shape spacing ``kg`` other than ``ks`` the shape
+    and the motion are regressed apart, ``x = S_shape x0 + S_motion (x -
+    x0)``, ``x0`` (n, 3) the shape stage, or (n, 3 m) one per column triple.
+    ``Y`` is overwritten. Returns ``val, d1, d2`` and the motion's operator.
+    """
+    ops = {} if ops is None else ops
+    sp_motion = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=ks) if ks > 1.0 else sp
+    split = kg is not None and kg != ks
+    reps = Y.shape[1] // np.shape(x0)[1]
+    if split:
+        # the temporal weights of a value sum to 1 ({1, t} are reproduced), so columns minus x0 are displacements
+        Y -= np.tile(x0, reps)
+    val, d1, d2 = sp_motion.evaluate(Y)
+    if split:
+        sp_shape = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
+        for a, b in zip((val, d1, d2), sp_shape.evaluate(x0)):
+            a += np.tile(b, reps)
+    return val, d1, d2, sp_motion
 
 
 def _assemble(fields, psi, te, nodes, used, was_filled, ed_nodes, shape, info, kernel, t0):

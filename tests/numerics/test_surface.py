@@ -13,6 +13,7 @@ from irdic.numerics.temporal import TemporalInterpolant
 from irdic.surface import (
     SpatialInterpolant,
     edge_distance,
+    fit_stages,
     fit_surface,
     gcv_spatial,
     smooth_series,
@@ -482,6 +483,32 @@ def test_missing_points_do_not_poison_their_neighbours(tube_fit):
     err_v = np.abs(sf.velocity - v_truth)[1:-1, near].max()
     assert err_v < 0.5 * np.abs(v_space - v_truth)[1:-1, near].max()
 
+
+@pytest.mark.parametrize("smoothing", [None, 3.0, (4.0, 3.0)])
+def test_fit_stages_is_fit_surface_at_its_stage_times(tube_fit, smoothing):
+    """Interpolating in time, the surface at a stage's own time is that stage's spatial fit alone; stacked
+    stages with their own shape stages are each fitted as alone."""
+    _, times, X, _ = tube_fit
+    rng = np.random.default_rng(4)
+    Xn = X + rng.standard_normal(X.shape) * 0.003  # regression must see something to smooth
+    ops = {}  # one fill operator for both (the fields stage shares it the same way)
+    sf = fit_surface(Xn, times, parametrisation="cylinder", smoothing=smoothing, operators=ops)
+    nodes = np.flatnonzero(np.isfinite(sf.x).all(axis=-1).any(axis=0))
+    sub = np.array([0, 3, 8, 20])  # 3: a stage with missing points
+    x_fit, tang = fit_stages(Xn[sub], sf.psi, nodes=nodes, smoothing=smoothing, operators=ops)
+    scale = np.nanmax(np.abs(sf.tangents))
+    np.testing.assert_allclose(x_fit, sf.x[sub], rtol=0, atol=1e-8 * np.nanmax(np.abs(sf.x)))
+    np.testing.assert_allclose(tang, sf.tangents[sub], rtol=0, atol=1e-8 * scale)
+    np.testing.assert_allclose(tang[0], sf.ref_tangents, rtol=0, atol=1e-8 * scale)
+    # stacked with another record's stages and shape stage: each as alone
+    Xm = X + rng.standard_normal(X.shape) * 0.003
+    _, tang_m = fit_stages(Xm[sub], sf.psi, nodes=nodes, smoothing=smoothing, operators=ops)
+    shapes = np.concatenate([np.broadcast_to(Xn[0], (4,) + Xn[0].shape), np.broadcast_to(Xm[0], (4,) + Xm[0].shape)])
+    _, both = fit_stages(np.concatenate([Xn[sub], Xm[sub]]), sf.psi, nodes=nodes, smoothing=smoothing,
+                         shape_stage=shapes, operators=ops)
+    np.testing.assert_allclose(both[:4], tang, rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(both[4:], tang_m, rtol=0, atol=1e-10 * scale)
+    assert np.nanmax(np.abs(tang_m - tang)) > 1e3 * 1e-10 * scale  # the two records' tangents differ
 
 def test_local_and_global_solvers_agree_on_strain(tube_fit):
     tube, times, X, sf = tube_fit
