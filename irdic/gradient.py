@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import ConfigError
-from .numerics.temporal import smooth_series
+from .numerics.series import smooth_series
 from .validation import float_array, shaped_array
 
 __all__ = [
@@ -195,7 +195,7 @@ def rate_from_series(theta, times, t_eval=None, *, smoothing=None, c=1.0, R0=1.0
     ``Theta_k(t) = Theta(x(Psi_k, t), t)``, so ``d Theta_k / dt`` is the material
     rate (eq:tempVeloc) without pixel derivatives or velocities. With
     ``smoothing="gcv"`` the series are smoothed by temporal IMQ regression first
-    (see :func:`irdic.numerics.temporal.smooth_series`): the way to a usable rate from
+    (see :func:`irdic.numerics.series.smooth_series`): the way to a usable rate from
     noisy IR data.
 
     Parameters

@@ -2,7 +2,8 @@
 
 from .imq import imq, imq_dr, imq_matrix, imq_planar
 from .saddle import SaddleFactor
-from .temporal import SeriesFit, TemporalInterpolant, gcv_temporal, smooth_series
+from .series import SeriesFit, smooth_series
+from .temporal import TemporalInterpolant, gcv_temporal
 
 __all__ = [
     "imq",

@@ -6,7 +6,7 @@ DIC series (:mod:`irdic.surface`) are treated alike: an IMQ kernel
 monomials {1, t} (the paper's interpolant; c = 1, R0 = 1 s), or, for noisy
 series, a least-squares regression with fewer centres whose spacing
 generalised cross-validation can choose (:func:`gcv_temporal`).
-:func:`smooth_series` applies the operator to any per-point series.
+:func:`irdic.numerics.series.smooth_series` applies the operator to any per-point series.
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ from __future__ import annotations
 import functools
 import logging
 import math
-from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -22,10 +21,9 @@ import scipy.linalg
 from ..errors import ConfigError, DataError, GeometryError
 from ..validation import as_int, float_array, increasing_times, positive, smoothing_factor
 from .imq import imq, imq_dr, regression_R0
-from .patterns import same_patterns
 from .saddle import SaddleFactor
 
-__all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "SeriesFit", "smooth_series", "temporal_reach",
+__all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "temporal_reach",
            "temporal_window", "REACH_TOL", "REGRESSION_SPACINGS"]
 
 log = logging.getLogger(__name__)
@@ -310,133 +308,6 @@ def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=40
     best = min(table, key=lambda r: r[2])
     log.info("temporal GCV: centres every %.3g times (%d parameters of %d)", best[0], best[1], M)
     return best[0], table
-
-
-class SeriesFit(NamedTuple):
-    """Result of :func:`smooth_series`."""
-
-    value: np.ndarray
-    """(T, ...) smoothed (or interpolated) values at the evaluation times."""
-    rate: np.ndarray
-    """(T, ...) time derivative (units per s)."""
-    smoothing: float
-    """Centre spacing factor used (1 = interpolation)."""
-    gcv: list
-    """GCV table ``(k, n_parameters, gcv)`` when chosen by GCV, else empty."""
-
-
-def _fill_series(F2, t, c, R0, window=None):
-    """Fill NaN entries of each column from its own valid times; returns the dead columns."""
-    bad = ~np.isfinite(F2)
-    dead = np.zeros(F2.shape[1], bool)
-    cols = np.flatnonzero(bad.any(axis=0))
-    if cols.size == 0:
-        return dead
-    if window is not None:
-        return _fill_series_windowed(F2, bad, cols, dead, t, c, R0, window)
-    # columns with the same gaps share one interpolant (a point cloud repeats few patterns)
-    for js in same_patterns(bad[:, cols].T):
-        js = cols[js]
-        ok = ~bad[:, js[0]]
-        if ok.sum() < 2:
-            dead[js] = True
-            F2[:, js] = 0.0
-            continue
-        fill = TemporalInterpolant(t[ok], c=c, R0=R0).weights(t[~ok]) @ F2[np.ix_(ok, js)]
-        # NaN rows lie outside the valid span: the nearest valid value (flat), as np.interp
-        out = ~np.isfinite(fill).all(axis=1)
-        if out.any():
-            valid = np.flatnonzero(ok)
-            fill[out] = F2[np.where(t[~ok][out] < t[valid[0]], valid[0], valid[-1])][:, js]
-        F2[np.ix_(~ok, js)] = fill
-    return dead
-
-
-def _fill_series_windowed(F2, bad, cols, dead, t, c, R0, window):
-    """:func:`_fill_series` with the windowed operator: each gap from the samples of its own window.
-
-    A gap's weights are those of :meth:`TemporalInterpolant._windowed`: the
-    global interpolant of the column's valid samples within ``window`` of
-    the gap's bracket. They depend only on those samples' times relative to
-    the gap, so they are cached by that pattern: a point cloud with scattered
-    failed points has nearly as many gap patterns per column as columns, but
-    few local ones.
-    """
-    cache = {}
-    snap = TIME_SNAP * R0
-    for j in cols:
-        idx = np.flatnonzero(~bad[:, j])
-        if idx.size < 2:
-            dead[j] = True
-            F2[:, j] = 0.0
-            continue
-        tv, miss = t[idx], np.flatnonzero(bad[:, j])
-        te = t[miss]
-        jj = np.clip(np.searchsorted(tv, te + snap, side="right"), 1, tv.size - 1)
-        lo, hi = np.maximum(jj - 1 - window, 0), np.minimum(jj + 1 + window, tv.size)
-        for r, m in enumerate(miss):
-            if not tv[0] - snap <= te[r] <= tv[-1] + snap:
-                F2[m, j] = np.interp(te[r], tv, F2[idx, j])  # outside the valid span: nearest valid value
-                continue
-            a, b = int(lo[r]), int(hi[r])
-            key = tuple(np.round((tv[a:b] - te[r]) / R0, 9))
-            w = cache.get(key)
-            if w is None:
-                w = cache[key] = TemporalInterpolant(tv[a:b], c=c, R0=R0).weights(te[r:r + 1])[0]
-            F2[m, j] = w @ F2[idx[a:b], j]
-    return dead
-
-
-def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0, record_times=None):
-    """Value and rate of time series by the temporal IMQ interpolant or regression.
-
-    For point temperatures ``Theta_k(t_n)`` at fixed material points this gives
-    the material temperature rate directly (the derivative at fixed ``Psi``).
-
-    Parameters
-    ----------
-    values : array_like, shape (M, ...)
-        Series at ``times``; NaN entries are filled by interpolating each
-        series over its own valid times (at least 2 needed, else NaN).
-    times : array_like, shape (M,)
-        Times (s), strictly increasing.
-    t_eval : array_like, shape (T,), optional
-        Evaluation times; default ``times``.
-    smoothing : None, float >= 1 or "gcv"
-        None/1: interpolation; k: regression; "gcv": k by :func:`gcv_temporal`.
-    c, R0 : float
-        Kernel shape factor and time normalisation (s).
-    record_times : array_like, optional
-        The whole record's times when ``times`` are a time chunk's window:
-        the operator's window (:func:`temporal_window`) is the record's.
-        Default ``times``.
-
-    Returns
-    -------
-    SeriesFit
-    """
-    t = increasing_times(times, "times", "n_times")
-    F = float_array(values, "values")
-    if F.ndim < 1 or F.shape[0] != t.size:
-        raise ConfigError(f"values must have M = {t.size} rows (one per time), got shape {F.shape}")
-    k = smoothing_factor(smoothing, "smoothing")
-    tail = F.shape[1:]
-    F2 = F.reshape(t.size, -1).copy()
-    record = t if record_times is None else increasing_times(record_times, "record_times", "n_times")
-    dead = _fill_series(F2, t, c, R0, temporal_window(record, c=c, R0=R0))
-    table = []
-    if k == "gcv":
-        k, table = gcv_temporal(t, F2[:, ~dead] if (~dead).any() else F2, c=c, R0=R0)
-    ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k, window=temporal_window(record, c=c, R0=R0, smoothing=k))
-    W0 = ts.weights(t_eval, 0)
-    W1 = ts.weights(t_eval, 1)
-    with np.errstate(invalid="ignore"):
-        val = W0 @ F2
-        rate = W1 @ F2
-    val[:, dead] = np.nan
-    rate[:, dead] = np.nan
-    T = W0.shape[0]
-    return SeriesFit(val.reshape((T,) + tail), rate.reshape((T,) + tail), float(k), table)
 
 
 def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):

@@ -39,7 +39,8 @@ from ..strain import strain
 from ..surface import fit_surface, surface_geometry, surface_parameters
 from ..surface.parametrisation import median_spacing
 from ..chunks import chunk_slice, gathered, window
-from ..numerics.temporal import smooth_series, temporal_window
+from ..numerics.series import fill_series, smooth_series
+from ..numerics.temporal import temporal_window
 from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
@@ -175,7 +176,10 @@ def _fill_operators(points, x, p) -> dict:
     kernel of ``c_space``, ``R0_space`` on the surface parameters). Its rows
     of ``G`` come from one pass over the local tiles, for every point that
     lacks a position or a temperature anywhere in the record, so no later
-    fill factorises the tiles again.
+    fill factorises the tiles again; the same pass gives the interpolant's
+    derivative weights (:meth:`~irdic.surface.SpatialInterpolant.local_pass`),
+    so its evaluations (the exact interpolation, and the reference of the
+    regressions' bias estimates) are one product per tile.
     """
     from ..surface import shared_interpolant
 
@@ -186,7 +190,7 @@ def _fill_operators(points, x, p) -> dict:
     gaps = (~np.isfinite(x).all(axis=2) | ~np.isfinite(theta)).any(axis=0)[have]
     if gaps.any() and have.sum() >= 6:
         shared_interpolant(ops, psi[have], c=p["c_space"], R0=p["R0_space"],
-                           solver=p["solver"]).coefficient_rows(np.flatnonzero(gaps))
+                           solver=p["solver"]).local_pass(np.flatnonzero(gaps))
     return ops
 
 
@@ -379,6 +383,8 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, o
         _, th_s, _ = _regressed_gradient(th_in, sf.psi, None, ks, **kw)
     else:
         th_in, ts_in, t_eval, record, th_s = theta, t, None, t, value
+    # the three regressions in time below fill the same gaps: once, together
+    th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
     fit = smooth_series(th_s, ts_in, t_eval, smoothing=p["temperature_smoothing"], c=p["c_time"], R0=p["R0_time"],
                         record_times=record)
     chosen["temperature_smoothing"] = fit.smoothing

@@ -391,18 +391,24 @@ def _local_bias(d, noise_var, psi, trusted=None):
     out = np.zeros_like(a)
     if have.size == 0:
         return out
+    from scipy import sparse
     from scipy.spatial import cKDTree
 
     k = min(BIAS_NEIGHBOURS, have.size)
-    nb = have[cKDTree(psi[have]).query(psi[have], k=k)[1].reshape(have.size, k)]
+    nb = cKDTree(psi[have]).query(psi[have], k=k)[1].reshape(have.size, k)
+    # the sum over each point's neighbours is one sparse product over all times and components
+    # (a[:, nb] at once would hold T x N x k (x 3) values: GBs at paper scale)
+    S = sparse.csr_matrix((np.ones(nb.size), (np.repeat(np.arange(have.size), k), nb.ravel())),
+                          shape=(have.size, have.size))
+
+    def neighbour_sum(v):
+        vh = np.moveaxis(v[:, have], 1, 0)
+        return np.moveaxis((S @ vh.reshape(have.size, -1)).reshape(vh.shape), 0, 1)
+
     s = np.zeros_like(a)
     n = np.zeros(a.shape)
-    # neighbour by neighbour: a[:, nb] at once would hold T x N x k (x 3) values (GBs at paper scale)
-    sh, nh = np.zeros(a[:, have].shape), np.zeros(a[:, have].shape)
-    for j in range(k):
-        sh += a[:, nb[:, j]]
-        nh += ok[:, nb[:, j]]
-    s[:, have], n[:, have] = sh, nh
+    s[:, have] = neighbour_sum(a)
+    n[:, have] = neighbour_sum(np.broadcast_to(ok, a.shape).astype(float))
     s2, n2 = s.copy(), n.copy()
     s2[1:] += s[:-1]
     s2[:-1] += s[1:]

@@ -117,7 +117,7 @@ shrinks the signal (GCV then chose ``lam`` too small: rate error reduced only
 1.3x on the heating curve).
 """
 
-from ..numerics.temporal import SeriesFit, smooth_series
+from ..numerics.series import SeriesFit, smooth_series
 from .fit import SurfaceFields, fit_stages, fit_surface
 from .geometry import Geometry, edge_distance, surface_geometry
 from .interpolation import SpatialInterpolant, shared_interpolant

@@ -11,8 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, DataError, IrdicWarning
-from ..numerics.imq import imq
-from ..numerics.saddle import solve_dense
+from ..numerics.series import cardinal_weights
 from ..numerics.temporal import TemporalInterpolant, gcv_temporal, temporal_window
 from ..validation import as_int, choice, float_array, increasing_times, psi_array, smoothing_factor
 from .geometry import edge_distance
@@ -55,9 +54,7 @@ def _temporal_fill(X, valid, times, c, R0, max_gap, window=8):
         key = tuple(np.round(s, 9))
         w = cache.get(key)
         if w is None:
-            # the cardinal weights at t_k: the kernel and monomials {1, s} evaluated at s = 0
-            A = imq(s[:, None] - s[None, :], c)
-            w = cache[key] = solve_dense(A, np.c_[np.ones(s.size), s], imq(-s, c), np.array([1.0, 0.0]))[0]
+            w = cache[key] = cardinal_weights(s, c)
         out[k, i] = w @ X[sel, i]
     return out, todo
 
@@ -472,7 +469,7 @@ def _fill_missing(sp, Xu, Vu, tu, T, ks, fill, c_t, R0_t, max_gap, info):
         chosen, tiles = sp.resolve(Xu.shape[1], 3 * T + 3, 2, sp.psi)
         sp.info["solver"] = chosen
         if chosen == "local":
-            sp.local_operator(kinds=(1, 2), g_rows=np.flatnonzero((~Vu).any(axis=0)), tiles=tiles)
+            sp.local_pass(np.flatnonzero((~Vu).any(axis=0)), tiles=tiles)
     Xs = sp.fill(Xu, Vu)[0] if fill != "time" else None
     by_time = np.zeros_like(Vu)
     Xt = Xs

@@ -400,6 +400,34 @@ class SpatialInterpolant:
         self.local_operator(kinds=(), g_rows=rows)
         return self._g
 
+    def local_pass(self, g_rows, tiles=None):
+        """Rows ``g_rows`` of ``G`` and the derivative weights at the points, from one pass over the tiles.
+
+        A fill factorises the tiles anyway (:meth:`coefficient_rows`); the same
+        factorisations give the weights of ``d/dPsi^alpha`` at the points for a
+        fraction more, and an evaluation at the points is then one product per
+        tile. So ``"auto"`` resolves to ``"local"`` from then on (the global
+        factorisation and its kernel rows, rebuilt for every evaluation, are
+        never needed); ``"global"`` builds the rows of ``G`` only. Nothing is
+        rebuilt when the weights and the rows are there already.
+        """
+        rows = np.unique(np.asarray(g_rows, dtype=np.int64))
+        if self.solver == "global":
+            self.coefficient_rows(rows)
+            return
+        op = self._local
+        built = op is not None and op.at_nodes and {1, 2} <= set(op.kinds)
+        if built and self._g is not None and np.isin(rows, self._g[0]).all():
+            return
+        if self._g is not None:
+            rows = np.union1d(rows, self._g[0])
+        if tiles is None and self.core is None:
+            # the tiles the rows of G alone would take: the fill stays what it is without the weights
+            tiles = self._choose_core(self.psi[rows], 1, 3)[0]
+        self._chosen = "local"
+        self.info["solver"] = "local"
+        self.local_operator(kinds=(1, 2), g_rows=rows, tiles=tiles)
+
     # ---- regression ------------------------------------------------------
 
     def _ls_factor(self):

@@ -7,7 +7,8 @@ import pytest
 
 from irdic.errors import ConfigError, DataError
 from irdic.chunks import window as chunk_window
-from irdic.numerics.temporal import TemporalInterpolant, smooth_series, temporal_window
+from irdic.numerics.series import smooth_series
+from irdic.numerics.temporal import TemporalInterpolant, temporal_window
 
 # --------------------------------------------------------------------------
 # time
@@ -158,7 +159,7 @@ def test_smooth_series_of_a_chunk_uses_the_record_window():
 def test_gap_fill_equals_each_series_own_interpolant(R0):
     """Series with scattered gaps (failed DIC points), shared gap patterns, series ends and all-but-one gaps:
     the grouped and the windowed fills give what each column's own (windowed) interpolant gives."""
-    from irdic.numerics.temporal import _fill_series
+    from irdic.numerics.series import fill_gaps
 
     rng = np.random.default_rng(0)
     t = np.arange(200) * 0.1
@@ -170,7 +171,7 @@ def test_gap_fill_equals_each_series_own_interpolant(R0):
     n = temporal_window(t, c=1.0, R0=R0)
     assert (n is None) == (R0 == 1.0)  # both operators are exercised
     got = F.copy()
-    dead = _fill_series(got, t, 1.0, R0, n)
+    dead = fill_gaps(got, t, 1.0, R0, n)
     assert np.flatnonzero(dead).tolist() == [8]
     for j in range(F.shape[1]):
         ok = np.isfinite(F[:, j])
@@ -193,3 +194,23 @@ def test_same_patterns_groups_identical_rows():
     wide = np.zeros((2, 20), bool)
     wide[1, 17] = True  # beyond the first packed byte
     assert sorted(g.tolist() for g in same_patterns(wide)) == [[0], [1]]
+
+
+def test_fill_series_of_several_arrays_is_each_filled_alone():
+    """Arrays filled together (one interpolant per pattern of missing times) are what smooth_series fills
+    in each alone; a series with fewer than two valid times stays NaN."""
+    from irdic.numerics.series import fill_series
+
+    rng = np.random.default_rng(1)
+    t = np.arange(60) * 0.25
+    A = np.cos(t)[:, None] + 0.01 * rng.normal(size=(60, 40))
+    A[rng.random(A.shape) < 0.05] = np.nan
+    A[1:, 3] = np.nan  # one valid time: dead
+    B = (2 * A + 1).reshape(60, 20, 2)  # the same gaps, another shape
+    fa, fb = fill_series([A, B], t, c=1.0, R0=1.0)
+    assert fa.shape == A.shape and fb.shape == B.shape
+    assert np.isnan(fa[:, 3]).all() and np.isfinite(np.delete(fa, 3, axis=1)).all()
+    ok = np.isfinite(A).sum(axis=0) >= 2
+    for arr, filled in ((A, fa), (B.reshape(60, 40), fb.reshape(60, 40))):
+        interp = smooth_series(arr[:, ok], t, smoothing=None, c=1.0, R0=1.0).value  # fills, then interpolates
+        np.testing.assert_allclose(filled[:, ok], interp, rtol=0, atol=1e-9)
