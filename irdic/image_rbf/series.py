@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import ConfigError, DataError, IrdicWarning
 from ..logs import Progress
 from ..numerics.temporal import TemporalInterpolant
+from ..threads import blas_threads
 from ..validation import as_int, bool_mask, choice, float_array
 from .interpolant import METHODS, MaskedGridInterpolant
 from .tiles import TileCache
@@ -236,7 +237,11 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
     F, lookup = _pixel_series(frames, union, ft, *labels, name)
     interp_args = dict(method=method, c=c, R0=R0, halo=halo, tile=tile)
-    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
+    # the work is thousands of small tile factorisations and solves (a few hundred pixels each), where
+    # threaded BLAS only adds synchronisation: slower even on a quiet machine, far slower beside another
+    # job (benchmarks/README.md, moving specimen)
+    with blas_threads(1):
+        out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
     return SeriesEvaluation(*out, in_span)
 
 
