@@ -237,11 +237,7 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
     F, lookup = _pixel_series(frames, union, ft, *labels, name)
     interp_args = dict(method=method, c=c, R0=R0, halo=halo, tile=tile)
-    # the work is thousands of small tile factorisations and solves (a few hundred pixels each), where
-    # threaded BLAS only adds synchronisation: slower even on a quiet machine, far slower beside another
-    # job (benchmarks/README.md, moving specimen)
-    with blas_threads(1):
-        out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
+    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
     return SeriesEvaluation(*out, in_span)
 
 
@@ -253,6 +249,7 @@ def _frame_times(frame_times, n_frames):
     return ft
 
 
+@blas_threads(1)  # thousands of small tile factorisations: threaded BLAS only synchronises (issue 10)
 def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args):
     """theta, d/du, d/dv, d/dt, edge distance (n_times, M) for the in-span times, chunk by chunk."""
     ks = np.flatnonzero(in_span)

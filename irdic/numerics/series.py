@@ -169,7 +169,8 @@ class SeriesFit(NamedTuple):
     """GCV table ``(k, n_parameters, gcv)`` when chosen by GCV, else empty."""
 
 
-def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0, record_times=None):
+def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0, record_times=None,
+                  gcv_max_fraction=0.5):
     """Value and rate of time series by the temporal IMQ interpolant or regression.
 
     For point temperatures ``Theta_k(t_n)`` at fixed material points this gives
@@ -192,6 +193,8 @@ def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0,
         The whole record's times when ``times`` are a time chunk's window:
         the operator's window (:func:`temporal_window`) is the record's.
         Default ``times``.
+    gcv_max_fraction : float
+        ``max_fraction`` of :func:`~irdic.numerics.temporal.gcv_temporal` (with ``smoothing="gcv"``).
 
     Returns
     -------
@@ -208,7 +211,8 @@ def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0,
     dead = fill_gaps(F2, t, c, R0, temporal_window(record, c=c, R0=R0))
     table = []
     if k == "gcv":
-        k, table = gcv_temporal(t, F2[:, ~dead] if (~dead).any() else F2, c=c, R0=R0)
+        k, table = gcv_temporal(t, F2[:, ~dead] if (~dead).any() else F2, c=c, R0=R0,
+                                max_fraction=gcv_max_fraction)
     ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k, window=temporal_window(record, c=c, R0=R0, smoothing=k))
     W0 = ts.weights(t_eval, 0)
     W1 = ts.weights(t_eval, 1)

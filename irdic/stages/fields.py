@@ -13,13 +13,11 @@ Jacobian ``J`` (px/mm) the paper's relations give
 - the in-plane Green-Lagrange strain on the reference tangent plane, its
   principal values and directions, and an equivalent strain.
 
-Beyond the paper (its own outlook for noisy IR data): with
-``temperature_smoothing`` ("gcv" or a number) the material rate is the time
-derivative of each point's temperature series after IMQ regression in time
-(the series is Lagrangian, so this is the material rate without pixel
-derivatives); the local part is then the difference of that rate and the
-convective part. ``surface_smoothing``/``surface_smoothing_time`` do the same
-for the coordinates. Interpolation (None) stays the default.
+Beyond the paper (its outlook for noisy IR data): regression in space and
+time where the estimated noise matters ("auto", the default; ``null`` is the
+paper's interpolation), the rate then the time derivative of each point's
+Lagrangian series (:func:`_space_time`), and per-point uncertainties
+(:mod:`irdic.stages.uncertainty`).
 """
 
 from __future__ import annotations
@@ -40,7 +38,7 @@ from ..surface import fit_surface, surface_geometry, surface_parameters
 from ..surface.parametrisation import median_spacing
 from ..chunks import chunk_slice, gathered, window
 from ..numerics.series import fill_series, smooth_series
-from ..numerics.temporal import temporal_window
+from ..numerics.temporal import RATE_MAX_FRACTION, temporal_window
 from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
@@ -64,10 +62,9 @@ _SMOOTHING = ("surface_smoothing", "surface_smoothing_time", "temperature_smooth
 
 
 def _smoothing(name, value):
-    if value is None or value == "gcv" or value == "auto":
+    if value is None or value in ("gcv", "auto") or (isinstance(value, (int, float)) and not isinstance(value, bool)
+                                                     and value >= 1):
         return value
-    if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 1:
-        return float(value)
     raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv', 'auto' or a number >= 1, got {value!r}")
 
 
@@ -213,7 +210,8 @@ def _surface_kw(p):
 def _record_reach(t, p):
     """Stages each side a time needs (:func:`~irdic.numerics.temporal.temporal_window`): the widest of the
     temporal operators in use; None for the whole record."""
-    ks = [None] + [p[k] for k in ("temperature_smoothing", "surface_smoothing_time") if p[k] is not None]
+    ks = [None] + [p.get(k) for k in ("temperature_smoothing", "temperature_smoothing_rate", "surface_smoothing_time")
+                   if p.get(k) is not None]
     reach = [temporal_window(t, c=p["c_time"], R0=p["R0_time"], smoothing=k) for k in ks]
     return None if any(r is None for r in reach) else max(reach)
 
@@ -272,6 +270,9 @@ def _resolve_gcv(points, x, t, psi, p, ops=None):
                                         R0=p["R0_space"], ops=ops)[1]
         p["temperature_smoothing"] = smooth_series(theta, t[w], smoothing="gcv", c=p["c_time"],
                                                    R0=p["R0_time"]).smoothing
+        if p["temperature_smoothing_space"] is not None:  # the rate's own spacing (see _rate_series)
+            p["temperature_smoothing_rate"] = smooth_series(theta, t[w], c=p["c_time"], R0=p["R0_time"],
+                                                            gcv_max_fraction=RATE_MAX_FRACTION).smoothing
     log.info("fields: smoothing chosen once on DIC times %d..%d: %s", w.start, w.stop - 1,
              ", ".join(f"{k} {p[k]}" for k in gcv))
     return p
@@ -362,13 +363,10 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, o
     spatial regression of each stage removes most of the noise first
     (GCV over the points, whose noise is white in space); GCV of the
     regressed series in time then judges a nearly noise-free signal and
-    chooses the light smoothing the signal needs. The value, gradient and
-    rate are those of one field, ``S_t(S_x Θ)``: the gradient is the spatial
-    regression's derivative of the temporally regressed values (the spatial
-    regression is a projection, so this is the regressed field's own
-    gradient), the rate the temporal derivative of the spatially regressed
-    series. Measured on the tube (demo, seed 3, 0.05 K, 2 decimals): rate
-    9.6 -> 3.6 %, gradient 13.1 -> 7.8 %, temperature 0.019 -> 0.008 K.
+    chooses the light smoothing the signal needs. The gradient is the spatial
+    regression's derivative of the temporally regressed values (the regressed
+    field's own gradient), the rate the temporal derivative of the spatially
+    regressed series, by a lighter regression in time (:func:`_rate_series`).
     """
     kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
     chosen = {"temperature_smoothing": None, "temperature_smoothing_space": None}
@@ -383,23 +381,46 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, o
         _, th_s, _ = _regressed_gradient(th_in, sf.psi, None, ks, **kw)
     else:
         th_in, ts_in, t_eval, record, th_s = theta, t, None, t, value
-    # the three regressions in time below fill the same gaps: once, together
+    # the regressions in time below fill the same gaps: once, together
     th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
-    fit = smooth_series(th_s, ts_in, t_eval, smoothing=p["temperature_smoothing"], c=p["c_time"], R0=p["R0_time"],
-                        record_times=record)
-    chosen["temperature_smoothing"] = fit.smoothing
-    total = np.where(visible, fit.rate, np.nan)
+    tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)
+    fit = smooth_series(th_s, ts_in, t_eval, smoothing=p["temperature_smoothing"], **tkw)
+    rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw)
+    chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing
+    total = np.where(visible, rate_fit.rate, np.nan)
     smoothed = np.where(visible, fit.value, np.nan)
     grad, value, _ = _regressed_gradient(smoothed, sf.psi, geo.dual, ks, **kw)
     # the spatial regression's bias is judged against the temporal regression of the points' own series
-    own = smooth_series(th_in, ts_in, t_eval, smoothing=fit.smoothing, c=p["c_time"], R0=p["R0_time"],
-                        record_times=record)
+    own = smooth_series(th_in, ts_in, t_eval, smoothing=fit.smoothing, **tkw)
+    own_rate = own.rate if rate_fit.smoothing == fit.smoothing else \
+        smooth_series(th_in, ts_in, t_eval, smoothing=rate_fit.smoothing, **tkw).rate
     # the temporal regression's bias: against the exact interpolation in time of the same (regressed) series,
     # whose noise is the regressed series' (against the points' own series the estimate drowned in their noise)
-    exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, c=p["c_time"], R0=p["R0_time"], record_times=record)
-    bias_inputs = (theta, grad, np.where(visible, own.value, np.nan), value, total - exact.rate, total - own.rate,
+    exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)
+    bias_inputs = (theta, grad, np.where(visible, own.value, np.nan), value, total - exact.rate, total - own_rate,
                    smoothed - exact.value)
     return grad, total, total - convective, value, bias_inputs, chosen
+
+
+def _rate_series(th_s, ts_in, t_eval, p, fit, tkw):
+    """The temporal regression of the spatially regressed series ``th_s`` whose derivative is the rate.
+
+    With ``temperature_smoothing`` "gcv": GCV's spacing among candidates with up to
+    :data:`~irdic.numerics.temporal.RATE_MAX_FRACTION` parameters per stage (the value's: 1/2), or that
+    resolved for the record (``p["temperature_smoothing_rate"]``); a configured number serves both (``fit``).
+
+    Notes
+    -----
+    The value and gradient stay one field, ``S_x S_t2 S_x Θ``; the rate is ``∂_t S_t1 S_x Θ``, ``S_t1`` at
+    most as smooth; they differ by the heavier one's temporal bias, which the value's std holds. A fast
+    transient's rate at 2 Hz is bias-limited, the gradient noise-limited (benchmarks/README.md, issue 15).
+    """
+    k = p.get("temperature_smoothing_rate")
+    if k is None:
+        if p["temperature_smoothing"] != "gcv":
+            return fit
+        k = "gcv"
+    return smooth_series(th_s, ts_in, t_eval, smoothing=k, gcv_max_fraction=RATE_MAX_FRACTION, **tkw)
 
 
 def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, temperature_smoothing,

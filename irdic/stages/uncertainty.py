@@ -236,7 +236,12 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
                                  window=temporal_window(record, c=p["c_time"], R0=p["R0_time"], smoothing=kt))
         ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
                                  window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
-        W = (ts.weights(t, 0), ts.weights(t, 1), ti.weights(t, 0), ti.weights(t, 1))
+        # the rate may come from a lighter regression than the value (irdic.stages.fields._rate_series)
+        kr = chosen_k.get("temperature_smoothing_rate") or kt
+        tr = ts if kr == kt else TemporalInterpolant(
+            ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=kr,
+            window=temporal_window(record, c=p["c_time"], R0=p["R0_time"], smoothing=kr))
+        W = (ts.weights(t, 0), tr.weights(t, 1), ti.weights(t, 0), ti.weights(t, 1))
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
     if ks is not None:

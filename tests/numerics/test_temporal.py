@@ -214,3 +214,24 @@ def test_fill_series_of_several_arrays_is_each_filled_alone():
     for arr, filled in ((A, fa), (B.reshape(60, 40), fb.reshape(60, 40))):
         interp = smooth_series(arr[:, ok], t, smoothing=None, c=1.0, R0=1.0).value  # fills, then interpolates
         np.testing.assert_allclose(filled[:, ok], interp, rtol=0, atol=1e-9)
+
+
+def test_gcv_max_fraction_admits_the_rates_lighter_regression():
+    """Issue 15: GCV left out every candidate with more than M/2 parameters, so on 21 stages of a fast
+    transient it could not reach centres every 2 stages (13 parameters), where its own curve has its minimum;
+    the rate's regression admits up to RATE_MAX_FRACTION."""
+    from irdic.numerics.temporal import RATE_MAX_FRACTION, gcv_temporal
+
+    t = np.arange(21) * 0.5
+    rng = np.random.default_rng(0)
+    truth = np.sin(2 * np.pi * t / 4.0)  # a period of 8 stages
+    F = truth[:, None] + rng.normal(0.0, 0.005, (21, 200))
+    k_value, table = gcv_temporal(t, F)
+    assert all(p <= 10 for _, p, _ in table)
+    k_rate, table = gcv_temporal(t, F, max_fraction=RATE_MAX_FRACTION)
+    assert max(p for _, p, _ in table) == 13 and k_rate < k_value, (k_value, k_rate, table)
+    fit_v = smooth_series(F, t, smoothing="gcv")
+    fit_r = smooth_series(F, t, smoothing="gcv", gcv_max_fraction=RATE_MAX_FRACTION)
+    rate = (np.pi / 2.0 * np.cos(2 * np.pi * t / 4.0))[1:-1, None]
+    err = lambda fit: np.sqrt(np.mean((fit.rate[1:-1] - rate) ** 2))  # noqa: E731
+    assert err(fit_r) < 0.5 * err(fit_v), (err(fit_r), err(fit_v))
