@@ -517,7 +517,7 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
     Missing values of a time are filled from that time's visible points first;
     times with fewer than 6 visible points stay NaN. Returns ``(grad (T, N, 3)
     K/mm, value (T, N) degC, the centre spacing factor used)``; ``dual`` None:
-    the values only (the gradient stays NaN). ``dual`` (T_d, N, 2, 3) may hold
+    the values only (``grad`` None, no derivatives computed). ``dual`` (T_d, N, 2, 3) may hold
     fewer times than ``theta``: row ``m`` of ``theta`` then uses the dual basis
     of time ``m % T_d`` (noise probes stacked along time). ``ops``: a cache of
     the spatial operators (:func:`irdic.surface.shared_interpolant`) shared by
@@ -527,7 +527,7 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
 
     ops = {} if ops is None else ops
     T, N = theta.shape
-    grad = np.full((T, N, 3), np.nan)
+    grad = None if dual is None else np.full((T, N, 3), np.nan)
     val = np.full((T, N), np.nan)
     have = np.isfinite(psi).all(axis=1)
     visible = np.isfinite(theta) & have
@@ -541,7 +541,7 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
         k = _space_gcv_filled(filled, p, c=c, R0=R0)
     else:
         k = float(smoothing)
-    v0, d1, d2 = shared_interpolant(ops, p, c=c, R0=R0, smoothing=k).evaluate(filled.T, value=True)
+    v0, d1, d2 = shared_interpolant(ops, p, c=c, R0=R0, smoothing=k).evaluate(filled.T, derivatives=dual is not None)
     del filled
     cols = np.flatnonzero(have)
     if dual is not None:
@@ -552,7 +552,7 @@ def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
             g = d1[:, s:s + step].T[..., None] * D[:, :, 0]
             g += d2[:, s:s + step].T[..., None] * D[:, :, 1]
             grad[tt[:, None], cols] = g
-    grad[~visible] = np.nan
+        grad[~visible] = np.nan
     val[times[:, None], cols] = v0.T
     val[~visible] = np.nan
     return grad, val, k
