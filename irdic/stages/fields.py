@@ -268,8 +268,8 @@ def _resolve_gcv(points, x, t, psi, p, ops=None):
             # judged on the spatially regressed series, as the fields regress them (see _space_time)
             theta = _regressed_gradient(theta, psi, None, p["temperature_smoothing_space"], c=p["c_space"],
                                         R0=p["R0_space"], ops=ops)[1]
-        p["temperature_smoothing"] = smooth_series(theta, t[w], smoothing="gcv", c=p["c_time"],
-                                                   R0=p["R0_time"]).smoothing
+        theta = fill_series([theta], t[w], c=p["c_time"], R0=p["R0_time"])[0]  # once for both GCVs below
+        p["temperature_smoothing"] = smooth_series(theta, t[w], smoothing="gcv", c=p["c_time"], R0=p["R0_time"]).smoothing
         if p["temperature_smoothing_space"] is not None:  # the rate's own spacing (see _rate_series)
             p["temperature_smoothing_rate"] = smooth_series(theta, t[w], c=p["c_time"], R0=p["R0_time"],
                                                             gcv_max_fraction=RATE_MAX_FRACTION).smoothing
