@@ -108,16 +108,21 @@ def fill_series(values, times, *, c=1.0, R0=1.0, record_times=None):
         times stays NaN throughout.
     """
     t = increasing_times(times, "times", "n_times")
-    parts = [float_array(v, "values") for v in values]
-    for v in parts:
-        if v.ndim < 1 or v.shape[0] != t.size:
-            raise ConfigError(f"values must have M = {t.size} rows (one per time), got shape {v.shape}")
+    parts = [_series_array(v, t) for v in values]
     F = np.concatenate([v.reshape(t.size, -1) for v in parts], axis=1)
     record = t if record_times is None else increasing_times(record_times, "record_times", "n_times")
     dead = fill_gaps(F, t, c, R0, temporal_window(record, c=c, R0=R0))
     F[:, dead] = np.nan
     bounds = np.cumsum([0] + [v[0].size for v in parts])
     return [F[:, a:b].reshape(v.shape) for a, b, v in zip(bounds[:-1], bounds[1:], parts)]
+
+
+def _series_array(values, t):
+    """``values`` as a float array with one row per time of ``t`` (ConfigError otherwise)."""
+    F = float_array(values, "values")
+    if F.ndim < 1 or F.shape[0] != t.size:
+        raise ConfigError(f"values must have M = {t.size} rows (one per time), got shape {F.shape}")
+    return F
 
 
 def _fill_windowed(F2, bad, cols, dead, t, c, R0, window):
@@ -201,9 +206,7 @@ def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0,
     SeriesFit
     """
     t = increasing_times(times, "times", "n_times")
-    F = float_array(values, "values")
-    if F.ndim < 1 or F.shape[0] != t.size:
-        raise ConfigError(f"values must have M = {t.size} rows (one per time), got shape {F.shape}")
+    F = _series_array(values, t)
     k = smoothing_factor(smoothing, "smoothing")
     tail = F.shape[1:]
     F2 = F.reshape(t.size, -1).copy()

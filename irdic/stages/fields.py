@@ -62,10 +62,9 @@ _SMOOTHING = ("surface_smoothing", "surface_smoothing_time", "temperature_smooth
 
 
 def _smoothing(name, value):
-    if value is None or value in ("gcv", "auto") or (isinstance(value, (int, float)) and not isinstance(value, bool)
-                                                     and value >= 1):
-        return value
-    raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv', 'auto' or a number >= 1, got {value!r}")
+    number = isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 1
+    if not (value is None or value in ("gcv", "auto") or number):
+        raise ConfigError(f"fields.{name} must be null (interpolation), 'gcv', 'auto' or a number >= 1, got {value!r}")
 
 
 def _method_of(info) -> str:

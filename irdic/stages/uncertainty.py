@@ -232,15 +232,16 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     if kt is not None:
         # a chunk's regression runs over its window (T_w samples) and is evaluated at its own times
         record = t if window is None else window.record
-        ts = TemporalInterpolant(t if window is None else window.t, c=p["c_time"], R0=p["R0_time"], smoothing=kt,
-                                 window=temporal_window(record, c=p["c_time"], R0=p["R0_time"], smoothing=kt))
-        ti = TemporalInterpolant(ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=None,
-                                 window=temporal_window(record, c=p["c_time"], R0=p["R0_time"]))
+
+        def operator(k):  # the record's windowed temporal operator over the regression's samples
+            return TemporalInterpolant(t if window is None else window.t, c=p["c_time"], R0=p["R0_time"],
+                                       smoothing=k, window=temporal_window(record, c=p["c_time"], R0=p["R0_time"],
+                                                                           smoothing=k))
+
+        ts, ti = operator(kt), operator(None)
         # the rate may come from a lighter regression than the value (irdic.stages.fields._rate_series)
         kr = chosen_k.get("temperature_smoothing_rate") or kt
-        tr = ts if kr == kt else TemporalInterpolant(
-            ts.times, c=p["c_time"], R0=p["R0_time"], smoothing=kr,
-            window=temporal_window(record, c=p["c_time"], R0=p["R0_time"], smoothing=kr))
+        tr = ts if kr == kt else operator(kr)
         W = (ts.weights(t, 0), tr.weights(t, 1), ti.weights(t, 0), ti.weights(t, 1))
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
@@ -413,7 +414,7 @@ def _local_bias(d, noise_var, psi, trusted=None):
     s = np.zeros_like(a)
     n = np.zeros(a.shape)
     s[:, have] = neighbour_sum(a)
-    n[:, have] = neighbour_sum(np.broadcast_to(ok, a.shape).astype(float))
+    n[:, have] = neighbour_sum(ok.astype(float))
     s2, n2 = s.copy(), n.copy()
     s2[1:] += s[:-1]
     s2[:-1] += s[1:]

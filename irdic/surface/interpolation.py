@@ -376,9 +376,8 @@ class SpatialInterpolant:
         return op.apply(F, kinds)
 
     def coefficient_rows(self, rows):
-        """Rows of the data-to-RBF-coefficient map ``G`` for the points ``rows``.
-
-        Computed from local tiles (the rows decay like the cardinal functions).
+        """Rows of the data-to-RBF-coefficient map ``G`` for the points ``rows``, from local tiles
+        (the rows decay like the cardinal functions).
 
         Parameters
         ----------
@@ -388,17 +387,20 @@ class SpatialInterpolant:
         Returns
         -------
         rows : ndarray of int
-            The sorted unique rows.
+            The sorted rows built so far (those asked for and any built before).
         G : scipy.sparse.csr_matrix, shape (len(rows), N)
         """
-        rows = np.unique(np.asarray(rows, dtype=np.int64))
-        if self._g is not None:
-            if np.isin(rows, self._g[0]).all():
-                return self._g
-            # the rows asked for so far stay: a shared instance (shared_interpolant) is not rebuilt back and forth
-            rows = np.union1d(rows, self._g[0])
-        self.local_operator(kinds=(), g_rows=rows)
+        rows = self._rows_to_build(rows)
+        if rows is not None:
+            self.local_operator(kinds=(), g_rows=rows)
         return self._g
+
+    def _rows_to_build(self, rows):
+        """None when the built rows of ``G`` hold ``rows``, else ``rows`` with them (a shared instance keeps them)."""
+        rows = np.unique(np.asarray(rows, dtype=np.int64))
+        if self._g is None:
+            return rows
+        return None if np.isin(rows, self._g[0]).all() else np.union1d(rows, self._g[0])
 
     def local_pass(self, g_rows, tiles=None):
         """Rows ``g_rows`` of ``G`` and the derivative weights at the points, from one pass over the tiles.
@@ -406,21 +408,19 @@ class SpatialInterpolant:
         A fill factorises the tiles anyway (:meth:`coefficient_rows`); the same
         factorisations give the weights of ``d/dPsi^alpha`` at the points for a
         fraction more, and an evaluation at the points is then one product per
-        tile. So ``"auto"`` resolves to ``"local"`` from then on (the global
-        factorisation and its kernel rows, rebuilt for every evaluation, are
-        never needed); ``"global"`` builds the rows of ``G`` only. Nothing is
-        rebuilt when the weights and the rows are there already.
+        tile. So ``"auto"`` resolves to ``"local"`` from then on (no global
+        factorisation, no kernel rows rebuilt per evaluation); ``"global"``
+        builds the rows of ``G`` only. Nothing built is rebuilt.
         """
-        rows = np.unique(np.asarray(g_rows, dtype=np.int64))
         if self.solver == "global":
-            self.coefficient_rows(rows)
+            self.coefficient_rows(g_rows)
             return
         op = self._local
         built = op is not None and op.at_nodes and {1, 2} <= set(op.kinds)
-        if built and self._g is not None and np.isin(rows, self._g[0]).all():
+        rows = self._rows_to_build(g_rows)
+        if built and rows is None:
             return
-        if self._g is not None:
-            rows = np.union1d(rows, self._g[0])
+        rows = self._g[0] if rows is None else rows
         if tiles is None and self.core is None:
             # the tiles the rows of G alone would take: the fill stays what it is without the weights
             tiles = self._choose_core(self.psi[rows], 1, 3)[0]
