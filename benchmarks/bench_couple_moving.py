@@ -2,9 +2,9 @@
 
 The tube in tension-torsion all along (irdic.synthetic, 10 Hz IR and DIC,
 by default 300 x 300 frames and 78 x 168 = 13,104 DIC points) is written to
-temporary stores; ``couple`` and ``fields`` then run in a fresh subprocess
-(``irdic.threads.stage_threads``, so the stage's peak RSS and threads are its
-own). In the same run, the scipy way: ``RBFInterpolator(kernel=
+temporary stores; ``couple`` and then ``fields`` each run in a fresh
+process, as the workflow's rules do, so a stage's peak RSS and threads are
+its own (the job's peak is the larger of the two). In the same run, the scipy way: ``RBFInterpolator(kernel=
 "inverse_multiquadric", epsilon=0.5, degree=1, neighbors=50)`` on the masked
 pixels of the IR frame at each DIC time, evaluated at the projected points and
 at four offsets for difference-quotient gradients, timed on ``--subset`` DIC
@@ -40,15 +40,15 @@ import _tube  # noqa: E402
 _STAGE = """
 import json, resource, sys, time
 from irdic.stages import couple, fields
-root = sys.argv[1]; tag = sys.argv[2]; threads = int(sys.argv[3])
+stage, root, tag, threads = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 t0 = time.perf_counter()
-couple.run({"dic": root + "/dic.zarr", "ir": root + "/ir.zarr", "calibration": root + "/cal.zarr"},
-           {"store": root + f"/points{tag}.zarr"}, threads=threads)
-t1 = time.perf_counter()
-fields.run({"points": root + f"/points{tag}.zarr", "calibration": root + "/cal.zarr"},
-           {"store": root + f"/fields{tag}.zarr"}, threads=threads)
-t2 = time.perf_counter()
-print(json.dumps({"couple": t1 - t0, "fields": t2 - t1,
+if stage == "couple":
+    couple.run({"dic": root + "/dic.zarr", "ir": root + "/ir.zarr", "calibration": root + "/cal.zarr"},
+               {"store": root + f"/points{tag}.zarr"}, threads=threads)
+else:
+    fields.run({"points": root + f"/points{tag}.zarr", "calibration": root + "/cal.zarr"},
+               {"store": root + f"/fields{tag}.zarr"}, threads=threads)
+print(json.dumps({"seconds": time.perf_counter() - t0,
                   "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
 """
 
@@ -78,20 +78,24 @@ def write_experiment(root: Path, frames: int, points: int, ir_noise: float = 0.0
     return ex
 
 
-def run_stage(root: Path, tag: str = "", threads: int = 1) -> subprocess.Popen:
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parents[1]),
-                                                        os.environ.get("PYTHONPATH", "")]))
-    return subprocess.Popen([sys.executable, "-c", _STAGE, str(root), tag, str(threads)], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-
-
-def result(proc: subprocess.Popen) -> dict:
+def run_stage(stage: str, root: Path, tag: str = "", threads: int = 1) -> dict:
+    """One stage in a fresh process, as a Snakemake rule runs it: its seconds and peak RSS (GB)."""
     import json
 
-    out, _ = proc.communicate()
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+                                                        os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, "-c", _STAGE, stage, str(root), tag, str(threads)], env=env,
+                          stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     if proc.returncode:
-        raise SystemExit(f"stage subprocess failed ({proc.returncode})")
-    return json.loads(out.strip().splitlines()[-1])
+        raise SystemExit(f"{stage} subprocess failed ({proc.returncode})")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def run_job(root: Path, tag: str = "", threads: int = 1) -> dict:
+    """couple, then fields, each in its own process: seconds of each, peak RSS of each and of the job."""
+    c, f = run_stage("couple", root, tag, threads), run_stage("fields", root, tag, threads)
+    return {"couple": c["seconds"], "fields": f["seconds"], "peak_couple": c["peak_gb"],
+            "peak_fields": f["peak_gb"], "peak_gb": max(c["peak_gb"], f["peak_gb"])}
 
 
 def scipy_way(root: Path, ex, subset: int) -> tuple[float, float]:
@@ -135,10 +139,11 @@ def one(frames: int, points: int, threads: int, subset: int, two_jobs: bool = Fa
         ex = write_experiment(root, frames, points)
         print(f"tube: {ex.s.size} points, {ex.dic_times.size} DIC x {ex.ir_times.size} IR frames of "
               f"{ex.renderer.v.size} x {ex.renderer.u.size} px (written in {time.perf_counter() - t0:.0f} s)", flush=True)
-        alone = result(run_stage(root, "", threads))
+        alone = run_job(root, "", threads)
         tot = alone["couple"] + alone["fields"]
         print(f"  irdic: couple {alone['couple']:.1f} s + fields {alone['fields']:.1f} s = {tot:.1f} s, "
-              f"peak RSS {alone['peak_gb']:.2f} GB ({threads} thread(s))", flush=True)
+              f"peak RSS {alone['peak_gb']:.2f} GB (couple {alone['peak_couple']:.2f}, fields "
+              f"{alone['peak_fields']:.2f}; {threads} thread(s))", flush=True)
         if subset:
             from irdic.store import open_store
 
@@ -152,8 +157,10 @@ def one(frames: int, points: int, threads: int, subset: int, two_jobs: bool = Fa
                   f"({full / alone['couple']:.1f} x couple); T RMS vs truth on {subset} times: scipy {rms:.4f} K, "
                   f"irdic (all) {np.sqrt(np.mean(err**2)):.4f} K", flush=True)
         if two_jobs:
-            a, b = run_stage(root, "_a", 1), run_stage(root, "_b", 1)
-            ra, rb = result(a), result(b)
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(2) as pool:
+                ra, rb = pool.map(lambda tag: run_job(root, tag, 1), ("_a", "_b"))
             for name, rr in (("job 1", ra), ("job 2", rb)):
                 t = rr["couple"] + rr["fields"]
                 print(f"  two jobs at once, {name}: {t:.1f} s = {t / tot:.2f} x alone", flush=True)

@@ -8,23 +8,22 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import math
 import warnings
 import time as _time
 
 import numpy as np
 import scipy.linalg
-from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, DataError, GeometryError
 from ..numerics.patterns import same_patterns
-from ..numerics.imq import imq_planar
+from ..numerics.imq import imq_matrix, imq_planar
 from ..numerics.saddle import SaddleFactor
 from ..numerics.threads import blas_threads, parallel_map
 from ..validation import choice, float_array, positive, psi_array, smoothing_factor
 from .parametrisation import MIN_POINTS
 from .regression import ls_design, monomials
+from .tiles import LocalOperator, Tiles, coefficient_matrix, tile_weights
 
 __all__ = ["SOLVERS", "SpatialInterpolant", "LocalOperator", "shared_interpolant"]
 
@@ -37,113 +36,6 @@ SOLVERS = ("auto", "global", "local")
 _GEMM_COST = 0.48
 # Kernel rows built per block in the global evaluation (rows x N x 8 B ~ 64 MB).
 _BLOCK_BYTES = 64 * 2**20
-
-
-class _Tiles:
-    """Overlapping tiles: a square core of side ``core`` plus every point within ``halo``."""
-
-    def __init__(self, psi, c, R0, halo, core):
-        self.psi = psi
-        self.c, self.R0, self.halo, self.core = c, R0, halo, core
-        self.tree = cKDTree(psi)
-        self.lo = psi.min(axis=0)
-
-    def cells(self, pts):
-        return np.floor((pts - self.lo) / self.core).astype(np.int64)
-
-    def tile_nodes(self, cell):
-        lo = self.lo + cell * self.core
-        hi = lo + self.core
-        ctr = 0.5 * (lo + hi)
-        cand = np.asarray(self.tree.query_ball_point(ctr, self.core / math.sqrt(2) + self.halo), dtype=np.int64)
-        p = self.psi[cand]
-        d = np.hypot(np.maximum(0, np.maximum(lo[0] - p[:, 0], p[:, 0] - hi[0])),
-                     np.maximum(0, np.maximum(lo[1] - p[:, 1], p[:, 1] - hi[1])))
-        return np.sort(cand[d <= self.halo]), ctr
-
-    def factor(self, nodes, ctr):
-        p = self.psi[nodes]
-        A, _, _ = imq_planar(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1], self.c, self.R0, False)
-        P = monomials(p, ctr, self.R0, 0)
-        return SaddleFactor(A, P)
-
-    def functionals(self, nodes, ctr, pts, kinds):
-        """Kernel/monomial rows of the functionals ``kinds`` (0 value, 1 d/dPsi1, 2 d/dPsi2) at ``pts``."""
-        p = self.psi[nodes]
-        dx = pts[:, None, 0] - p[None, :, 0]
-        dy = pts[:, None, 1] - p[None, :, 1]
-        m, m1, m2 = imq_planar(dx, dy, self.c, self.R0, any(k > 0 for k in kinds))
-        rows = {0: m, 1: m1, 2: m2}
-        return [(rows[k], monomials(pts, ctr, self.R0, k)) for k in kinds]
-
-    def count(self, pts):
-        """Tile sizes for the cells of ``pts``: list of (n_points_in_cell, K)."""
-        cells, inv = np.unique(self.cells(pts), axis=0, return_inverse=True)
-        per = np.bincount(inv.ravel(), minlength=len(cells))
-        lo = self.lo + cells * self.core
-        ctr = lo + 0.5 * self.core
-        K = self.tree.query_ball_point(ctr, self.core / math.sqrt(2) + self.halo, return_length=True)
-        # the ball circumscribes the rounded box: correct by the area ratio
-        r = self.core / math.sqrt(2) + self.halo
-        ratio = (self.core**2 + 4 * self.core * self.halo + math.pi * self.halo**2) / (math.pi * r * r)
-        return per, np.maximum(np.asarray(K) * ratio, per)
-
-
-class LocalOperator:
-    """Per-tile weights of a set of functionals, and rows of ``G``."""
-
-    def __init__(self, n_eval, kinds, tiles, g_rows, G, at_nodes):
-        self.n_eval, self.kinds, self.tiles = n_eval, tuple(kinds), tiles
-        self.g_rows, self.G, self.at_nodes = g_rows, G, at_nodes
-
-    def apply(self, F, kinds):
-        """Functionals ``kinds`` (a subset of the built ones) of the interpolant of ``F`` (N, ncols)."""
-        pos = [self.kinds.index(k) for k in kinds]
-        out = [np.empty((self.n_eval, F.shape[1])) for _ in kinds]
-
-        def work(tile):
-            idx, nodes, Wk = tile
-            Fl = F[nodes]
-            for o, j in zip(out, pos):
-                o[idx] = Wk[j] @ Fl
-
-        with blas_threads(1):
-            parallel_map(work, self.tiles)
-        return out
-
-
-
-def _tile_weights(tiles, cell, pts, kinds, grow, n):
-    """Nodes of the tile of ``cell``, weights of the functionals ``kinds`` at ``pts`` and rows ``grow`` of G."""
-    nodes, ctr = tiles.tile_nodes(cell)
-    if nodes.size < MIN_POINTS:
-        # a cell far from every point (evaluation outside the cloud)
-        nodes = np.sort(tiles.tree.query(ctr, k=min(n, 4 * MIN_POINTS))[1])
-    fac = tiles.factor(nodes, ctr)
-    Bs, Qs = [], []
-    for B, Q in tiles.functionals(nodes, ctr, pts, kinds) if pts.shape[0] else []:
-        Bs.append(B)
-        Qs.append(Q)
-    if grow.size:
-        B = np.zeros((grow.size, nodes.size))
-        B[np.arange(grow.size), np.searchsorted(nodes, grow)] = 1.0
-        Bs.append(B)
-        Qs.append(np.zeros((grow.size, 3)))
-    W = fac.weights(np.concatenate(Bs), np.concatenate(Qs))
-    ne = pts.shape[0]
-    Wk = [W[i * ne:(i + 1) * ne] for i in range(len(kinds))] if ne else []
-    return nodes, Wk, W[len(kinds) * ne:]
-
-
-def _coefficient_matrix(results, rows, n):
-    """Sparse rows ``rows`` of the data-to-coefficient map G from the tiles' results."""
-    data, ri, ci = [], [], []
-    for _, nodes, _, Wg, grow in results:
-        if grow.size:
-            data.append(Wg.ravel())
-            ri.append(np.repeat(np.searchsorted(rows, grow), nodes.size))
-            ci.append(np.tile(nodes, grow.size))
-    return sparse.csr_matrix((np.concatenate(data), (np.concatenate(ri), np.concatenate(ci))), shape=(rows.size, n))
 
 
 class SpatialInterpolant:
@@ -220,6 +112,7 @@ class SpatialInterpolant:
         self.core = positive(core, "core") if core is not None else None
         self._global = None
         self._ls = None
+        self._ls_at = None
         self._local = None
         self._g = None
         self._chosen = None
@@ -228,7 +121,7 @@ class SpatialInterpolant:
     # ---- cost model -------------------------------------------------------
 
     def _tiles(self, core):
-        return _Tiles(self.psi, self.c, self.R0, self.halo, core)
+        return Tiles(self.psi, self.c, self.R0, self.halo, core)
 
     def _choose_core(self, pts, n_func, ncols):
         if self.core is not None:
@@ -273,14 +166,7 @@ class SpatialInterpolant:
     # ---- global -------------------------------------------------------------
 
     def _kernel_matrix(self):
-        p = self.psi
-        A = np.empty((self.n, self.n))
-        # row blocks keep the temporaries small
-        step = max(1, _BLOCK_BYTES // (8 * self.n))
-        for i in range(0, self.n, step):
-            A[i:i + step], _, _ = imq_planar(p[i:i + step, None, 0] - p[None, :, 0],
-                                           p[i:i + step, None, 1] - p[None, :, 1], self.c, self.R0, False)
-        return A
+        return imq_matrix(self.psi, self.psi, self.c * self.R0)
 
     def _global_factor(self):
         if self._global is None:
@@ -353,11 +239,12 @@ class SpatialInterpolant:
         def work(t):
             idx = order_e[bounds_e[t]:bounds_e[t + 1]]
             grow = rows[order_g[bounds_g[t]:bounds_g[t + 1]]]
-            return (idx, *_tile_weights(tiles, uc[t], pts[idx], kinds, grow, self.n), grow)
+            return (idx, *tile_weights(tiles, uc[t], pts[idx], kinds, grow, self.n), grow)
 
+        # the largest tiles first: the pool's last tiles are then short ones, not one left running alone
         with blas_threads(1):
-            results = parallel_map(work, range(len(uc)))
-        G = _coefficient_matrix(results, rows, self.n) if rows.size else None
+            results = parallel_map(work, np.argsort(-tiles.sizes(uc), kind="stable"))
+        G = coefficient_matrix(results, rows, self.n) if rows.size else None
         tiles_e = [(idx, nodes, Wk) for idx, nodes, Wk, _, _ in results if idx.size]
         ksum = sum(r[1].size for r in results)
         log.info("local tiles: %d tiles, mean %d points, core %.2f mm, halo %.2f mm: %.1f s",
@@ -421,9 +308,6 @@ class SpatialInterpolant:
         if built and rows is None:
             return
         rows = self._g[0] if rows is None else rows
-        if tiles is None and self.core is None:
-            # the tiles the rows of G alone would take: the fill stays what it is without the weights
-            tiles = self._choose_core(self.psi[rows], 1, 3)[0]
         self._chosen = "local"
         self.info["solver"] = "local"
         self.local_operator(kinds=(1, 2), g_rows=rows, tiles=tiles)
@@ -435,20 +319,26 @@ class SpatialInterpolant:
             self._ls = ls_design(self.psi, self.k, self.h, self.c, self.R0)
         return self._ls
 
-    def _eval_ls(self, F, pts, kinds):
-        centres, R0k, ctr, Qm, Rm = self._ls_factor()
+    def _ls_rows(self, q, kinds):
+        """Design rows of the regression's functionals ``kinds`` at ``q`` (n, 2): each (n, centres + 3)."""
+        centres, R0k, ctr, _, _ = self._ls_factor()
+        m = imq_planar(q[:, None, 0] - centres[None, :, 0], q[:, None, 1] - centres[None, :, 1], self.c, R0k,
+                       any(k > 0 for k in kinds))
+        return [np.concatenate([m[k], monomials(q, ctr, self.R0, k)], axis=1) for k in kinds]
+
+    def _eval_ls(self, F, pts, kinds, at_nodes=False):
+        centres, _, _, Qm, Rm = self._ls_factor()
         coef = scipy.linalg.solve_triangular(Rm, Qm.T @ F, check_finite=False)
-        out = []
+        if at_nodes and pts.shape[0] * (len(centres) + 3) * 8 * 3 <= _BLOCK_BYTES:
+            # the rows at the points themselves serve every later evaluation there (noise probes, GCV trials)
+            if self._ls_at is None:
+                self._ls_at = dict(zip((0, 1, 2), self._ls_rows(pts, (0, 1, 2))))
+            return [self._ls_at[k] @ coef for k in kinds]
+        out = [np.empty((pts.shape[0], F.shape[1])) for _ in kinds]
         step = max(1, _BLOCK_BYTES // (8 * max(len(centres), 1)))
-        for k in kinds:
-            o = np.empty((pts.shape[0], F.shape[1]))
-            for i in range(0, pts.shape[0], step):
-                q = pts[i:i + step]
-                m, m1, m2 = imq_planar(q[:, None, 0] - centres[None, :, 0], q[:, None, 1] - centres[None, :, 1],
-                                     self.c, R0k, k > 0)
-                E = np.concatenate([{0: m, 1: m1, 2: m2}[k], monomials(q, ctr, self.R0, k)], axis=1)
+        for i in range(0, pts.shape[0], step):
+            for o, E in zip(out, self._ls_rows(pts[i:i + step], kinds)):
                 o[i:i + step] = E @ coef
-            out.append(o)
         return out
 
     # ---- public -----------------------------------------------------------
@@ -493,7 +383,7 @@ class SpatialInterpolant:
         if kinds:
             if self.k > 1.0:
                 solver = "regression"
-                outs = self._eval_ls(F2, pts, kinds)
+                outs = self._eval_ls(F2, pts, kinds, at_nodes)
             else:
                 solver, tiles = self.resolve(pts.shape[0], F2.shape[1], len(kinds), pts)
                 if solver == "global":

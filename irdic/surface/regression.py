@@ -16,7 +16,7 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import ConfigError, DataError, GeometryError
-from ..numerics.imq import imq_planar, regression_R0
+from ..numerics.imq import imq_matrix, imq_planar, regression_R0
 from ..validation import float_array, positive, psi_array
 from .parametrisation import MIN_POINTS, median_spacing
 
@@ -82,8 +82,7 @@ def ls_design(psi, k, h, c, R0):
     centres = psi[idx]
     R0k = regression_R0(c, k * h)
     ctr = psi.mean(axis=0)
-    m, _, _ = imq_planar(psi[:, None, 0] - centres[None, :, 0], psi[:, None, 1] - centres[None, :, 1], c, R0k, False)
-    E = np.concatenate([m, monomials(psi, ctr, R0, 0)], axis=1)
+    E = np.concatenate([imq_matrix(psi, centres, c * R0k), monomials(psi, ctr, R0, 0)], axis=1)
     Qm, Rm = scipy.linalg.qr(E, mode="economic", overwrite_a=True, check_finite=False)
     dg = np.abs(np.diag(Rm))
     if dg.min() < 1e-12 * dg.max():
