@@ -450,8 +450,9 @@ class MaskedGridInterpolant:
         """Tile ``key = (ty, tx)`` and the RBF and monomial coefficients of all fitted fields on it."""
         got = self._alpha.get(key)
         if got is None:
-            tile = build_tile(self._tiles, self.mask, key[0], key[1], self.tile, self.halo, self._ce,
-                              self._stable)
+            with self._tiles.lock:  # the cache is shared by the worker threads of evaluate_series
+                tile = build_tile(self._tiles, self.mask, key[0], key[1], self.tile, self.halo, self._ce,
+                                  self._stable)
             F = self._grid[:, tile.pv - self._rv0, tile.pu - self._ru0].T
             alpha, beta = tile.fac.solve(F)
             got = (tile, np.ascontiguousarray(alpha.T), beta.T)  # (nf, n_t), (nf, 3)

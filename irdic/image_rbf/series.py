@@ -8,6 +8,7 @@ interpolated in space at the points ``P_k`` (see :mod:`irdic.image_rbf`).
 from __future__ import annotations
 
 import logging
+import threading
 import warnings
 from typing import NamedTuple
 
@@ -16,6 +17,7 @@ import numpy as np
 from ..errors import ConfigError, DataError, IrdicWarning
 from ..logs import Progress
 from ..numerics.temporal import TemporalInterpolant
+from ..numerics.threads import parallel_map
 from ..threads import blas_threads
 from ..validation import as_int, bool_mask, choice, float_array
 from .interpolant import METHODS, MaskedGridInterpolant
@@ -251,7 +253,13 @@ def _frame_times(frame_times, n_frames):
 
 @blas_threads(1)  # thousands of small tile factorisations: threaded BLAS only synchronises (issue 10)
 def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args):
-    """theta, d/du, d/dv, d/dt, edge distance (n_times, M) for the in-span times, chunk by chunk."""
+    """theta, d/du, d/dv, d/dt, edge distance (n_times, M) for the in-span times, chunk by chunk.
+
+    The chunks run on the stage's worker threads (:func:`~irdic.numerics.threads.parallel_map`),
+    each thread with the interpolant of its current mask; they share the
+    factorised edge tiles (:class:`TileCache`, built under its lock) and write
+    disjoint rows of the results.
+    """
     ks = np.flatnonzero(in_span)
     Wv = temporal.weights(te[ks], 0) if ks.size else None
     Wd = temporal.weights(te[ks], 1) if ks.size else None
@@ -259,18 +267,24 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
     row_of[ks] = np.arange(ks.size)
     out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(5)]
     cache = TileCache()
-    interp, current = None, None
-    stable, run = None, None
+    stables = {}
     progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
-    done = 0
-    for ch in _pieces(ks, mask_of, chunk):
-        mi = int(mask_of[ch[0]])
-        if mi != current:  # masks come in runs: keep only the current one
-            interp, current = None, mi
-            if mi // _STABLE_RUN != run:
-                run = mi // _STABLE_RUN
-                stable = np.logical_and.reduce(masks[run * _STABLE_RUN:(run + 1) * _STABLE_RUN])
-            interp = MaskedGridInterpolant(masks[mi], tile_cache=cache, stable_mask=stable, **interp_args)
+    done = [0]
+    lock = threading.Lock()
+    local = threading.local()
+
+    def interpolant(mi):
+        if getattr(local, "mask", None) != mi:  # masks come in runs: a thread keeps only its current one
+            run = mi // _STABLE_RUN
+            if run not in stables:
+                stables[run] = np.logical_and.reduce(masks[run * _STABLE_RUN:(run + 1) * _STABLE_RUN])
+            local.interp = MaskedGridInterpolant(masks[mi], tile_cache=cache, stable_mask=stables[run],
+                                                 **interp_args)
+            local.mask = mi
+        return local.interp
+
+    def work(ch):
+        interp = interpolant(int(mask_of[ch[0]]))
         sel = lookup[interp.pixels[:, 1], interp.pixels[:, 0]]
         if sel.size == F.shape[0]:
             sel = slice(None)  # the mask is the union: no copy
@@ -279,8 +293,11 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
         val, du, dv, ed = interp.evaluate_grouped(pts[ch], 2, (True, False))
         for o, res in zip(out, (val[:, 0], du[:, 0], dv[:, 0], val[:, 1], ed)):
             o[ch] = res
-        done += ch.size
-        progress.update(done)
+        with lock:
+            done[0] += ch.size
+            progress.update(done[0])
+
+    parallel_map(work, _pieces(ks, mask_of, chunk))
     log.info(
         "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised, "
         "%d reused (hit rate %.0f %%), %d of the factorised extending a shared stable factor",

@@ -20,6 +20,7 @@ pixels near the moving outline (see :func:`build_tile`).
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from typing import NamedTuple
 
@@ -97,6 +98,8 @@ class TileCache:
         self.built = 0
         self.hits = 0
         self.extended = 0
+        # held by whoever looks up or builds a tile (the stable factors grow in place)
+        self.lock = threading.RLock()
 
     @property
     def hit_rate(self):

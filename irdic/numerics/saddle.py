@@ -141,8 +141,9 @@ class SaddleFactor:
         return np.concatenate([x_s, x_r])
 
     def _schur(self, Y):
-        self._Y = Y
+        # _Y last: a thread that sees it set (a cached tile solved by two threads) sees _S_inv too
         self._S_inv = np.linalg.inv(self.P.T @ Y)
+        self._Y = Y
 
     @property
     def Y(self):

@@ -18,6 +18,7 @@ import xarray as xr
 
 from ..errors import CalibrationError, DataError
 from ..footprint import facing_camera, point_normals, specimen_mask
+from ..numerics.threads import parallel_map
 
 __all__ = ["Projection", "project_points", "fill_in_time", "masks_and_facing", "MASK_REUSE_PX"]
 
@@ -62,17 +63,18 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, o
     keep_t = np.arange(n_t) if only is None else np.arange(n_t)[only]
     masks = np.zeros((keep_t.size, v.size, u.size), dtype=bool)
     facing = np.zeros((keep_t.size, M), dtype=bool)
-    built = {}
+
+    def build(j):
+        n = point_normals(xf[j], towards=centre)
+        f = facing_camera(xf[j], n, centre, max_angle_deg=max_angle)
+        keep = np.isfinite(pf[j]).all(axis=1) & f
+        return specimen_mask(pf[j][keep], u, v, erosion_px=erosion, max_edge_factor=edge_factor), f
+
+    sources = np.unique(source[keep_t][source[keep_t] >= 0])
+    built = dict(zip(sources.tolist(), parallel_map(build, sources.tolist())))
     for row, k in enumerate(keep_t):
-        j = source[k]
-        if j < 0:
-            continue
-        if j not in built:
-            n = point_normals(xf[j], towards=centre)
-            f = facing_camera(xf[j], n, centre, max_angle_deg=max_angle)
-            keep = np.isfinite(pf[j]).all(axis=1) & f
-            built[j] = (specimen_mask(pf[j][keep], u, v, erosion_px=erosion, max_edge_factor=edge_factor), f)
-        masks[row], facing[row] = built[j]
+        if source[k] >= 0:
+            masks[row], facing[row] = built[int(source[k])]
     rebuilt = len(built)
     n_t = keep_t.size
     # a pixel the moving edge crosses between neighbouring times carries mixed

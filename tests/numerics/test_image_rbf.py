@@ -10,6 +10,7 @@ from scipy import ndimage
 
 from irdic.errors import ConfigError, DataError, IrdicWarning
 from irdic.numerics.temporal import TemporalInterpolant
+from irdic.threads import stage_threads
 from irdic.image_rbf.tiles import TileCache
 from irdic.image_rbf import (
     MaskedGridInterpolant,
@@ -499,6 +500,34 @@ def test_series_moving_mask_matches_per_time_masks():
         np.testing.assert_allclose(r.theta[k], e.value[0], atol=1e-10, equal_nan=True)
         np.testing.assert_allclose(r.edge_distance[k], e.edge_distance)
     assert np.isfinite(r.theta[1]).sum() > np.isfinite(r.theta[2]).sum()
+
+
+def test_series_on_worker_threads_equals_one_thread():
+    """The chunks of a moving outline run on the stage's threads with one shared tile cache (issue 10).
+
+    Each time keeps its own mask and the same numbers as on one thread (to
+    round-off: a shared tile may be built by either thread, whole or
+    extending its run's stable factor), including the cache's accounting.
+    """
+    t, mask, frames = series_case(n_frames=16)
+    n = 10
+    # an outline that moves every time, so that chunks with different masks run at once
+    masks = np.stack([ndimage.shift(mask.astype(float), (0.0, 0.6 * k), order=0) > 0.5 for k in range(n)])
+    te = np.linspace(0.3, 6.5, n)
+    pts = points_in(mask & masks[-1], 300)
+    with stage_threads(1):
+        one = evaluate_series(frames, t, te, pts, masks, chunk=1)
+    with stage_threads(3):
+        three = evaluate_series(frames, t, te, pts, masks, chunk=1)
+    for a, b in zip(one[:5], three[:5]):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-9, equal_nan=True)
+        np.testing.assert_array_equal(np.isfinite(b), np.isfinite(a))
+    truth = 20 + (0.1 * pts[:, 0] + 0.2 * pts[:, 1]) * (1 + 0.05 * te[:, None])
+    ok = np.isfinite(three.theta)
+    assert ok.sum() > 0.5 * ok.size
+    np.testing.assert_allclose(three.theta[ok], truth[ok], atol=1e-6)
+    du = np.broadcast_to(0.1 * (1 + 0.05 * te[:, None]), truth.shape)
+    np.testing.assert_allclose(three.dtheta_du[ok], du[ok], atol=1e-5)  # float32 frames
 
 
 def test_edge_tiles_shared_across_positions_and_masks():
