@@ -21,7 +21,7 @@ from .imq import imq
 from .patterns import same_patterns
 from .saddle import solve_dense
 from .temporal import TIME_SNAP, TemporalInterpolant, gcv_temporal, temporal_window
-from .threads import blas_threads
+from .threads import blas_threads, parallel_map
 
 __all__ = ["SeriesFit", "smooth_series", "fill_series", "fill_gaps", "cardinal_weights"]
 
@@ -69,14 +69,13 @@ def fill_gaps(F2, t, c, R0, window=None):
 
 def _fill_global(F2, bad, cols, dead, t, c, R0):
     """The gaps of the columns ``cols`` of ``F2`` from the global interpolant of each column's valid times."""
-    # columns with the same gaps share one interpolant (a point cloud repeats few patterns)
-    for js in same_patterns(bad[:, cols].T):
+    def one(js):
         js = cols[js]
         ok = ~bad[:, js[0]]
         if ok.sum() < 2:
             dead[js] = True
             F2[:, js] = 0.0
-            continue
+            return
         fill = TemporalInterpolant(t[ok], c=c, R0=R0).weights(t[~ok]) @ F2[np.ix_(ok, js)]
         # NaN rows lie outside the valid span: the nearest valid value (flat), as np.interp
         out = ~np.isfinite(fill).all(axis=1)
@@ -84,6 +83,10 @@ def _fill_global(F2, bad, cols, dead, t, c, R0):
             valid = np.flatnonzero(ok)
             fill[out] = F2[np.where(t[~ok][out] < t[valid[0]], valid[0], valid[-1])][:, js]
         F2[np.ix_(~ok, js)] = fill
+
+    # columns with the same gaps share one interpolant (a point cloud repeats few patterns); the patterns
+    # write disjoint columns, so they run on the stage's worker threads
+    parallel_map(one, same_patterns(bad[:, cols].T))
 
 
 def fill_series(values, times, *, c=1.0, R0=1.0, record_times=None):

@@ -155,11 +155,13 @@ def test_smooth_series_of_a_chunk_uses_the_record_window():
     np.testing.assert_allclose(part.value, whole.value[600:], rtol=0, atol=1e-10)
 
 
-@pytest.mark.parametrize("R0", [0.3, 1.0])
-def test_gap_fill_equals_each_series_own_interpolant(R0):
+@pytest.mark.parametrize("R0, threads", [(0.3, 1), (1.0, 1), (1.0, 3)])
+def test_gap_fill_equals_each_series_own_interpolant(R0, threads):
     """Series with scattered gaps (failed DIC points), shared gap patterns, series ends and all-but-one gaps:
-    the grouped and the windowed fills give what each column's own (windowed) interpolant gives."""
+    the grouped and the windowed fills give what each column's own (windowed) interpolant gives, also with
+    the patterns on worker threads."""
     from irdic.numerics.series import fill_gaps
+    from irdic.threads import stage_threads
 
     rng = np.random.default_rng(0)
     t = np.arange(200) * 0.1
@@ -171,7 +173,8 @@ def test_gap_fill_equals_each_series_own_interpolant(R0):
     n = temporal_window(t, c=1.0, R0=R0)
     assert (n is None) == (R0 == 1.0)  # both operators are exercised
     got = F.copy()
-    dead = fill_gaps(got, t, 1.0, R0, n)
+    with stage_threads(threads):
+        dead = fill_gaps(got, t, 1.0, R0, n)
     assert np.flatnonzero(dead).tolist() == [8]
     for j in range(F.shape[1]):
         ok = np.isfinite(F[:, j])
