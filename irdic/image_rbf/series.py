@@ -43,6 +43,8 @@ class SeriesEvaluation(NamedTuple):
     edge_distance : px from the mask edge (see :class:`Evaluation`)
     in_span : (n_times,) bool, False where the time lies outside the frame
         span (all values NaN there)
+    theta_extra : temperature of the frames through ``pixel_operator``
+        (None without one)
     """
 
     theta: np.ndarray
@@ -51,6 +53,7 @@ class SeriesEvaluation(NamedTuple):
     dtheta_dt: np.ndarray
     edge_distance: np.ndarray
     in_span: np.ndarray
+    theta_extra: np.ndarray | None = None
 
 
 def _frame_shape(frames):
@@ -147,20 +150,26 @@ def _pieces(ks, mask_of, chunk):
     return pieces
 
 
-def _combined_frames(F, sel, Wv, Wd, n_mask):
-    """``G_k`` and ``G'_k`` of a chunk: (chunk, 2, n_mask)."""
-    vals = np.empty((Wv.shape[0], 2, n_mask))
+def _combined_frames(F, sel, Wv, Wd, n_mask, extra=None):
+    """``G_k`` and ``G'_k`` of a chunk: (chunk, 2, n_mask); with the sparse operator ``extra`` (n_u, n_u)
+    on the union's pixels (the rows of ``F``), ``extra G_k`` too: (chunk, 3, n_mask)."""
+    vals = np.empty((Wv.shape[0], 2 if extra is None else 3, n_mask))
     for j, Wt in enumerate((Wv, Wd)):
         # the temporal cardinal weights decay like the spatial ones: only
         # frames where they exceed 1e-15 of the largest enter (error ~1e-13 K)
         big = np.flatnonzero((np.abs(Wt) > 1e-15 * np.abs(Wt).max()).any(axis=0))
         c0, c1 = big[0], big[-1] + 1
-        vals[:, j] = (F[:, c0:c1] @ Wt[:, c0:c1].T)[sel].T
+        G = F[:, c0:c1] @ Wt[:, c0:c1].T
+        vals[:, j] = G[sel].T
+        if j == 0 and extra is not None:
+            # the operator is linear in the pixel values: it acts on G_k, not on every frame
+            vals[:, 2] = (extra @ G)[sel].T
     return vals
 
 
 def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rbf", c=2.0, R0=1.0, c_time=1.0,
-                    R0_time=1.0, time_window=None, halo=12, tile=8, chunk=32, u=None, v=None, name="frames"):
+                    R0_time=1.0, time_window=None, halo=12, tile=8, chunk=32, u=None, v=None, name="frames",
+                    pixel_operator=None):
     """Temperatures, gradients and rates at moving points over a frame series.
 
     Parameters
@@ -201,6 +210,14 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
         window); given, error messages name sensor pixels, not array indices.
     name : str
         Name of the frames in error messages (e.g. ``"ir: frames"``).
+    pixel_operator : callable, optional
+        ``(mask (H, W) bool, pixels (n, 2) int (u, v)) -> (n, n)`` sparse
+        matrix, a linear operator on the values of the pixels of the union
+        of the masks (e.g.
+        :class:`irdic.stages.footprint_temperature.FootprintOperator`): the
+        temperature of the frames through it is evaluated in the same pass,
+        as extra right-hand sides of the same tile factorisations
+        (``theta_extra``; its gradient and rate are not evaluated).
 
     Returns
     -------
@@ -237,8 +254,12 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
     F, lookup = _pixel_series(frames, union, ft, *labels, name)
     interp_args = dict(method=method, c=c, R0=R0, halo=halo, tile=tile)
-    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
-    return SeriesEvaluation(*out, in_span)
+    extra = None
+    if pixel_operator is not None:
+        uv, uu = np.nonzero(union)  # the rows of F
+        extra = pixel_operator(union, np.c_[uu, uv])
+    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra)
+    return SeriesEvaluation(*out[:5], in_span, out[5] if extra is not None else None)
 
 
 def _frame_times(frame_times, n_frames):
@@ -250,14 +271,16 @@ def _frame_times(frame_times, n_frames):
 
 
 @blas_threads(1)  # thousands of small tile factorisations: threaded BLAS only synchronises (issue 10)
-def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args):
-    """theta, d/du, d/dv, d/dt, edge distance (n_times, M) for the in-span times, chunk by chunk."""
+def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra=None):
+    """theta, d/du, d/dv, d/dt, edge distance and theta through ``extra`` (sparse, on the rows of ``F``)
+    (n_times, M) for the in-span times, chunk by chunk."""
     ks = np.flatnonzero(in_span)
     Wv = temporal.weights(te[ks], 0) if ks.size else None
     Wd = temporal.weights(te[ks], 1) if ks.size else None
     row_of = np.full(te.size, -1, np.int64)
     row_of[ks] = np.arange(ks.size)
-    out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(5)]
+    out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(6)]
+    g = 2 if extra is None else 3
     cache = TileCache()
     interp, current = None, None
     stable, run = None, None
@@ -275,9 +298,9 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
         if sel.size == F.shape[0]:
             sel = slice(None)  # the mask is the union: no copy
         r = row_of[ch]
-        interp.fit_values(_combined_frames(F, sel, Wv[r], Wd[r], interp.n_mask).reshape(2 * ch.size, -1))
-        val, du, dv, ed = interp.evaluate_grouped(pts[ch], 2, (True, False))
-        for o, res in zip(out, (val[:, 0], du[:, 0], dv[:, 0], val[:, 1], ed)):
+        interp.fit_values(_combined_frames(F, sel, Wv[r], Wd[r], interp.n_mask, extra).reshape(g * ch.size, -1))
+        val, du, dv, ed = interp.evaluate_grouped(pts[ch], g, (True,) + (False,) * (g - 1))
+        for o, res in zip(out, (val[:, 0], du[:, 0], dv[:, 0], val[:, 1], ed, val[:, g - 1])):
             o[ch] = res
         done += ch.size
         progress.update(done)

@@ -1,0 +1,212 @@
+"""Footprint temperatures: the point temperatures of the couple stage from the pixels about each point.
+
+The paper interpolates the IR frame at each projected DIC point, so a point
+carries the noise of the few pixels next to it; with points 3 px apart that
+is about one ninth of the specimen's pixels. ``points.temperature_footprint``
+interpolates, with the same operator and in the same pass
+(:func:`irdic.image_rbf.evaluate_series`, ``pixel_operator``), frames whose
+pixels were first replaced by a local-linear fit over a box about one point
+spacing wide (:func:`footprint_matrix`). The fields stage's spatial
+regressions take it for the gradient and the rate
+(:func:`footprint_temperatures`); ``points.temperature`` stays the paper's,
+and the denoised temperature is still regressed from it (the box's offset,
+see :func:`footprint_matrix`, does not enter the value).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import xarray as xr
+from scipy import sparse
+
+from .visibility import Projection
+
+__all__ = ["FootprintOperator", "footprint_matrix", "footprint_side", "footprint_temperatures", "footprint_noise",
+           "footprint_probes", "paper_value", "window_extras", "MAX_SIDE"]
+
+#: largest box side (px): half of it stays within the 2 px of the mask edge whose points are flagged
+#: (irdic.stages.uncertainty.EDGE_PX), so the unflagged points' boxes are whole; the box's offset,
+#: (side² - 1) / 24 ∇²Θ, stays at most 1 px² times the Laplacian
+MAX_SIDE = 5
+
+
+def footprint_temperatures(points: xr.Dataset) -> xr.Dataset:
+    """``points`` for the fields stage's regression of the gradient and rate: ``temperature_footprint`` as
+    ``temperature`` with its noise gain, the paper's value kept as ``temperature_paper`` (the denoised
+    temperature is regressed from it); unchanged when the store has none (side 1, or written before it
+    existed)."""
+    if "temperature_footprint" not in points:
+        return points
+    return points.assign(temperature=points["temperature_footprint"], temperature_paper=points["temperature"],
+                         ).assign_attrs(ir_noise_gain_temperature_paper=points.attrs.get("ir_noise_gain_temperature"),
+                                        ir_noise_gain_temperature=points.attrs.get(
+                                            "ir_noise_gain_temperature_footprint", np.nan))
+
+
+def footprint_side(pr: Projection) -> int:
+    """Side (px, odd, 1 .. :data:`MAX_SIDE`) of the pixel box a point's footprint temperature fits: the
+    largest odd number not above the median spacing of the projected points at the first stage with 6 or
+    more in the frame, so that the boxes of neighbouring points barely overlap (their noise stays nearly
+    independent)."""
+    from scipy.spatial import cKDTree
+
+    for k in range(pr.in_frame.shape[0]):
+        q = pr.local[k][pr.in_frame[k] & np.isfinite(pr.local[k]).all(axis=1)]
+        if q.shape[0] >= 6:
+            d = float(np.median(cKDTree(q).query(q, k=2)[0][:, 1]))
+            return int(min(MAX_SIDE, max(1, 2 * int((d - 1) // 2) + 1)))
+    return 1
+
+
+def footprint_matrix(mask: np.ndarray, pixels: np.ndarray, side: int) -> sparse.csr_matrix:
+    """The local-linear box fit as a sparse operator on the values of the masked ``pixels``.
+
+    Parameters
+    ----------
+    mask : ndarray of bool, shape (H, W)
+        The specimen's pixels; only they enter a box.
+    pixels : ndarray of int, shape (n, 2)
+        (u, v) of the masked pixels, in the order of the value vectors.
+    side : int
+        Box side (px, odd).
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (n, n)
+        Row ``i``: the weights whose product with the pixel values is the
+        plane fitted (least squares) to the masked pixels of the box about
+        pixel ``i``, at its centre.
+
+    Notes
+    -----
+    With moments ``A = Σ m (1, dx, dy)ᵀ(1, dx, dy)`` over the box the
+    centre value is ``e₀ᵀ A⁻¹ Σ m (1, dx, dy) Θ``: the weight of pixel ``j``
+    is ``w₀ + w₁ dx_j + w₂ dy_j`` with ``w = A⁻¹ e₀``, and white pixel noise
+    ``σ`` gives the centre value the variance ``σ² w₀``. Over a whole box it
+    is the box mean (``w₀ = 1/side²``), which for a smooth field is the field
+    plus ``(side² - 1)/24 ∇²Θ`` (px²): a constant for a quadratic field,
+    whose gradient is unchanged. Where the mask's edge cuts the box, the
+    plane through the remaining pixels is still evaluated at the centre
+    (their plain mean would sit off centre: a bias of the gradient times the
+    shift); with fewer than three pixels off a line a pixel keeps its own
+    value.
+    """
+    from scipy import ndimage
+
+    H, W = mask.shape
+    m = np.asarray(mask, dtype=float)
+    r = np.arange(side, dtype=float) - (side - 1) / 2
+    dy, dx = np.meshgrid(r, r, indexing="ij")
+    S0, Sx, Sy, Sxx, Sxy, Syy = (ndimage.correlate(m, k, mode="constant")
+                                 for k in (np.ones_like(dx), dx, dy, dx * dx, dx * dy, dy * dy))
+    u, v = pixels[:, 0], pixels[:, 1]
+    A = np.stack([np.stack([S0, Sx, Sy], -1), np.stack([Sx, Sxx, Sxy], -1),
+                  np.stack([Sy, Sxy, Syy], -1)], -2)[v, u]
+    ok = np.abs(np.linalg.det(A)) > 1e-6 * np.maximum(S0[v, u], 1.0) ** 3
+    w = np.zeros((u.size, 3))
+    w[ok] = np.linalg.solve(A[ok], np.broadcast_to(np.eye(3)[0], (int(ok.sum()), 3))[..., None])[..., 0]
+    index = np.full((H, W), -1, np.int64)
+    index[v, u] = np.arange(u.size)
+    rows, cols, vals = [np.arange(u.size)[~ok]], [np.arange(u.size)[~ok]], [np.ones(int((~ok).sum()))]
+    fit = np.flatnonzero(ok)
+    for ox, oy in zip(dx.ravel().astype(int), dy.ravel().astype(int)):
+        uj, vj = u[fit] + ox, v[fit] + oy
+        inside = (uj >= 0) & (uj < W) & (vj >= 0) & (vj < H)
+        j = np.full(fit.size, -1, np.int64)
+        j[inside] = index[vj[inside], uj[inside]]
+        on = j >= 0
+        i = fit[on]
+        rows.append(i), cols.append(j[on]), vals.append(w[i, 0] + w[i, 1] * ox + w[i, 2] * oy)
+    n = u.size
+    return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+
+class FootprintOperator:
+    """The ``pixel_operator`` of :func:`~irdic.image_rbf.evaluate_series` for boxes of ``side`` px:
+    ``(mask, pixels) -> footprint_matrix``. The series evaluation applies it on the union of the masks
+    of all times: a point's box then holds every pixel about it that was on the specimen at some time
+    (the mask of its own time is eroded and shrunk by the motion: the boxes of the points next to its
+    edge would be cut to half, with about 3 x the variance)."""
+
+    def __init__(self, side: int):
+        self.side = int(side)
+
+    def __call__(self, mask, pixels):
+        return footprint_matrix(np.asarray(mask, bool), np.asarray(pixels), self.side)
+
+    def frames(self, frames, mask):
+        """``frames`` (n, H, W) with the masked pixels replaced by their box fit (tests, figures)."""
+        vv, uu = np.nonzero(mask)
+        out = np.array(frames, dtype=float)
+        out[:, vv, uu] = (self(mask, np.c_[uu, vv]) @ out[:, vv, uu].T).T
+        return out
+
+
+def footprint_noise(rng, pixel, side, shape):
+    """White pixel noise (unit variance) through the box mean of ``side`` px about each point's nearest
+    pixel, scaled to unit variance: probes (``shape`` (b,) + pixel.shape[:-1]) with the spatial correlation
+    of the footprint temperatures' noise (neighbouring points closer than ``side`` px share pixels).
+
+    ``pixel`` (T, N, 2): the points' projected positions (px, NaN: none). The interpolation between the
+    pixels' box values is left out: it adds a little correlation at sub-box distances only.
+    """
+    b = shape[0]
+    T, N = pixel.shape[:2]
+    out = np.zeros((b, T, N))
+    h = side // 2
+    o = np.arange(-h, h + 1)
+    ou, ov = (a.ravel() for a in np.meshgrid(o, o))
+    for k in range(T):
+        ok = np.isfinite(pixel[k]).all(axis=1)
+        if not ok.any():
+            continue
+        c = np.round(pixel[k][ok]).astype(np.int64)
+        keys = (c[:, 0:1] + ou) * 1_000_003 + (c[:, 1:2] + ov)  # (n, side²): the box's pixels
+        uniq, inv = np.unique(keys, return_inverse=True)
+        xi = rng.standard_normal((b, uniq.size))
+        out[:, k, ok] = xi[:, inv.reshape(keys.shape)].sum(axis=-1) / side
+    return out
+
+
+def footprint_probes(points, window, sigma):
+    """``(draw, s_paper)`` for the noise probes of :mod:`irdic.stages.uncertainty` when the fields regress
+    footprint temperatures (:func:`footprint_temperatures`), else None: ``draw(rng, b)`` gives ``b`` probes
+    of :func:`footprint_noise` at the record's (or the chunk window's) points, ``s_paper`` (K) the noise of
+    the paper's point temperatures (pixel noise ``sigma`` times their gain), whose regression is the value."""
+    if "temperature_paper" not in points:
+        return None
+    side = int(points.attrs.get("footprint_px", 1))
+    pixel = points["pixel"].transpose("time", "point", "axis").values if window is None else window.pixel
+    return (lambda rng, b: footprint_noise(rng, pixel, side, (b,))), sigma * float(
+        points.attrs.get("ir_noise_gain_temperature_paper", np.nan))
+
+
+def window_extras(points, w) -> dict:
+    """The :class:`~irdic.stages.uncertainty.Window` fields of the footprint (none without it) at times ``w``."""
+    if "temperature_paper" not in points:
+        return {}
+    return dict(theta_paper=points["temperature_paper"].isel(time=w).values.astype(float),
+                pixel=points["pixel"].isel(time=w).transpose("time", "point", "axis").values)
+
+
+def paper_value(points, series, space_time, spatial):
+    """The denoised temperature from the paper's point temperatures, with the inputs of its bias estimate.
+
+    ``space_time(theta, series) -> (grad, total, local, value, spatial, chosen)`` is the fields stage's
+    regression (:func:`irdic.stages.fields._space_time`), ``spatial`` its inputs of the bias estimates on
+    the footprint temperatures. Returns ``(value (T, N) degC, spatial)`` with the value's entries (the
+    input, the output, the temporal difference) from the paper's temperatures and the gradient's and
+    rate's from the footprint (:func:`irdic.stages.uncertainty.uncertainties`).
+
+    Notes
+    -----
+    The footprint's box offset, ``(side² - 1)/24 ∇²Θ``, is the same in every
+    regression of it, so the difference to the exact interpolation of the
+    same input (the regressions' bias estimate) cannot see it; regressed
+    from the paper's temperatures the value has no such offset.
+    """
+    theta = points["temperature_paper"].values.astype(float)
+    ser = None if series is None else series._replace(theta=series.theta_paper)
+    _, _, _, value, own, _ = space_time(theta, ser)
+    merged = (spatial[0], spatial[1], own[2], own[3]) + ((spatial[4], spatial[5], own[6]) if len(spatial) > 4 else ())
+    return value, merged
