@@ -60,8 +60,12 @@ def status_attrs() -> dict:
 #: units and long names of the variables of ``points.zarr`` (couple stage)
 POINTS_ATTRS: dict[str, dict[str, str]] = {
     "temperature": {"units": "degC", "long_name": "temperature at the material point"},
-    "temperature_footprint": {"units": "degC", "long_name": "temperature at the material point from the mean of "
-                              "the specimen pixels in a footprint_px box about it (the fields stage regresses it)"},
+    "temperature_footprint": {"units": "degC", "long_name": "temperature at the material point from the plane "
+                              "fitted to the specimen pixels of a footprint_px box about each pixel (the fields "
+                              "stage regresses it for the gradient and rate)"},
+    "temperature_footprint_noise_factor": {"units": "1", "long_name": "noise of temperature_footprint relative "
+                                           "to that of a whole footprint_px box (box cut by the mask edge, "
+                                           "extrapolation from the edge)"},
     "pixel": {"units": "px", "long_name": "projected position in the IR image (full sensor, u = column, v = row)"},
     "pixel_std": {"units": "px", "long_name": "standard uncertainty of the projected position from the "
                   "calibration covariance (radial RMS)"},

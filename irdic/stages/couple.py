@@ -170,13 +170,14 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
     p = dict(p, time_window=temporal_window(t_ir if record_times is None else record_times, c=p["c_time"],
                                             R0=p["R0_time"]))
     t_dic = dic["time"].values.astype(float)
-    theta, gu, gv, rate, edge, in_span, extrap, theta_fp = _interpolate(ir, t_dic, pr, masks, seen, p, require_span,
-                                                                         side)
+    theta, gu, gv, rate, edge, in_span, extrap, footprint = _interpolate(ir, t_dic, pr, masks, seen, p, require_span,
+                                                                          side)
+    theta_fp, fp_factor = footprint if footprint is not None else (None, None)
     status = _status(pr, facing, seen, in_span, extrap, theta)
     visible = status <= Status.EXTRAPOLATED_FROM_EDGE
     if theta_fp is not None:  # where no footprint sample was on the mask: the paper's value
         theta_fp = np.where(np.isfinite(theta_fp), theta_fp, theta)
-    for a in (theta, gu, gv, rate, edge) + (() if theta_fp is None else (theta_fp,)):
+    for a in (theta, gu, gv, rate, edge) + (() if theta_fp is None else (theta_fp, fp_factor)):
         a[~visible] = np.nan
     # noise of the IR data at the specimen pixels: the fields stage's auto rule and uncertainties use it;
     # a chunk estimates it on its own IR window and masks (run_gather combines the chunks' estimates)
@@ -197,8 +198,8 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
         gain_fp = interpolation_noise_gains(t_ir if record_times is None else record_times, method=p["method"],
                                             c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"], R0_time=p["R0_time"],
                                             halo=p["halo"], footprint=side).temperature
-        ds["temperature_footprint"] = (("time", "point"), theta_fp.astype(np.float32),
-                                       cf_attrs("points", "temperature_footprint"))
+        for name, a in (("temperature_footprint", theta_fp), ("temperature_footprint_noise_factor", fp_factor)):
+            ds[name] = (("time", "point"), a.astype(np.float32), cf_attrs("points", name))
         ds.attrs["ir_noise_gain_temperature_footprint"] = float(gain_fp)
     return ds
 
@@ -222,7 +223,8 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
     as the points: a second pass would factorise every edge tile of every
     mask again. Also returns which DIC times lie in the IR time span (n_t,)
     and which values were extrapolated (n_t, M); last the footprint temperature of boxes of ``side`` px
-    (:mod:`irdic.stages.footprint_temperature`, same pass), None for side 1.
+    (:mod:`irdic.stages.footprint_temperature`, same pass) and its noise factor (n_t, M) each, None for
+    side 1.
     """
     u, v = ir["u"].values, ir["v"].values
     t_ir = ir["time"].values.astype(float)
@@ -233,7 +235,7 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
     res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
                           method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
                           R0_time=p["R0_time"], time_window=p["time_window"], halo=p["halo"], u=u, v=v,
-                          name="ir: frames", pixel_operator=FootprintOperator(side) if side > 1 else None)
+                          name="ir: frames", pixel_operator=(op := FootprintOperator(side)) if side > 1 else None)
     theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)
@@ -250,6 +252,7 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
         scratch = [np.array(a[:, :M], dtype=float) for a in (res.dtheta_du, res.dtheta_dv, res.dtheta_dt,
                                                              res.edge_distance)]
         extrapolate(res._replace(theta=res.theta_extra), M, cols, samples, pr.local, theta_fp, *scratch)
+        theta_fp = (theta_fp, op.noise_factor(pr.local, res, M, cols, samples))
     return theta, gu, gv, rate, edge, in_span, extrap, theta_fp
 
 

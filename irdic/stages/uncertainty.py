@@ -92,7 +92,8 @@ class Window(NamedTuple):
     (the temporal operator's window). With footprint temperatures
     (:func:`~irdic.stages.footprint_temperature.footprint_temperatures`):
     ``theta_paper`` (T_w, N), the paper's point temperatures, and ``pixel``
-    (T_w, N, 2) px, the points' projected positions.
+    (T_w, N, 2) px, the points' projected positions, ``noise_factor`` (T_w, N)
+    their footprint temperatures' (``points.temperature_footprint_noise_factor``).
     """
 
     theta: np.ndarray
@@ -105,6 +106,7 @@ class Window(NamedTuple):
     record: np.ndarray
     theta_paper: np.ndarray | None = None
     pixel: np.ndarray | None = None
+    noise_factor: np.ndarray | None = None
 
 
 def _probe_std(samples, base):
