@@ -211,13 +211,9 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     name : str
         Name of the frames in error messages (e.g. ``"ir: frames"``).
     pixel_operator : callable, optional
-        ``(mask (H, W) bool, pixels (n, 2) int (u, v)) -> (n, n)`` sparse
-        matrix, a linear operator on the values of the pixels of the union
-        of the masks (e.g.
-        :class:`irdic.stages.footprint_temperature.FootprintOperator`): the
-        temperature of the frames through it is evaluated in the same pass,
-        as extra right-hand sides of the same tile factorisations
-        (``theta_extra``; its gradient and rate are not evaluated).
+        ``(union mask (H, W), its pixels (n, 2) (u, v)) -> sparse (n, n)``, a linear operator on the pixel
+        values; the frames through it are interpolated in the same pass, extra right-hand sides of the same
+        tile factorisations (``theta_extra``, no derivatives).
 
     Returns
     -------
@@ -241,25 +237,33 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     frames, (n_frames, H, W) = _frame_shape(frames)
     ft = _frame_times(frame_times, n_frames)
     temporal = TemporalInterpolant(ft, c=c_time, R0=R0_time, window=time_window)
-    te = float_array(eval_times, "eval_times")
-    if te.ndim != 1:
-        raise ConfigError(f"eval_times must be 1-D (n_times,), got shape {te.shape}")
+    te = _eval_times(eval_times)
     pts = _points(points, te.size)
     masks, mask_of = _masks(mask, te.size, H, W)
     in_span = temporal.in_span(te)
     _warn_out_of_span(in_span, te, ft)
+    union = _union(masks)
+    labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
+    F, lookup = _pixel_series(frames, union, ft, *labels, name)
+    extra = None if pixel_operator is None else pixel_operator(union, np.c_[np.nonzero(union)[::-1]])  # F's rows
+    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk,
+                    dict(method=method, c=c, R0=R0, halo=halo, tile=tile), extra)
+    return SeriesEvaluation(*out[:5], in_span, out[5] if extra is not None else None)
+
+
+def _eval_times(eval_times):
+    te = float_array(eval_times, "eval_times")
+    if te.ndim != 1:
+        raise ConfigError(f"eval_times must be 1-D (n_times,), got shape {te.shape}")
+    return te
+
+
+def _union(masks):
+    """The union of the masks (H, W); DataError when it is empty."""
     union = np.logical_or.reduce(masks)
     if not union.any():
         raise DataError("mask: no pixel is masked; at least 3 pixels not on one line are needed")
-    labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
-    F, lookup = _pixel_series(frames, union, ft, *labels, name)
-    interp_args = dict(method=method, c=c, R0=R0, halo=halo, tile=tile)
-    extra = None
-    if pixel_operator is not None:
-        uv, uu = np.nonzero(union)  # the rows of F
-        extra = pixel_operator(union, np.c_[uu, uv])
-    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra)
-    return SeriesEvaluation(*out[:5], in_span, out[5] if extra is not None else None)
+    return union
 
 
 def _frame_times(frame_times, n_frames):

@@ -135,6 +135,7 @@ class FootprintOperator:
         # kept for the points' noise factors (noise_factor)
         self.mask, self.pixels = np.asarray(mask, bool), np.asarray(pixels)
         self.matrix = footprint_matrix(self.mask, self.pixels, self.side)
+        self._index = None
         return self.matrix
 
     def noise_factor(self, local, res, M, cols, samples):
@@ -154,23 +155,16 @@ class FootprintOperator:
         nearest pixel ``q`` (1 for a whole box, up to ~3 where the union's
         edge cuts it). Extrapolated from the edge: the extrapolation is
         ``Σ_j a_j f_j`` of the samples ``f_j`` (1 px apart: their boxes
-        overlap), so ``sqrt(Σ_jk a_j a_k ρ_jk)`` with ``ρ`` the overlap of
-        the whole boxes about the samples' pixels (:func:`_box_overlap`); the
-        weights ``a_j`` are the extrapolation of unit samples (the tube demo:
-        ~2.5, against 1.3-2.6 for white samples).
+        overlap), so ``sqrt(Σ_jk a_j a_k s_j s_k ρ_jk)`` with ``s_j`` the
+        samples' own factors and ``ρ`` the overlap of whole boxes about the
+        samples' pixels (:func:`_box_overlap`); the weights ``a_j`` are the
+        extrapolation of unit samples (the tube demo: ~2.5, against 1.3-2.6
+        for white samples).
         """
         from .extrapolation import extrapolate
 
         n_t = local.shape[0]
-        index = np.full(self.mask.shape, -1, np.int64)
-        index[self.pixels[:, 1], self.pixels[:, 0]] = np.arange(self.pixels.shape[0])
-        w2 = np.asarray(self.matrix.multiply(self.matrix).sum(axis=1)).ravel()
-        factor = np.ones(local.shape[:2])
-        c = np.round(np.nan_to_num(local, nan=-1.0)).astype(np.int64)
-        on = (c[..., 0] >= 0) & (c[..., 0] < index.shape[1]) & (c[..., 1] >= 0) & (c[..., 1] < index.shape[0])
-        q = np.full(on.shape, -1, np.int64)
-        q[on] = index[c[..., 1][on], c[..., 0][on]]
-        factor[q >= 0] = self.side * np.sqrt(w2[q[q >= 0]])
+        factor = self._box_factor(local)
         if cols.size == 0:
             return factor
         S = samples.shape[0]
@@ -187,13 +181,25 @@ class FootprintOperator:
                                samples, local, th, *scratch)
             a[j] = np.where(done[:, cols], th[:, cols], np.nan)
         pix = np.round(np.nan_to_num(samples)).astype(np.int64)  # (S, n_t, Mc, 2)
+        own = np.stack([self._box_factor(samples[j]) for j in range(S)])  # the samples' boxes may be cut
         var = np.zeros((n_t, cols.size))
         for j in range(S):
             for k in range(S):
-                var += np.nan_to_num(a[j] * a[k]) * _box_overlap(pix[j] - pix[k], self.side)
+                var += np.nan_to_num(a[j] * a[k]) * own[j] * own[k] * _box_overlap(pix[j] - pix[k], self.side)
         ext = np.isfinite(a[0])
         tt, pp = np.nonzero(ext)
         factor[tt, cols[pp]] = np.sqrt(var[ext])
+        return factor
+
+    def _box_factor(self, local):
+        """``side sqrt(Σ_j W_qj²)`` at the nearest pixel ``q`` of each position ``local`` (..., 2); 1 off the mask."""
+        if getattr(self, "_index", None) is None:
+            self._index = np.full(self.mask.shape, -1, np.int64)
+            self._index[self.pixels[:, 1], self.pixels[:, 0]] = np.arange(self.pixels.shape[0])
+            self._w2 = np.asarray(self.matrix.multiply(self.matrix).sum(axis=1)).ravel()
+        q = _nearest_rows(self._index, local)
+        factor = np.ones(q.shape)
+        factor[q >= 0] = self.side * np.sqrt(self._w2[q[q >= 0]])
         return factor
 
     def frames(self, frames, mask):
@@ -202,6 +208,15 @@ class FootprintOperator:
         out = np.array(frames, dtype=float)
         out[:, vv, uu] = (self(mask, np.c_[uu, vv]) @ out[:, vv, uu].T).T
         return out
+
+
+def _nearest_rows(index, local):
+    """Row of ``index`` (H, W) at the nearest pixel of each position ``local`` (..., 2) px; -1: none."""
+    c = np.round(np.nan_to_num(local, nan=-1.0)).astype(np.int64)
+    on = (c[..., 0] >= 0) & (c[..., 0] < index.shape[1]) & (c[..., 1] >= 0) & (c[..., 1] < index.shape[0])
+    q = np.full(on.shape, -1, np.int64)
+    q[on] = index[c[..., 1][on], c[..., 0][on]]
+    return q
 
 
 def _box_overlap(d, side):
