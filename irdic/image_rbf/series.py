@@ -128,8 +128,9 @@ def _pixel_series(frames, union, ft, u, v, name):
 
 
 def _warn_out_of_span(in_span, te, ft):
+    """``in_span``, with an IrdicWarning naming the times outside the frame span."""
     if in_span.all():
-        return
+        return in_span
     out = np.flatnonzero(~in_span)
     shown = ", ".join(f"{te[i]:g}" for i in out[:5]) + (", ..." if out.size > 5 else "")
     warnings.warn(
@@ -138,6 +139,7 @@ def _warn_out_of_span(in_span, te, ft):
         IrdicWarning,
         stacklevel=3,
     )
+    return in_span
 
 
 def _pieces(ks, mask_of, chunk):
@@ -240,11 +242,9 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     te = _eval_times(eval_times)
     pts = _points(points, te.size)
     masks, mask_of = _masks(mask, te.size, H, W)
-    in_span = temporal.in_span(te)
-    _warn_out_of_span(in_span, te, ft)
+    in_span = _warn_out_of_span(temporal.in_span(te), te, ft)
     union = _union(masks)
-    labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
-    F, lookup = _pixel_series(frames, union, ft, *labels, name)
+    F, lookup = _pixel_series(frames, union, ft, *((None, None) if u is None or v is None else (u, v)), name)
     extra = None if pixel_operator is None else pixel_operator(union, np.c_[np.nonzero(union)[::-1]])  # F's rows
     out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk,
                     dict(method=method, c=c, R0=R0, halo=halo, tile=tile), extra)

@@ -306,11 +306,11 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
     spatial = None
     ops = {} if ops is None else ops  # the spatial operators of the regressions and their probes, factorised once
     if p["temperature_smoothing_space"] is not None:
-        def space_time(th, ser):
-            return _space_time(th, t, sf, geo, p, ser, rate.convective, visible, (total, loc), ops)
+        def space_time(th, ser, q=p):
+            return _space_time(th, t, sf, geo, q, ser, rate.convective, visible, (total, loc), ops)
         grad, total, loc, best, spatial, chosen_k = space_time(theta, series)
-        if "temperature_paper" in points:  # footprint temperatures: the value from the paper's (paper_value)
-            best, spatial = paper_value(points, series, space_time, spatial)
+        if "temperature_paper" in points:  # footprint temperatures: the value from the paper's, same spacings
+            best, spatial = paper_value(points, series, lambda th, ser: space_time(th, ser, {**p, **chosen_k}), spatial)
     elif p["temperature_smoothing"] is not None:
         # a chunk regresses its window's series and evaluates it at its own times
         th, ts = (series.theta, series.t) if series is not None else (theta, t)

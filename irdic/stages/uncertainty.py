@@ -257,11 +257,15 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
     if ks is not None:
         draw, s_paper = (None, None) if footprint is None else footprint
-        acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, spatial is not None, draw)
-        if s_paper is not None:
-            # the value is regressed from the paper's temperatures: their own (white) noise through the operators
-            acc_p = _spatial_probes(t, regress_space, geo, visible, rng, s_paper, ks, W, window, spatial is not None)
-            acc.update({k: acc_p[k] for k in ("v", "v_var", "vt_var")})
+        # the value is regressed from the paper's temperatures: their own (white) noise through the operators
+        acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
+                              spatial is not None)
+        if draw is not None:
+            # the gradient and rate from the footprint temperatures: their correlated noise, drawn from a stream
+            # of its own (the other probes' draws stay as they were)
+            acc_fp = _spatial_probes(t, regress_space, geo, visible, rng.spawn(1)[0], s_T, ks, W, window,
+                                     spatial is not None, draw)
+            acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var")})
         temp_std, grad_std = np.sqrt(acc["v"]), np.sqrt(acc["g"])
         if W is not None:
             rate_std = np.sqrt(acc["r"])
