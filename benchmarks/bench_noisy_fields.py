@@ -109,8 +109,21 @@ def measure(name: str, scale: str, seed: int) -> dict:
         "chosen": {k: f.attrs.get(f"{k}_chosen") for k in
                    ("surface_smoothing", "temperature_smoothing", "temperature_smoothing_space")},
         "dic_noise_mm": f.attrs.get("dic_noise_mm"), "ir_noise_k": f.attrs.get("ir_noise_k"),
-        "couple_s": t1 - t0, "fields_s": t2 - t1,
+        "couple_s": t1 - t0, "fields_s": t2 - t1, "coverage": coverage(f, tr, m),
     }
+
+
+def coverage(f, tr, m) -> dict:
+    """Fractions of the interior errors within 1 and 2 std, where the store does not flag the bias as dominant
+    (the issue's bands: 0.60-0.76 and 0.92-0.98), and the fraction of interior values so flagged."""
+    out = {}
+    for v, true in (("temperature", "temperature"), ("temperature_gradient", "temperature_gradient"),
+                    ("temperature_rate", "temperature_rate"), ("max_principal_strain", "strain_max")):
+        mm = (m if f[v].ndim == 2 else m[..., None]) & ~f[f"{v}_bias_dominated"].values
+        z = np.abs(f[v].values - tr[true].values)[mm] / f[f"{v}_std"].values[mm]
+        z = z[np.isfinite(z)]
+        out[v] = (float(np.mean(z <= 1)), float(np.mean(z <= 2)), 1 - mm.sum() / max(1, m.sum() * (f[v].size // m.size)))
+    return out
 
 
 def main(argv=None):
@@ -136,6 +149,13 @@ def main(argv=None):
           f"(true RMS {t['true_strain_rms']:.2g}) |")
     print(f"| temperature RMS, denoised (fields) / interpolated (points) | {b['temp_denoised']:.3f} / "
           f"{b['temp_points']:.3f} K | {t['temp_denoised']:.3f} / {t['temp_points']:.3f} K |")
+    print()
+    print("| within 1 / 2 std (flagged bias-dominated) | barrel | tube |")
+    print("|---|---|---|")
+    for v in b["coverage"]:
+        cells = [f"{r['coverage'][v][0]:.2f} / {r['coverage'][v][1]:.2f} ({100 * r['coverage'][v][2]:.0f} %)"
+                 for r in (b, t)]
+        print(f"| {v} | {cells[0]} | {cells[1]} |")
 
 
 if __name__ == "__main__":

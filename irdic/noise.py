@@ -355,7 +355,7 @@ class NoiseGains:
 
 
 def interpolation_noise_gains(frame_times, *, method="rbf", c=2.0, R0=1.0, c_time=1.0, R0_time=1.0, halo=12,
-                              size=32, points=192, seed=0) -> NoiseGains:
+                              size=32, points=192, seed=0, footprint=1) -> NoiseGains:
     """Noise gains of the couple stage's pixel interpolation, measured on a probe.
 
     Parameters
@@ -373,6 +373,9 @@ def interpolation_noise_gains(frame_times, *, method="rbf", c=2.0, R0=1.0, c_tim
     seed : int
         Seed of the probe (the gains are a property of the operator, not of
         the data, so a fixed seed keeps the stores reproducible).
+    footprint : int
+        Side (px) of the box mean the frames go through first (the couple
+        stage's ``temperature_footprint``); 1: none.
 
     Returns
     -------
@@ -395,6 +398,10 @@ def interpolation_noise_gains(frame_times, *, method="rbf", c=2.0, R0=1.0, c_tim
         return NoiseGains(np.nan, np.nan, np.nan)
     rng = np.random.default_rng(seed)
     frames = rng.standard_normal((t.size, size, size))
+    if footprint > 1:
+        from scipy import ndimage
+
+        frames = ndimage.uniform_filter(frames, (1, int(footprint), int(footprint)), mode="nearest")
     margin = min(halo, size // 4)
     n_t, per = 16, max(1, points // 16)
     te = np.sort(rng.uniform(t[0], t[-1], n_t))

@@ -60,6 +60,12 @@ def status_attrs() -> dict:
 #: units and long names of the variables of ``points.zarr`` (couple stage)
 POINTS_ATTRS: dict[str, dict[str, str]] = {
     "temperature": {"units": "degC", "long_name": "temperature at the material point"},
+    "temperature_footprint": {"units": "degC", "long_name": "temperature at the material point from the plane "
+                              "fitted to the specimen pixels of a footprint_px box about each pixel (the fields "
+                              "stage regresses it for the gradient and rate)"},
+    "temperature_footprint_noise_factor": {"units": "1", "long_name": "noise of temperature_footprint relative "
+                                           "to that of a whole footprint_px box (box cut by the mask edge, "
+                                           "extrapolation from the edge)"},
     "pixel": {"units": "px", "long_name": "projected position in the IR image (full sensor, u = column, v = row)"},
     "pixel_std": {"units": "px", "long_name": "standard uncertainty of the projected position from the "
                   "calibration covariance (radial RMS)"},
@@ -161,6 +167,7 @@ DATASET_ATTRS: frozenset[str] = frozenset(
        # noise estimates, the smoothing "auto" chose and why, uncertainty notes (irdic.noise, fields)
        "ir_noise_k", "ir_noise_temporal_k", "ir_noise_spatial_k", "ir_quantisation_k",
        "ir_noise_gain_temperature", "ir_noise_gain_gradient_per_px", "ir_noise_gain_rate_per_s", "dic_noise_mm",
+       "footprint_px", "ir_noise_gain_temperature_footprint",
        "uncertainty_notes"]
     + [f"{o}_{w}" for o in ("temperature_smoothing", "temperature_smoothing_space", "surface_smoothing")
        for w in ("chosen", "reason")]

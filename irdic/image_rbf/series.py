@@ -45,6 +45,8 @@ class SeriesEvaluation(NamedTuple):
     edge_distance : px from the mask edge (see :class:`Evaluation`)
     in_span : (n_times,) bool, False where the time lies outside the frame
         span (all values NaN there)
+    theta_extra : temperature of the frames through ``pixel_operator``
+        (None without one)
     """
 
     theta: np.ndarray
@@ -53,6 +55,7 @@ class SeriesEvaluation(NamedTuple):
     dtheta_dt: np.ndarray
     edge_distance: np.ndarray
     in_span: np.ndarray
+    theta_extra: np.ndarray | None = None
 
 
 def _frame_shape(frames):
@@ -127,8 +130,9 @@ def _pixel_series(frames, union, ft, u, v, name):
 
 
 def _warn_out_of_span(in_span, te, ft):
+    """``in_span``, with an IrdicWarning naming the times outside the frame span."""
     if in_span.all():
-        return
+        return in_span
     out = np.flatnonzero(~in_span)
     shown = ", ".join(f"{te[i]:g}" for i in out[:5]) + (", ..." if out.size > 5 else "")
     warnings.warn(
@@ -137,6 +141,7 @@ def _warn_out_of_span(in_span, te, ft):
         IrdicWarning,
         stacklevel=3,
     )
+    return in_span
 
 
 def _pieces(ks, mask_of, chunk):
@@ -149,20 +154,26 @@ def _pieces(ks, mask_of, chunk):
     return pieces
 
 
-def _combined_frames(F, sel, Wv, Wd, n_mask):
-    """``G_k`` and ``G'_k`` of a chunk: (chunk, 2, n_mask)."""
-    vals = np.empty((Wv.shape[0], 2, n_mask))
+def _combined_frames(F, sel, Wv, Wd, n_mask, extra=None):
+    """``G_k`` and ``G'_k`` of a chunk: (chunk, 2, n_mask); with the sparse operator ``extra`` (n_u, n_u)
+    on the union's pixels (the rows of ``F``), ``extra G_k`` too: (chunk, 3, n_mask)."""
+    vals = np.empty((Wv.shape[0], 2 if extra is None else 3, n_mask))
     for j, Wt in enumerate((Wv, Wd)):
         # the temporal cardinal weights decay like the spatial ones: only
         # frames where they exceed 1e-15 of the largest enter (error ~1e-13 K)
         big = np.flatnonzero((np.abs(Wt) > 1e-15 * np.abs(Wt).max()).any(axis=0))
         c0, c1 = big[0], big[-1] + 1
-        vals[:, j] = (F[:, c0:c1] @ Wt[:, c0:c1].T)[sel].T
+        G = F[:, c0:c1] @ Wt[:, c0:c1].T
+        vals[:, j] = G[sel].T
+        if j == 0 and extra is not None:
+            # the operator is linear in the pixel values: it acts on G_k, not on every frame
+            vals[:, 2] = (extra @ G)[sel].T
     return vals
 
 
 def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rbf", c=2.0, R0=1.0, c_time=1.0,
-                    R0_time=1.0, time_window=None, halo=12, tile=8, chunk=32, u=None, v=None, name="frames"):
+                    R0_time=1.0, time_window=None, halo=12, tile=8, chunk=32, u=None, v=None, name="frames",
+                    pixel_operator=None):
     """Temperatures, gradients and rates at moving points over a frame series.
 
     Parameters
@@ -203,6 +214,10 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
         window); given, error messages name sensor pixels, not array indices.
     name : str
         Name of the frames in error messages (e.g. ``"ir: frames"``).
+    pixel_operator : callable, optional
+        ``(union mask (H, W), its pixels (n, 2) (u, v)) -> sparse (n, n)``, a linear operator on the pixel
+        values; the frames through it are interpolated in the same pass, extra right-hand sides of the same
+        tile factorisations (``theta_extra``, no derivatives).
 
     Returns
     -------
@@ -226,21 +241,31 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     frames, (n_frames, H, W) = _frame_shape(frames)
     ft = _frame_times(frame_times, n_frames)
     temporal = TemporalInterpolant(ft, c=c_time, R0=R0_time, window=time_window)
+    te = _eval_times(eval_times)
+    pts = _points(points, te.size)
+    masks, mask_of = _masks(mask, te.size, H, W)
+    in_span = _warn_out_of_span(temporal.in_span(te), te, ft)
+    union = _union(masks)
+    F, lookup = _pixel_series(frames, union, ft, *((None, None) if u is None or v is None else (u, v)), name)
+    extra = None if pixel_operator is None else pixel_operator(union, np.c_[np.nonzero(union)[::-1]])  # F's rows
+    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk,
+                    dict(method=method, c=c, R0=R0, halo=halo, tile=tile), extra)
+    return SeriesEvaluation(*out[:5], in_span, out[5] if extra is not None else None)
+
+
+def _eval_times(eval_times):
     te = float_array(eval_times, "eval_times")
     if te.ndim != 1:
         raise ConfigError(f"eval_times must be 1-D (n_times,), got shape {te.shape}")
-    pts = _points(points, te.size)
-    masks, mask_of = _masks(mask, te.size, H, W)
-    in_span = temporal.in_span(te)
-    _warn_out_of_span(in_span, te, ft)
+    return te
+
+
+def _union(masks):
+    """The union of the masks (H, W); DataError when it is empty."""
     union = np.logical_or.reduce(masks)
     if not union.any():
         raise DataError("mask: no pixel is masked; at least 3 pixels not on one line are needed")
-    labels = (None, None) if u is None or v is None else (np.asarray(u), np.asarray(v))
-    F, lookup = _pixel_series(frames, union, ft, *labels, name)
-    interp_args = dict(method=method, c=c, R0=R0, halo=halo, tile=tile)
-    out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args)
-    return SeriesEvaluation(*out, in_span)
+    return union
 
 
 def _frame_times(frame_times, n_frames):
@@ -252,8 +277,9 @@ def _frame_times(frame_times, n_frames):
 
 
 @blas_threads(1)  # thousands of small tile factorisations: threaded BLAS only synchronises (issue 10)
-def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args):
-    """theta, d/du, d/dv, d/dt, edge distance (n_times, M) for the in-span times, chunk by chunk.
+def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra=None):
+    """theta, d/du, d/dv, d/dt, edge distance and theta through ``extra`` (sparse, on the rows of ``F``)
+    (n_times, M) for the in-span times, chunk by chunk.
 
     The chunks run on the stage's worker threads (:func:`~irdic.numerics.threads.parallel_map`),
     each thread with the interpolant of its current mask; they share the
@@ -265,7 +291,8 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
     Wd = temporal.weights(te[ks], 1) if ks.size else None
     row_of = np.full(te.size, -1, np.int64)
     row_of[ks] = np.arange(ks.size)
-    out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(5)]
+    out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(6)]
+    g = 2 if extra is None else 3
     cache = TileCache()
     stables = {}
     progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
@@ -289,9 +316,9 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
         if sel.size == F.shape[0]:
             sel = slice(None)  # the mask is the union: no copy
         r = row_of[ch]
-        interp.fit_values(_combined_frames(F, sel, Wv[r], Wd[r], interp.n_mask).reshape(2 * ch.size, -1))
-        val, du, dv, ed = interp.evaluate_grouped(pts[ch], 2, (True, False))
-        for o, res in zip(out, (val[:, 0], du[:, 0], dv[:, 0], val[:, 1], ed)):
+        interp.fit_values(_combined_frames(F, sel, Wv[r], Wd[r], interp.n_mask, extra).reshape(g * ch.size, -1))
+        val, du, dv, ed = interp.evaluate_grouped(pts[ch], g, (True,) + (False,) * (g - 1))
+        for o, res in zip(out, (val[:, 0], du[:, 0], dv[:, 0], val[:, 1], ed, val[:, g - 1])):
             o[ch] = res
         with lock:
             done[0] += ch.size

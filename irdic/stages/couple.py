@@ -50,6 +50,7 @@ from ..store import open_store, write_dataset
 from ..vocabulary import COMPONENTS, PIXEL_AXES, Status, cf_attrs, status_attrs
 from .common import paths, stage_context
 from .extrapolation import extrapolate, extrapolation_samples, in_mask
+from .footprint_temperature import FootprintOperator, footprint_side
 from .parameters import settings
 from .visibility import Projection, masks_and_facing, project_points
 
@@ -156,6 +157,7 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
     _check_sensor(calibration, u, v)
     pr = project_points(camera, dic, u, v)
     n_t, M, _ = pr.x.shape
+    side = footprint_side(pr)  # from the record's first stage: the same in every chunk
     masks, facing = masks_and_facing(
         pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
         np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],
@@ -167,11 +169,15 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
     # the temporal operator's window comes from the whole record: every chunk evaluates alike
     p = dict(p, time_window=temporal_window(t_ir if record_times is None else record_times, c=p["c_time"],
                                             R0=p["R0_time"]))
-    theta, gu, gv, rate, edge, in_span, extrap = _interpolate(ir, dic["time"].values.astype(float), pr, masks,
-                                                               seen, p, require_span)
+    t_dic = dic["time"].values.astype(float)
+    theta, gu, gv, rate, edge, in_span, extrap, footprint = _interpolate(ir, t_dic, pr, masks, seen, p, require_span,
+                                                                          side)
+    theta_fp, fp_factor = footprint if footprint is not None else (None, None)
     status = _status(pr, facing, seen, in_span, extrap, theta)
     visible = status <= Status.EXTRAPOLATED_FROM_EDGE
-    for a in (theta, gu, gv, rate, edge):
+    if theta_fp is not None:  # where no footprint sample was on the mask: the paper's value
+        theta_fp = np.where(np.isfinite(theta_fp), theta_fp, theta)
+    for a in (theta, gu, gv, rate, edge) + (() if theta_fp is None else (theta_fp, fp_factor)):
         a[~visible] = np.nan
     # noise of the IR data at the specimen pixels: the fields stage's auto rule and uncertainties use it;
     # a chunk estimates it on its own IR window and masks (run_gather combines the chunks' estimates)
@@ -185,7 +191,17 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
     log.info("couple: %d DIC times x %d points in %.1f s; %s", n_t, M, _time.perf_counter() - started,
              ", ".join(f"{k} {v}" for k, v in counts.items() if v))
     fields = dict(theta=theta, gu=gu, gv=gv, rate=rate, edge=edge, status=status, visible=visible, masks=masks)
-    return _points_dataset(dic, calibration, camera, pr, t_ir, counts, noise, gains, **fields)
+    ds = _points_dataset(dic, calibration, camera, pr, t_ir, counts, noise, gains, **fields)
+    ds.attrs["footprint_px"] = int(side)
+    if theta_fp is not None:
+        # its gain (probe), like the plain one a property of the operator: the same in every chunk
+        gain_fp = interpolation_noise_gains(t_ir if record_times is None else record_times, method=p["method"],
+                                            c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"], R0_time=p["R0_time"],
+                                            halo=p["halo"], footprint=side).temperature
+        for name, a in (("temperature_footprint", theta_fp), ("temperature_footprint_noise_factor", fp_factor)):
+            ds[name] = (("time", "point"), a.astype(np.float32), cf_attrs("points", name))
+        ds.attrs["ir_noise_gain_temperature_footprint"] = float(gain_fp)
+    return ds
 
 
 def _check_sensor(calibration: xr.Dataset, u: np.ndarray, v: np.ndarray) -> None:
@@ -199,14 +215,16 @@ def _check_sensor(calibration: xr.Dataset, u: np.ndarray, v: np.ndarray) -> None
 
 
 def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.ndarray, seen: np.ndarray, p: dict,
-                 require_span: bool = True):
+                 require_span: bool = True, side: int = 1):
     """Temperature, pixel gradient (u, v), local rate and edge distance at the seen points, each (n_t, M).
 
     Points that project just outside the mask are extrapolated from samples
     of the interpolant inside it. The samples are evaluated in the same pass
     as the points: a second pass would factorise every edge tile of every
     mask again. Also returns which DIC times lie in the IR time span (n_t,)
-    and which values were extrapolated (n_t, M).
+    and which values were extrapolated (n_t, M); last the footprint temperature of boxes of ``side`` px
+    (:mod:`irdic.stages.footprint_temperature`, same pass) and its noise factor (n_t, M) each, None for
+    side 1.
     """
     u, v = ir["u"].values, ir["v"].values
     t_ir = ir["time"].values.astype(float)
@@ -217,7 +235,7 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
     res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
                           method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
                           R0_time=p["R0_time"], time_window=p["time_window"], halo=p["halo"], u=u, v=v,
-                          name="ir: frames")
+                          name="ir: frames", pixel_operator=(op := FootprintOperator(side)) if side > 1 else None)
     theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)
@@ -227,7 +245,15 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
             f"({t_ir[0]:g}..{t_ir[-1]:g} s): check time_offset/time_origin of the experiment"
         )
     extrap = extrapolate(res, M, cols, samples, pr.local, theta, gu, gv, rate, edge)
-    return theta, gu, gv, rate, edge, in_span, extrap
+    theta_fp = None
+    if res.theta_extra is not None:
+        # outside the mask: the same parabola through the footprint's samples (the derivatives are scratch)
+        theta_fp = np.array(res.theta_extra[:, :M], dtype=float)
+        scratch = [np.array(a[:, :M], dtype=float) for a in (res.dtheta_du, res.dtheta_dv, res.dtheta_dt,
+                                                             res.edge_distance)]
+        extrapolate(res._replace(theta=res.theta_extra), M, cols, samples, pr.local, theta_fp, *scratch)
+        theta_fp = (theta_fp, op.noise_factor(pr.local, res, M, cols, samples))
+    return theta, gu, gv, rate, edge, in_span, extrap, theta_fp
 
 
 def _status(pr: Projection, facing, seen, in_span, extrap, theta) -> np.ndarray:

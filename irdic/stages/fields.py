@@ -43,6 +43,7 @@ from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
+from .footprint_temperature import footprint_temperatures, paper_value, window_extras
 from .parameters import settings
 from .uncertainty import Window, uncertainties
 
@@ -132,10 +133,9 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
     x = points["x"].transpose("time", "point", "component").values.astype(float)
     # "auto": regression where the estimated noise matters, else the paper's interpolation; resolved once on
     # the whole record (before chunking), so every chunk makes the same choice
-    chosen, noise_attrs = auto_smoothing(points, x, {k: p[k] for k in
-                                                     ("surface_smoothing", "temperature_smoothing",
-                                                      "temperature_smoothing_space")})
+    chosen, noise_attrs = auto_smoothing(points, x, {k: p[k] for k in _SMOOTHING if k != "surface_smoothing_time"})
     p.update(chosen)
+    points = footprint_temperatures(points) if p["temperature_smoothing_space"] is not None else points
     configured = p["temperature_smoothing"]
     ops = _fill_operators(points, x, p)
     points, sf, p, series = _surface(points, x, t, chunk, p, ops)
@@ -237,7 +237,7 @@ def _chunk_surface(points, x, t, chunk, p, ops=None):
     sf.info["parametrisation"] = how
     # the window's temperature series and coordinates: the regression in time and the uncertainty probes need them
     series = Window(theta=points["temperature"].isel(time=w).values.astype(float), t=t[w], x=x[w], x_ref=x[:2],
-                    t_ref=t[:2], first=sl.start == 0, last=sl.stop == t.size, record=t)
+                    t_ref=t[:2], first=sl.start == 0, last=sl.stop == t.size, record=t, **window_extras(points, w))
     return points.isel(time=sl), sf, p, series
 
 
@@ -306,8 +306,11 @@ def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=
     spatial = None
     ops = {} if ops is None else ops  # the spatial operators of the regressions and their probes, factorised once
     if p["temperature_smoothing_space"] is not None:
-        grad, total, loc, best, spatial, chosen_k = _space_time(theta, t, sf, geo, p, series, rate.convective, visible,
-                                                                (total, loc), ops)
+        def space_time(th, ser, q=p):
+            return _space_time(th, t, sf, geo, q, ser, rate.convective, visible, (total, loc), ops)
+        grad, total, loc, best, spatial, chosen_k = space_time(theta, series)
+        if "temperature_paper" in points:  # footprint temperatures: the value from the paper's, same spacings
+            best, spatial = paper_value(points, series, lambda th, ser: space_time(th, ser, {**p, **chosen_k}), spatial)
     elif p["temperature_smoothing"] is not None:
         # a chunk regresses its window's series and evaluates it at its own times
         th, ts = (series.theta, series.t) if series is not None else (theta, t)
@@ -414,11 +417,9 @@ def _rate_series(th_s, ts_in, t_eval, p, fit, tkw):
     most as smooth; they differ by the heavier one's temporal bias, which the value's std holds. A fast
     transient's rate at 2 Hz is bias-limited, the gradient noise-limited (benchmarks/README.md, issue 15).
     """
-    k = p.get("temperature_smoothing_rate")
+    k = p.get("temperature_smoothing_rate") or ("gcv" if p["temperature_smoothing"] == "gcv" else None)
     if k is None:
-        if p["temperature_smoothing"] != "gcv":
-            return fit
-        k = "gcv"
+        return fit
     return smooth_series(th_s, ts_in, t_eval, smoothing=k, gcv_max_fraction=RATE_MAX_FRACTION, **tkw)
 
 

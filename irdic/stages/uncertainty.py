@@ -60,6 +60,7 @@ from ..numerics.temporal import TemporalInterpolant, temporal_window
 from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
+from .footprint_temperature import footprint_probes
 
 __all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
 
@@ -88,7 +89,11 @@ class Window(NamedTuple):
     ``t`` (T_w,) s; ``x_ref``/``t_ref``: the record's first two stages (the
     strain's reference); ``first``/``last``: the chunk holds the record's
     first/last DIC time; ``record`` (M,) s: the whole record's stage times
-    (the temporal operator's window).
+    (the temporal operator's window). With footprint temperatures
+    (:func:`~irdic.stages.footprint_temperature.footprint_temperatures`):
+    ``theta_paper`` (T_w, N), the paper's point temperatures, and ``pixel``
+    (T_w, N, 2) px, the points' projected positions, ``noise_factor`` (T_w, N)
+    their footprint temperatures' (``points.temperature_footprint_noise_factor``).
     """
 
     theta: np.ndarray
@@ -99,6 +104,9 @@ class Window(NamedTuple):
     first: bool
     last: bool
     record: np.ndarray
+    theta_paper: np.ndarray | None = None
+    pixel: np.ndarray | None = None
+    noise_factor: np.ndarray | None = None
 
 
 def _probe_std(samples, base):
@@ -162,7 +170,8 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     # the bias is averaged over points where the exact interpolation is itself accurate (unflagged)
     trusted = ~(near_edge(points, sf, visible) | strain_bias)
     temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
-                                                        s_T, s_g, s_r, window, spatial, trusted)
+                                                        s_T, s_g, s_r, window, spatial, trusted,
+                                                        footprint_probes(points, window, sigma))
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
     # calibration: the projected position's uncertainty moves the sample along the pixel gradient
     pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
@@ -211,9 +220,10 @@ def _ir_noise(a):
 
 
 def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None, spatial=None,
-            trusted=None):
+            trusted=None, footprint=None):
     """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
-    bias (:func:`_local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None."""
+    bias (:func:`_local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None.
+    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.stages.footprint_temperature.footprint_probes`."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
@@ -246,7 +256,16 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
     if ks is not None:
-        acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, spatial is not None)
+        draw, s_paper = (None, None) if footprint is None else footprint
+        # the value is regressed from the paper's temperatures: their own (white) noise through the operators
+        acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
+                              spatial is not None)
+        if draw is not None:
+            # the gradient and rate from the footprint temperatures: their correlated noise, drawn from a stream
+            # of its own (the other probes' draws stay as they were)
+            acc_fp = _spatial_probes(t, regress_space, geo, visible, rng.spawn(1)[0], s_T, ks, W, window,
+                                     spatial is not None, draw)
+            acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var")})
         temp_std, grad_std = np.sqrt(acc["v"]), np.sqrt(acc["g"])
         if W is not None:
             rate_std = np.sqrt(acc["r"])
@@ -262,7 +281,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     return temp_std, grad_std, rate_std, rate_biased
 
 
-def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias):
+def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias, draw=None):
     """Noise probes through the spatial (and temporal) regression of the temperatures.
 
     :data:`PROBES` white-noise fields of the point noise ``s_T`` (K) run
@@ -276,6 +295,8 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     The probes are evaluated at the :data:`PROBE_TIMES` times of
     :func:`_probe_times` (the regression in time mixes all of them first);
     every other time takes the nearest one's mean squares (:func:`_spread`).
+    ``draw(rng, b)``: ``b`` unit-variance noise fields (b, T_w, N) with the
+    input's spatial correlation instead of white ones.
     """
     T, N = visible.shape
     W0, W1, I0, I1 = W if W is not None else (None,) * 4
@@ -291,7 +312,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     seen = visible if tw == T else np.isfinite(window.theta)
     for start in range(0, PROBES, PROBE_GROUP):
         b = min(PROBE_GROUP, PROBES - start)
-        noise = rng.standard_normal((b, tw, N)) * s_T
+        noise = (rng.standard_normal((b, tw, N)) if draw is None else draw(rng, b)) * s_T
         noise[:, ~seen] = np.nan
         noise_c = noise[:, off:off + T][:, sub]
         m = b * sub.size

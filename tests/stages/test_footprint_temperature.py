@@ -1,0 +1,118 @@
+"""Footprint temperatures (issue 15): local-linear box values of the IR pixels, against analytic truth."""
+
+import numpy as np
+
+from irdic.noise import interpolation_noise_gains
+from irdic.stages.footprint_temperature import FootprintOperator, footprint_side
+
+
+def _disc(H=40, W=50, r=15.0):
+    v, u = np.mgrid[:H, :W].astype(float)
+    return (u - 24.3) ** 2 + (v - 19.6) ** 2 <= r * r, u, v
+
+
+def test_linear_field_is_reproduced_up_to_the_mask_edge():
+    # a cut box's plain mean would sit off the pixel: a bias of the gradient (0.8 K/px) times the shift
+    mask, u, v = _disc()
+    frames = np.stack([20.0 + 0.8 * u - 0.3 * v, 25.0 - 0.1 * u + 0.6 * v])
+    out = FootprintOperator(3).frames(frames, mask)
+    np.testing.assert_allclose(out[:, mask], frames[:, mask], atol=1e-9)
+    # outside the mask the frames are left as they are
+    np.testing.assert_array_equal(out[:, ~mask], frames[:, ~mask])
+
+
+def test_quadratic_field_offset_and_noise_reduction():
+    mask, u, v = _disc(r=18.0)
+    side = 3
+    frames = (0.02 * u ** 2 + 0.01 * v ** 2)[None]
+    out = FootprintOperator(side).frames(frames, mask)[0]
+    inner = np.zeros_like(mask)
+    inner[1:-1, 1:-1] = mask[:-2, 1:-1] & mask[2:, 1:-1] & mask[1:-1, :-2] & mask[1:-1, 2:] & mask[:-2, :-2] \
+        & mask[2:, 2:] & mask[:-2, 2:] & mask[2:, :-2] & mask[1:-1, 1:-1]
+    # the box mean of a quadratic: the field plus (side² - 1) / 24 ∇²Θ, ∇²Θ = 2 (0.02 + 0.01) K/px²
+    np.testing.assert_allclose(out[inner] - frames[0][inner], (side ** 2 - 1) / 24 * 0.06, atol=1e-12)
+    rng = np.random.default_rng(1)
+    noise = rng.standard_normal((20,) + mask.shape)
+    f = FootprintOperator(side).frames(noise, mask)
+    # white noise through a full box of side² pixels: std 1/side (0.333)
+    assert abs(f[:, inner].std() - 1 / side) < 0.02, f[:, inner].std()
+    # the couple stage's gain of the interpolated footprint temperature (probe): about 1/side of the plain one's
+    t = np.arange(8) * 0.25
+    g1 = interpolation_noise_gains(t, c=0.95, R0=1.0).temperature
+    g3 = interpolation_noise_gains(t, c=0.95, R0=1.0, footprint=3).temperature
+    assert 0.25 < g3 / g1 < 0.45, (g1, g3)
+
+
+def test_footprint_side_is_the_largest_odd_box_within_the_point_spacing():
+    for spacing, side in ((3.1, 3), (2.0, 1), (2.9, 1), (5.5, 3), (13.0, 3)):
+        g = np.stack(np.meshgrid(np.arange(10) * spacing, np.arange(10) * spacing), -1).reshape(1, -1, 2)
+        # the two fields of irdic.stages.visibility.Projection it reads
+        fake = type("P", (), {"local": g, "in_frame": np.ones(g.shape[:2], bool)})()
+        assert footprint_side(fake) == side, (spacing, footprint_side(fake))
+
+
+def test_one_pass_equals_a_second_interpolation_of_the_footprint_frames():
+    """The footprint temperature is an extra right-hand side of the same tile factorisations
+    (evaluate_series' pixel_operator): equal to interpolating the box-fitted frames in a pass of their own."""
+    from irdic.image_rbf import evaluate_series
+
+    mask0, u, v = _disc(r=14.0)
+    masks = np.stack([mask0, np.roll(mask0, 1, axis=1), np.roll(mask0, 2, axis=1)])  # a moving specimen
+    union = masks.any(axis=0)
+    rng = np.random.default_rng(3)
+    t = np.arange(6) * 0.5
+    frames = 20 + 0.3 * u + 0.01 * (v - 20) ** 2 + 0.5 * t[:, None, None] + rng.normal(0, 0.05, (6,) + u.shape)
+    te = np.array([0.6, 1.2, 2.1])
+    pts = np.stack([np.c_[24 + 8 * rng.uniform(-1, 1, 50), 19.6 + 8 * rng.uniform(-1, 1, 50)]] * 3)
+    op = FootprintOperator(3)
+    one = evaluate_series(frames, t, te, pts, masks, pixel_operator=op)
+    boxed = op.frames(frames, union)  # the box fit over the union, as the pass applies it
+    two = evaluate_series(boxed, t, te, pts, masks)
+    plain = evaluate_series(frames, t, te, pts, masks)
+    assert np.isfinite(one.theta_extra).sum() > 100
+    np.testing.assert_allclose(one.theta_extra, two.theta, atol=1e-12, equal_nan=True)
+    # the paper's values and derivatives are untouched by the extra right-hand side
+    for a, b in zip(one[:5], plain[:5]):
+        np.testing.assert_array_equal(a, b)
+    assert plain.theta_extra is None
+
+
+def test_noise_factor_of_a_box_cut_by_a_straight_edge():
+    """On the mask the factor is side x the norm of the box fit's row at the nearest pixel: 1 for a whole
+    box; at a straight edge the 3 x 3 box keeps 2 columns, the plane through them at the centre column has
+    w0 = e0' A^-1 e0 = 3 / 9 (A = [[6, 3, 0], [3, 3, 0], [0, 0, 4]]): factor 3 sqrt(1/3) = sqrt(3)."""
+    from irdic.image_rbf import SeriesEvaluation
+
+    mask = np.zeros((20, 20), bool)
+    mask[2:18, 5:18] = True
+    op = FootprintOperator(3)
+    vv, uu = np.nonzero(mask)
+    op(mask, np.c_[uu, vv])
+    local = np.array([[[10.2, 9.9], [5.1, 10.0]]])  # inside; on the mask's first column
+    res = SeriesEvaluation(*(np.zeros((1, 2)),) * 5, np.ones(1, bool))
+    f = op.noise_factor(local, res, 2, np.array([], np.int64), np.zeros((9, 1, 0, 2)))
+    np.testing.assert_allclose(f, [[1.0, np.sqrt(3.0)]], rtol=1e-12)
+
+
+def test_noise_factor_matches_monte_carlo_on_the_couple_stage():
+    """Per point, the footprint temperature's scatter over IR noise realisations is the probe gain times the
+    noise factor (whole boxes, cut boxes and points extrapolated from the edge), within the Monte Carlo
+    spread (8 realisations: about 25 % per point, a few % over a group)."""
+    from irdic.stages.couple import couple
+
+    from .._synthetic_stores import synthetic_inputs
+
+    errs, pts = [], None
+    for seed in range(8):
+        dic, ir, cal, truth = synthetic_inputs("tube", "tiny", ir_noise=0.05, seed=seed)
+        pts = couple(dic, ir, cal)
+        errs.append(pts.temperature_footprint.values - truth.sel(point=pts.point).temperature.values)
+    e = np.array(errs)
+    e = (e - e.mean(axis=0)) * np.sqrt(len(errs) / (len(errs) - 1))  # the noise: the box's offset is not
+    pred = 0.05 * pts.attrs["ir_noise_gain_temperature_footprint"] * pts.temperature_footprint_noise_factor.values
+    status = pts.status.values
+    for group in (status == 0, status == 1):
+        ok = group & np.isfinite(e).all(axis=0)
+        assert ok.sum() > 50
+        ratio = np.sqrt(np.mean(e[:, ok] ** 2)) / np.sqrt(np.mean(pred[ok] ** 2))
+        assert 0.85 < ratio < 1.15, (ratio, ok.sum())
