@@ -96,21 +96,16 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
 
     Notes
     -----
-    Why the detections are re-measured: the detector's windowed centroid
-    takes noise from every pixel of its window with a lever arm up to the
-    window's radius, the template fit weighs each pixel by how much the
-    marker's position changes it (its edge): at contrast/noise 3 (oblique
-    pose) camera error 0.17-0.25 -> ~0.04 px, at 55 (lab pose) centre error
-    0.015 -> 0.008 px RMS. Both centre a centrally symmetric blob without
-    bias, so the perspective bias correction applies unchanged.
+    Why the detections are re-measured: the windowed centroid takes every
+    window pixel's noise with its lever arm, the template fit weighs each
+    pixel by its edge derivative (contrast/noise 3, oblique pose: camera
+    0.17-0.25 -> ~0.04 px; 55, lab: centre 0.015 -> 0.008 px RMS). Both
+    centre a symmetric blob without bias: the perspective correction holds.
 
-    Why the radius is re-estimated: a template of the wrong size is still
-    centrally symmetric, but the pixelated marker is not (the pixel grid's
-    phase), so the misfit of its edge shifts the centre, and it weighs the
-    edge pixels by the wrong derivative. The detector's half-contrast sizes
-    are biased low at contrast/noise 3 (1.557 instead of 1.6 mm, lab pose):
-    centre variance 1.53 x the Cramer-Rao bound instead of 1.30, camera
-    0.133 -> 0.112 px (seed 5 of the calibration benchmark).
+    Why the radius is re-estimated (:func:`_template_radius`): a template of
+    the wrong size shifts the centre with the pixel grid's phase; the
+    detector's sizes are biased low at contrast/noise 3 (1.557 instead of
+    1.6 mm: camera 0.133 -> 0.112 px, seed 5 of the calibration benchmark).
     """
     pol = det.attrs.get("polarity")
     noise = float(det.attrs.get("noise_k", np.nan))
@@ -131,18 +126,25 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
                 centre, shape, fine, window = _predict(model, x, normals, radius, min_radius_px, max_radius_px)
             det = _refit_matched(image, det, mi, di, centre, shape, window, fine, kw, every=radius_mm is None)
             break
-        D = np.column_stack([det["u"].values, det["v"].values])
-        wanted = fine.copy()
-        wanted[mi] = False
-        for k in np.flatnonzero(wanted):
-            # a detection already there was left unmatched for a reason (contested, or far off)
-            wanted[k] = not (np.hypot(*(D - centre[k]).T) <= window[k]).any()
-        rows = search_predicted(image, centre, shape, window, np.flatnonzero(wanted), fine, **kw)
-        if rows:
-            det = _append(det, [r for r in rows if r is not None])
-            mi, di, model = propagate(model, x, np.column_stack([det["u"].values, det["v"].values]))
+        det, mi, di, model = _search_round(image, det, x, mi, di, model, centre, shape, window, fine, kw)
     log.info("%d markers found at their predicted positions, %d detections re-measured", det.attrs["n_guided"],
              det.attrs["n_template_fit"] - det.attrs["n_guided"])
+    return det, mi, di, model
+
+
+def _search_round(image, det, x, mi, di, model, centre, shape, window, fine, kw):
+    """One round of :func:`find_missing`'s search: the unmatched predicted markers searched for, the
+    correspondence grown with what is found; returns ``det, mi, di, model``."""
+    D = np.column_stack([det["u"].values, det["v"].values])
+    wanted = fine.copy()
+    wanted[mi] = False
+    for k in np.flatnonzero(wanted):
+        # a detection already there was left unmatched for a reason (contested, or far off)
+        wanted[k] = not (np.hypot(*(D - centre[k]).T) <= window[k]).any()
+    rows = search_predicted(image, centre, shape, window, np.flatnonzero(wanted), fine, **kw)
+    if rows:
+        det = _append(det, [r for r in rows if r is not None])
+        mi, di, model = propagate(model, x, np.column_stack([det["u"].values, det["v"].values]))
     return det, mi, di, model
 
 
