@@ -71,9 +71,11 @@ def test_one_pass_equals_a_second_interpolation_of_the_footprint_frames():
     plain = evaluate_series(frames, t, te, pts, masks)
     assert np.isfinite(one.theta_extra).sum() > 100
     np.testing.assert_allclose(one.theta_extra, two.theta, atol=1e-12, equal_nan=True)
-    # the paper's values and derivatives are untouched by the extra right-hand side
+    # the paper's values and derivatives are untouched by the extra right-hand side (to round-off: the
+    # chunks run on worker threads, and a shared edge tile may be built by either of them)
     for a, b in zip(one[:5], plain[:5]):
-        np.testing.assert_array_equal(a, b)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-10, equal_nan=True)
+        np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
     assert plain.theta_extra is None
 
 
