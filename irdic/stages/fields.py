@@ -43,7 +43,7 @@ from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
-from .footprint_temperature import footprint_temperatures, paper_value, window_extras
+from .footprint_fields import footprint_temperatures, paper_value, window_extras
 from .parameters import settings
 from .uncertainty import Window, uncertainties
 

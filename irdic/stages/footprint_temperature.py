@@ -8,7 +8,7 @@ interpolates, with the same operator and in the same pass
 pixels were first replaced by a local-linear fit over a box about one point
 spacing wide (:func:`footprint_matrix`). The fields stage's spatial
 regressions take it for the gradient and the rate
-(:func:`footprint_temperatures`); ``points.temperature`` stays the paper's,
+(:func:`irdic.stages.footprint_fields.footprint_temperatures`); ``points.temperature`` stays the paper's,
 and the denoised temperature is still regressed from it (the box's offset,
 see :func:`footprint_matrix`, does not enter the value).
 """
@@ -16,32 +16,17 @@ see :func:`footprint_matrix`, does not enter the value).
 from __future__ import annotations
 
 import numpy as np
-import xarray as xr
 from scipy import sparse
 
 from .visibility import Projection
 
-__all__ = ["FootprintOperator", "footprint_matrix", "footprint_side", "footprint_temperatures", "footprint_noise",
-           "footprint_probes", "paper_value", "window_extras", "MAX_SIDE"]
+__all__ = ["FootprintOperator", "footprint_matrix", "footprint_side", "MAX_SIDE"]
 
 #: largest box side (px). The box's offset, (side² - 1)/24 ∇²Θ px², stays a third of the Laplacian, and the
 #: boxes of neighbouring points overlap little; sparser point clouds do not take wider boxes: with 5 px on the
 #: tiny tube (points 13 px apart) the gradient's std covered 0.50 / 0.70 of its errors within 1 / 2 std
 #: (interpolation 0.64 / 0.89, 3 px 0.59 / 0.80), the offset's gradient being a bias no probe sees
 MAX_SIDE = 3
-
-
-def footprint_temperatures(points: xr.Dataset) -> xr.Dataset:
-    """``points`` for the fields stage's regression of the gradient and rate: ``temperature_footprint`` as
-    ``temperature`` with its noise gain, the paper's value kept as ``temperature_paper`` (the denoised
-    temperature is regressed from it); unchanged when the store has none (side 1, or written before it
-    existed)."""
-    if "temperature_footprint" not in points:
-        return points
-    return points.assign(temperature=points["temperature_footprint"], temperature_paper=points["temperature"],
-                         ).assign_attrs(ir_noise_gain_temperature_paper=points.attrs.get("ir_noise_gain_temperature"),
-                                        ir_noise_gain_temperature=points.attrs.get(
-                                            "ir_noise_gain_temperature_footprint", np.nan))
 
 
 def footprint_side(pr: Projection) -> int:
@@ -224,82 +209,3 @@ def _box_overlap(d, side):
     """Correlation of the means of two whole ``side`` x ``side`` boxes ``d`` (..., 2) px apart."""
     o = np.clip(side - np.abs(d), 0, None) / side
     return o[..., 0] * o[..., 1]
-
-
-def footprint_noise(rng, pixel, side, shape):
-    """White pixel noise (unit variance) through the box mean of ``side`` px about each point's nearest
-    pixel, scaled to unit variance: probes (``shape`` (b,) + pixel.shape[:-1]) with the spatial correlation
-    of the footprint temperatures' noise (neighbouring points closer than ``side`` px share pixels).
-
-    ``pixel`` (T, N, 2): the points' projected positions (px, NaN: none). The interpolation between the
-    pixels' box values is left out: it adds a little correlation at sub-box distances only.
-    """
-    b = shape[0]
-    T, N = pixel.shape[:2]
-    out = np.zeros((b, T, N))
-    h = side // 2
-    o = np.arange(-h, h + 1)
-    ou, ov = (a.ravel() for a in np.meshgrid(o, o))
-    for k in range(T):
-        ok = np.isfinite(pixel[k]).all(axis=1)
-        if not ok.any():
-            continue
-        c = np.round(pixel[k][ok]).astype(np.int64)
-        keys = (c[:, 0:1] + ou) * 1_000_003 + (c[:, 1:2] + ov)  # (n, side²): the box's pixels
-        uniq, inv = np.unique(keys, return_inverse=True)
-        xi = rng.standard_normal((b, uniq.size))
-        out[:, k, ok] = xi[:, inv.reshape(keys.shape)].sum(axis=-1) / side
-    return out
-
-
-def footprint_probes(points, window, sigma):
-    """``(draw, s_paper)`` for the noise probes of :mod:`irdic.stages.uncertainty` when the fields regress
-    footprint temperatures (:func:`footprint_temperatures`), else None: ``draw(rng, b)`` gives ``b`` probes
-    of :func:`footprint_noise` at the record's (or the chunk window's) points, ``s_paper`` (K) the noise of
-    the paper's point temperatures (pixel noise ``sigma`` times their gain), whose regression is the value."""
-    if "temperature_paper" not in points:
-        return None
-    side = int(points.attrs.get("footprint_px", 1))
-    if window is None:
-        pixel = points["pixel"].transpose("time", "point", "axis").values
-        factor = points["temperature_footprint_noise_factor"].values if "temperature_footprint_noise_factor" in \
-            points else None
-    else:
-        pixel, factor = window.pixel, window.noise_factor
-    factor = 1.0 if factor is None else np.nan_to_num(np.asarray(factor, dtype=float), nan=1.0)
-    return (lambda rng, b: footprint_noise(rng, pixel, side, (b,)) * factor), sigma * float(
-        points.attrs.get("ir_noise_gain_temperature_paper", np.nan))
-
-
-def window_extras(points, w) -> dict:
-    """The :class:`~irdic.stages.uncertainty.Window` fields of the footprint (none without it) at times ``w``."""
-    if "temperature_paper" not in points:
-        return {}
-    factor = points.get("temperature_footprint_noise_factor")
-    return dict(theta_paper=points["temperature_paper"].isel(time=w).values.astype(float),
-                pixel=points["pixel"].isel(time=w).transpose("time", "point", "axis").values,
-                noise_factor=None if factor is None else factor.isel(time=w).values)
-
-
-def paper_value(points, series, space_time, spatial):
-    """The denoised temperature from the paper's point temperatures, with the inputs of its bias estimate.
-
-    ``space_time(theta, series) -> (grad, total, local, value, spatial, chosen)`` is the fields stage's
-    regression (:func:`irdic.stages.fields._space_time`) with the spacings chosen for the footprint
-    temperatures (the noise probes run through one operator), ``spatial`` its inputs of the bias
-    estimates on the footprint temperatures. Returns ``(value (T, N) degC, spatial)`` with the value's entries (the
-    input, the output, the temporal difference) from the paper's temperatures and the gradient's and
-    rate's from the footprint (:func:`irdic.stages.uncertainty.uncertainties`).
-
-    Notes
-    -----
-    The footprint's box offset, ``(side² - 1)/24 ∇²Θ``, is the same in every
-    regression of it, so the difference to the exact interpolation of the
-    same input (the regressions' bias estimate) cannot see it; regressed
-    from the paper's temperatures the value has no such offset.
-    """
-    theta = points["temperature_paper"].values.astype(float)
-    ser = None if series is None else series._replace(theta=series.theta_paper)
-    _, _, _, value, own, _ = space_time(theta, ser)
-    merged = (spatial[0], spatial[1], own[2], own[3]) + ((spatial[4], spatial[5], own[6]) if len(spatial) > 4 else ())
-    return value, merged

@@ -60,7 +60,7 @@ from ..numerics.temporal import TemporalInterpolant, temporal_window
 from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
-from .footprint_temperature import footprint_probes
+from .footprint_fields import footprint_probes
 
 __all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
 
@@ -90,7 +90,7 @@ class Window(NamedTuple):
     strain's reference); ``first``/``last``: the chunk holds the record's
     first/last DIC time; ``record`` (M,) s: the whole record's stage times
     (the temporal operator's window). With footprint temperatures
-    (:func:`~irdic.stages.footprint_temperature.footprint_temperatures`):
+    (:func:`~irdic.stages.footprint_fields.footprint_temperatures`):
     ``theta_paper`` (T_w, N), the paper's point temperatures, and ``pixel``
     (T_w, N, 2) px, the points' projected positions, ``noise_factor`` (T_w, N)
     their footprint temperatures' (``points.temperature_footprint_noise_factor``).
@@ -223,7 +223,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             trusted=None, footprint=None):
     """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
     bias (:func:`_local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None.
-    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.stages.footprint_temperature.footprint_probes`."""
+    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.stages.footprint_fields.footprint_probes`."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
