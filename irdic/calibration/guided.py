@@ -121,8 +121,7 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
         centre, shape, fine, window = _predict(model, x, normals, radius, min_radius_px, max_radius_px)
         if rnd == rounds:
             if radius_mm is None:
-                D = np.column_stack([det["u"].values, det["v"].values])
-                radius = _template_radius(image, mi, di, D, radius, centre, shape, window, fine, kw)
+                radius = _template_radius(image, det, mi, di, radius, centre, shape, window, fine, kw)
                 centre, shape, fine, window = _predict(model, x, normals, radius, min_radius_px, max_radius_px)
             det = _refit_matched(image, det, mi, di, centre, shape, window, fine, kw, every=radius_mm is None)
             break
@@ -159,7 +158,15 @@ def _predict(model, x, normals, radius, min_radius_px, max_radius_px):
     return centre, shape, fine, window
 
 
-def _template_radius(image, mi, di, D, radius, centre, shape, window, fine, kw) -> float:
+def _matched_starts(det, mi, di, n):
+    """Start of each marker's template fit (n, 2) px: its matched detection (a grid search would find what
+    the detector found); NaN for the unmatched."""
+    start = np.full((n, 2), np.nan)
+    start[mi] = np.column_stack([det["u"].values, det["v"].values])[di]
+    return start
+
+
+def _template_radius(image, det, mi, di, radius, centre, shape, window, fine, kw) -> float:
     """Marker radius (mm): ``radius`` times the median size of the matched markers' templates fitted freely.
 
     The detector's half-contrast sizes behind :func:`estimate_radius` are
@@ -170,10 +177,8 @@ def _template_radius(image, mi, di, D, radius, centre, shape, window, fine, kw) 
     determined (its derivative is even, the shift's odd: the two are
     uncorrelated), their median over the markers more so.
     """
-    # each fit starts at its matched detection (D, px): a grid search would find what the detector found
-    start = np.full(centre.shape, np.nan)
-    start[mi] = D[di]
-    rows = search_predicted(image, centre, shape, window, mi[fine[mi]], fine, fit_scale=True, start=start, **kw)
+    rows = search_predicted(image, centre, shape, window, mi[fine[mi]], fine, fit_scale=True,
+                            start=_matched_starts(det, mi, di, centre.shape[0]), **kw)
     scale = np.array([r["scale"] for r in rows])
     if len(scale) < 6:
         return radius  # too few to judge: the detector's estimate stands
@@ -187,9 +192,8 @@ def _refit_matched(image, det, mi, di, centre, shape, window, fine, kw, every: b
     final marker radius differs from the one they were found with).
     """
     todo = fine[mi] if every else ~det["template_fit"].values[di] & fine[mi]
-    start = np.full(centre.shape, np.nan)
-    start[mi] = np.column_stack([det["u"].values, det["v"].values])[di]
-    rows = search_predicted(image, centre, shape, window, mi[todo], fine, keep_misses=True, start=start, **kw)
+    rows = search_predicted(image, centre, shape, window, mi[todo], fine, keep_misses=True,
+                            start=_matched_starts(det, mi, di, centre.shape[0]), **kw)
     cols = {k: det[k].values.copy() for k in (*DETECTION_FIELDS, "template_fit")}
     for d, row in zip(di[todo], rows):
         if row is not None:

@@ -291,8 +291,9 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
     Wd = temporal.weights(te[ks], 1) if ks.size else None
     row_of = np.full(te.size, -1, np.int64)
     row_of[ks] = np.arange(ks.size)
-    out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(6)]
     g = 2 if extra is None else 3
+    # theta, d/du, d/dv, d/dt, edge distance, and theta through extra when there is one
+    out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(5 if extra is None else 6)]
     cache = TileCache()
     stables = {}
     progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
