@@ -38,6 +38,17 @@ _GEMM_COST = 0.48
 _BLOCK_BYTES = 64 * 2**20
 
 
+def default_halo(cR0, h):
+    """Default halo of the local tiles (mm) for the kernel width ``c R0`` and the point spacing ``h`` (mm).
+
+    Nine kernel widths, but at most 20 point spacings: a tile then holds a
+    bounded number of points however dense the grid, so the local pass costs
+    time linear in the points (:mod:`irdic.surface`, Notes); never fewer than
+    6 spacings.
+    """
+    return max(min(9.0 * cR0, 20.0 * h), 6.0 * h)
+
+
 class SpatialInterpolant:
     """IMQ interpolant (or regression) over fixed surface parameters, for many fields.
 
@@ -56,7 +67,8 @@ class SpatialInterpolant:
     solver : {"auto", "global", "local"}
         Interpolation solver (module Notes); regression is always global.
     halo : float, optional
-        Halo of the local tiles (mm); default ``max(9 c R0, 6 h)``.
+        Halo of the local tiles (mm); default ``max(min(9 c R0, 20 h), 6 h)``
+        (h: median point spacing; see :mod:`irdic.surface`, Notes).
     core : float, optional
         Core side of the local tiles (mm); default: chosen by a cost model.
 
@@ -108,7 +120,7 @@ class SpatialInterpolant:
                 "ill-conditioned (derivatives lose digits); consider a smaller R0",
                 self.c * self.R0, ratio, self.h,
             )
-        self.halo = positive(halo, "halo") if halo is not None else max(9.0 * self.c * self.R0, 6.0 * self.h)
+        self.halo = positive(halo, "halo") if halo is not None else default_halo(self.c * self.R0, self.h)
         self.core = positive(core, "core") if core is not None else None
         self._global = None
         self._ls = None
