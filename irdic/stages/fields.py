@@ -43,7 +43,7 @@ from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
-from .footprint_fields import footprint_temperatures, paper_value, window_extras
+from .footprint_fields import footprint_temperatures, paper_value, pixel_pitch, window_extras
 from .parameters import settings
 from .uncertainty import Window, uncertainties
 
@@ -259,7 +259,7 @@ def _resolve_gcv(points, x, t, psi, p, ops=None):
         p["surface_smoothing_time"] = info["smoothing_t"] if p["surface_smoothing_time"] is not None else None
     theta = points["temperature"].isel(time=w).values.astype(float)
     if p["temperature_smoothing_space"] == "gcv":
-        k = _space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"], ops=ops)
+        k = _space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"], ops=ops, separation=pixel_pitch(points, psi))
         if k is not None:  # no time with 6 visible points among them: each chunk chooses its own
             p["temperature_smoothing_space"] = k
     if p["temperature_smoothing"] == "gcv":
@@ -476,13 +476,13 @@ def _with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
     return ds
 
 
-def _space_gcv_filled(filled, p, *, c, R0):
+def _space_gcv_filled(filled, p, *, c, R0, separation=None):
     """Centre spacing of the spatial regression from up to 8 filled times (rows of ``filled``).
 
     Chosen by the estimated risk of the gradient
     (:func:`irdic.surface.regression.gradient_risk_spatial`), not by GCV of
     the values: the gradient is what this regression is for, and GCV's curve
-    is flat over the spacings where the gradient's error still halves.
+    is flat where the gradient's error still halves. ``separation`` (mm): one IR pixel (see there).
     """
     from ..surface import edge_distance
     from ..surface.regression import gradient_risk_spatial
@@ -491,13 +491,13 @@ def _space_gcv_filled(filled, p, *, c, R0):
     # the rim's data carry more than noise (mixed edge pixels, extrapolation), which the least smoothed
     # pilot follows: judged inside it, all points fitted
     judged = edge_distance(p) >= JUDGED_MARGIN * median_spacing(p)
-    k, _ = gradient_risk_spatial(p, sample, c=c, R0=R0, judged=judged if judged.sum() >= 6 else None)
-    log.info("temperature_smoothing_space: the gradient's estimated risk chose a centre spacing of %.1f point "
-             "spacings", k)
+    k, _ = gradient_risk_spatial(p, sample, c=c, R0=R0, judged=judged if judged.sum() >= 6 else None,
+                                 separation=separation)
+    log.info("temperature_smoothing_space: the gradient's estimated risk chose %.1f point spacings", k)
     return k
 
 
-def _space_gcv(theta, psi, *, c, R0, ops=None):
+def _space_gcv(theta, psi, *, c, R0, ops=None, separation=None):
     """:func:`_space_gcv_filled` of the times of ``theta`` (T, N) with 6 or more visible points."""
     from ..surface import shared_interpolant
 
@@ -508,7 +508,7 @@ def _space_gcv(theta, psi, *, c, R0, ops=None):
         return None
     filled, _ = shared_interpolant({} if ops is None else ops, psi[have], c=c, R0=R0).fill(
         theta[np.ix_(times, have)], visible[np.ix_(times, have)])
-    return _space_gcv_filled(filled, psi[have], c=c, R0=R0)
+    return _space_gcv_filled(filled, psi[have], c=c, R0=R0, separation=separation)
 
 
 def _regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):

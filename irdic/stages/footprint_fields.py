@@ -15,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-__all__ = ["footprint_temperatures", "footprint_noise", "footprint_probes", "paper_value", "window_extras"]
+__all__ = ["footprint_temperatures", "footprint_noise", "footprint_probes", "paper_value", "pixel_pitch",
+           "window_extras"]
 
 
 def footprint_temperatures(points: xr.Dataset) -> xr.Dataset:
@@ -29,6 +30,33 @@ def footprint_temperatures(points: xr.Dataset) -> xr.Dataset:
                          ).assign_attrs(ir_noise_gain_temperature_paper=points.attrs.get("ir_noise_gain_temperature"),
                                         ir_noise_gain_temperature=points.attrs.get(
                                             "ir_noise_gain_temperature_footprint", np.nan))
+
+
+def pixel_pitch(points: xr.Dataset, psi) -> float | None:
+    """Size (mm) of one IR pixel on the surface: the median of ``|ΔΨ| / |Δpixel|`` over nearest neighbours.
+
+    Point temperatures closer than this share their pixels' noise
+    (:func:`irdic.surface.regression.gradient_risk_spatial`, ``separation``).
+    Taken at the one of five times spread over the record with the most
+    projected points; None when fewer than 6 points are projected there.
+    """
+    from scipy.spatial import cKDTree
+
+    pix = points["pixel"].transpose("time", "point", "axis")
+    psi = np.asarray(psi, dtype=float)
+    best = None
+    for i in np.unique(np.linspace(0, pix.shape[0] - 1, 5).astype(int)):
+        q = np.asarray(pix[i].values, dtype=float)
+        ok = np.flatnonzero(np.isfinite(q).all(axis=1) & np.isfinite(psi).all(axis=1))
+        if best is None or ok.size > best[1].size:
+            best = (q, ok)
+    q, ok = best
+    if ok.size < 6:
+        return None
+    d, j = cKDTree(psi[ok]).query(psi[ok], k=2)
+    dpx = np.linalg.norm(q[ok] - q[ok[j[:, 1]]], axis=1)
+    use = dpx > 0
+    return float(np.median(d[use, 1] / dpx[use])) if use.any() else None
 
 
 def footprint_noise(rng, pixel, side, shape):

@@ -724,6 +724,34 @@ def test_duplicate_points_are_left_out_with_a_logged_reason(caplog):
     assert np.isnan(sf.tangents[:, -1]).all() and np.isfinite(sf.tangents[:, 7]).all()
 
 
+def test_gradient_risk_of_points_denser_than_the_pixels_is_judged_one_per_pixel():
+    """Points 0.15 mm apart carrying the noise of 0.35 mm pixels (each point its nearest pixel's): judged on
+    all points, the white-noise estimate takes the pilot (the least smoothed regression follows the
+    correlated noise); judged on one point per pixel (``separation``) it takes a spacing whose gradient error
+    is near the best candidate's."""
+    from irdic.surface.regression import gradient_risk_spatial
+
+    rng = np.random.default_rng(3)
+    psi = np.stack(np.meshgrid(np.arange(64.0), np.arange(64.0)), -1).reshape(-1, 2) * 0.15
+    psi = psi + rng.uniform(-0.01, 0.01, psi.shape)
+    f = 0.2 * (psi[:, 0] - 5) ** 2 / 5 + 0.3 * psi[:, 1] + np.sin(psi[:, 0] / 2)
+    g = np.c_[0.4 * (psi[:, 0] - 5) / 5 + np.cos(psi[:, 0] / 2) / 2, np.full(len(psi), 0.3)]
+    pixel = np.unique(np.floor(psi / 0.35).astype(int), axis=0, return_inverse=True)[1].ravel()
+    F = f[:, None] + rng.normal(0, 0.05, (pixel.max() + 1, 8))[pixel]
+
+    def error(k):
+        _, d1, d2 = SpatialInterpolant(psi, smoothing=k).evaluate(F, value=False)
+        return np.sqrt(np.mean((d1 - g[:, :1]) ** 2 + (d2 - g[:, 1:]) ** 2))
+
+    k_white, _ = gradient_risk_spatial(psi, F)
+    k, table = gradient_risk_spatial(psi, F, separation=0.35)
+    assert k_white <= 3 and k > 8
+    # the candidates are in units of the subset's spacing, returned in the whole cloud's
+    assert table[0][0] == pytest.approx(2.0 * 0.35 / 0.15, rel=0.25)
+    best = min(error(kk) for kk in (8, 12, 16, 20, 24))
+    assert error(k) <= 1.5 * best < 0.2 * error(k_white)
+
+
 def test_gradient_risk_estimates_the_gradient_error_and_beats_gcv():
     """Issue 15: the spacing of the temperature regression is chosen for its gradient. The Mallows-type
     estimate tracks the true mean squared gradient error at every spacing, and its choice has a smaller
