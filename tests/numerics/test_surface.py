@@ -317,6 +317,27 @@ def test_fill_of_stages_sharing_a_pattern_equals_each_stage_alone():
     assert np.isfinite(together).all()
 
 
+def test_fill_factorisations_are_reused_only_with_their_rows_of_g():
+    """A missing pattern's LU is kept for the next fill with the same points, and dropped when more rows of
+    G are built (their tiles may differ): the result is the one of an instance that never kept it."""
+    rng = np.random.default_rng(6)
+    psi = grid(0.6, 9) + rng.uniform(-0.05, 0.05, (grid(0.6, 9).shape[0], 2))
+    n = psi.shape[0]
+    X = curved(psi)[None] + rng.normal(size=(1, n, 3))
+    a, b = (np.ones((1, n), bool) for _ in range(2))
+    a[0, rng.choice(n, 30, replace=False)] = False
+    b[0, rng.choice(n, 200, replace=False)] = False
+    sp = SpatialInterpolant(psi)
+    first = sp.fill(np.where(a[..., None], X, np.nan), a)[0]
+    assert len(sp._fill_lu) == 1
+    np.testing.assert_array_equal(sp.fill(np.where(a[..., None], X, np.nan), a)[0], first)
+    sp.fill(np.where(b[..., None], X, np.nan), b)
+    again = sp.fill(np.where(a[..., None], X, np.nan), a)[0]
+    other = SpatialInterpolant(psi)
+    other.fill(np.where(b[..., None], X, np.nan), b)
+    np.testing.assert_allclose(again, other.fill(np.where(a[..., None], X, np.nan), a)[0], rtol=0, atol=1e-12)
+
+
 def test_regression_reduces_noise_in_derivatives():
     rng = np.random.default_rng(4)
     psi = grid(0.7, 14)
