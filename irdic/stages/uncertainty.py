@@ -62,7 +62,7 @@ from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
 from .footprint_fields import footprint_probes
-from .regression_bias import BIAS_NEIGHBOURS, local_bias, reference_spacing
+from .regression_bias import BIAS_NEIGHBOURS, local_bias, noise_scale, reference_spacing, scaled_probes
 
 __all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
 
@@ -141,10 +141,13 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         record's own ends are flagged as series ends.
     spatial : tuple, optional
         With the spatial regression of the temperatures: ``(theta, grad,
-        value_in, value[, d_rate_t, d_rate_s, d_value_t])`` (T, N[, 3]): the
-        point temperatures, the regressed gradient, the regression's input
-        and output (their differences to the exact interpolation give its
-        bias); with a regression in time too (``S_t`` in time, ``S`` in
+        value_in, value[, d_rate_t, d_rate_s, d_value_t], grad_in)`` (T, N[,
+        3]): the point temperatures, the regressed gradient, the value
+        regression's input and output (their difference gives its bias), and
+        last the input whose lighter regression is the gradient's bias
+        reference (:func:`~irdic.stages.regression_bias.reference_spacing`;
+        the points' own series after the regression in time, or the point
+        temperatures); with a regression in time too (``S_t`` in time, ``S`` in
         space, ``I_t`` the exact interpolation in time): the rate of
         ``S_t S Θ`` minus that of ``I_t S Θ`` (the temporal bias), minus that
         of ``S_t Θ`` (the spatial one), and the value of ``S_t S Θ`` minus
@@ -171,7 +174,8 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     trusted = ~(near_edge(points, sf, visible) | strain_bias)
     temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
                                                         s_T, s_g, s_r, window, spatial, trusted,
-                                                        footprint_probes(points, window, sigma))
+                                                        footprint_probes(points, window, sigma),
+                                                        _values(points, "temperature_paper"))
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
     # calibration: the projected position's uncertainty moves the sample along the pixel gradient
     pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
@@ -224,10 +228,12 @@ def _ir_noise(a):
 
 
 def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None, spatial=None,
-            trusted=None, footprint=None):
+            trusted=None, footprint=None, theta_paper=None):
     """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
     bias (:func:`~irdic.stages.regression_bias.local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None.
-    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.stages.footprint_fields.footprint_probes`."""
+    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.stages.footprint_fields.footprint_probes`, with
+    ``theta_paper`` (T, N) the paper's point temperatures. The probes' noise is scaled to the data's
+    (:func:`~irdic.stages.regression_bias.noise_scale`)."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
@@ -265,11 +271,14 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         # the value is regressed from the paper's temperatures: their own (white) noise through the operators
         acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
                               spatial is not None)
+        own = None if spatial is None else spatial[0]  # the regressions' input (the footprint's, with one)
+        acc = scaled_probes(acc, noise_scale(own if draw is None else theta_paper, acc, regress_space, ks, trusted))
         if draw is not None:
             # the gradient and rate from the footprint temperatures: their correlated noise, drawn from a stream
             # of its own (the other probes' draws stay as they were)
             acc_fp = _spatial_probes(t, regress_space, geo, visible, rng.spawn(1)[0], s_T, ks, W, window,
                                      spatial is not None, draw)
+            acc_fp = scaled_probes(acc_fp, noise_scale(own, acc_fp, regress_space, ks, trusted))
             acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null",
                                                "rs_var_null")})
         temp_std, grad_std = np.sqrt(acc["v"]), np.sqrt(acc["g"])
@@ -277,13 +286,15 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             rate_std = np.sqrt(acc["r"])
         if spatial is not None:
             theta, grad, value_in, value = spatial[:4]
-            d_grad = grad - regress_space(theta, geo.dual, reference_spacing(ks) or 1.0)[0]
+            # against the lighter regression of the gradient's input after the same regression in time (the
+            # value's reference; the points' own series at each time carried the temporal bias and full noise)
+            d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
             grad_std = np.hypot(grad_std, local_bias(d_grad, acc["g_var"], sf.psi, trusted, acc["g_var_null"]))
             # the exact interpolation of the input at the points is the input itself
             temp_std = np.hypot(temp_std, local_bias(value - value_in, acc["v_var"], sf.psi, trusted,
                                                     acc["v_var_null"]))
-            if len(spatial) > 4 and W is not None:
-                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:], acc, sf.psi, trusted, temp_std,
+            if len(spatial) > 5 and W is not None:  # the temporal terms
+                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:7], acc, sf.psi, trusted, temp_std,
                                                                    rate_std)
     return temp_std, grad_std, rate_std, rate_biased
 
@@ -308,7 +319,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     T, N = visible.shape
     W0, W1, I0, I1 = W if W is not None else (None,) * 4
     sub, near = _probe_times(T)
-    acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var"), 0.0)
+    acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var", "res"), 0.0)
     n_bias = 0  # probes through the exact interpolation (whole groups, the first BIAS_PROBES or more)
     # each of the first BIAS_PROBES probes' squared differences: the bias estimates' own scatter on noise
     nulls = {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
@@ -328,9 +339,11 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         if W0 is None:
             g, v = regress_space(noise_c.reshape(m, N), geo.dual[sub], ks)
             value_in = noise_c
+            res = noise_c - v.reshape(noise_c.shape)
         else:
             # in space at each time first, then in time (irdic.stages.fields._space_time)
             s = np.nan_to_num(regress_space(noise.reshape(b * tw, N), None, ks)[1].reshape(b, tw, N))
+            res = (noise - s)[:, off:off + T][:, sub]
             r = np.einsum("ij,kjn->kin", W1[sub], s)
             acc["r"] = acc["r"] + np.sum(r ** 2, axis=0) / PROBES
             smoothed = np.einsum("ij,kjn->kin", W0[sub], s)
@@ -346,6 +359,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
                     nulls[key] += list(sq) if start < BIAS_PROBES else []
         g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)
         acc["v"] = acc["v"] + np.sum(v ** 2, axis=0) / PROBES
+        acc["res"] = acc["res"] + np.sum(res ** 2, axis=0) / PROBES  # (noise - S noise): see noise_scale
         acc["g"] = acc["g"] + np.sum(g ** 2, axis=0) / PROBES
         if bias:
             acc["v_var"] = acc["v_var"] + np.sum((v - value_in) ** 2, axis=0) / PROBES
@@ -353,7 +367,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         if bias and start < BIAS_PROBES:
             # the same probes through the exact interpolation (k = 1): the noise expected in the
             # difference regression - interpolation, which is subtracted from the data's difference
-            g_int = regress_space(noise_c.reshape(m, N), geo.dual[sub], reference_spacing(ks) or 1.0)[0].reshape(
+            g_int = regress_space(value_in.reshape(m, N), geo.dual[sub], reference_spacing(ks) or 1.0)[0].reshape(
                 b, sub.size, N, 3)
             acc["g_var"] = acc["g_var"] + np.sum((g - g_int) ** 2, axis=0)
             nulls["g_var"] += list((g - g_int) ** 2)
@@ -362,6 +376,10 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         acc["g_var"] = acc["g_var"] / n_bias
     out = {k: _spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
     return {**out, **{f"{k}_null": np.array([_spread(a, near) for a in n]) if n else None for k, n in nulls.items()}}
+
+
+def _values(points, name):
+    return points[name].values.astype(float) if name in points else None
 
 
 def _probe_times(T):
