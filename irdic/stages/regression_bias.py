@@ -25,10 +25,6 @@ log = logging.getLogger(__name__)
 BIAS_NEIGHBOURS = 32
 #: a local bias estimate counts where it exceeds this many of its own standard errors on pure noise
 BIAS_Z = 1.0
-#: where the neighbourhood's estimate does not resolve the bias: WIDE_FACTOR times the neighbours, at the time
-#: and WIDE_REACH times each side (a bias smooth on the centre spacing's scale, resolved in ~13 x the samples)
-WIDE_FACTOR = 8
-WIDE_REACH = 2
 
 
 def noise_scale(theta, acc, regress_space, ks, trusted):
@@ -85,7 +81,7 @@ def reference_spacing(k):
     return None if k < 2.0 else k / 2.0
 
 
-def local_bias(d, noise_var, psi, trusted=None, null=None):
+def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None):
     """Local RMS of a regression's bias from its difference ``d`` to a less biased reference.
 
     Parameters
@@ -103,6 +99,11 @@ def local_bias(d, noise_var, psi, trusted=None, null=None):
     null : ndarray, shape (K, T, N[, C]), optional
         ``K >= 2`` probes' own squared differences (``noise_var`` is, or
         estimates, their mean): the noise-only scatter of the estimate.
+    spacing : float, optional
+        The regression's centre spacing in point spacings: where the
+        neighbourhood's estimate is not resolved, the points within that
+        spacing (``π spacing²`` nearest) are averaged instead (the bias
+        varies on that scale).
 
     Returns
     -------
@@ -132,8 +133,9 @@ def local_bias(d, noise_var, psi, trusted=None, null=None):
         return np.zeros_like(a)
     out = None
     # the neighbourhood, then a wider one where the bias is below the neighbourhood's resolution
-    for k, reach in ((BIAS_NEIGHBOURS, 1), (WIDE_FACTOR * BIAS_NEIGHBOURS, WIDE_REACH)):
-        nb = _neighbours(psi, k, reach)
+    wide = [] if spacing is None else [int(np.pi * float(np.max(spacing)) ** 2)]
+    for k in [BIAS_NEIGHBOURS] + [n for n in wide if n > BIAS_NEIGHBOURS]:
+        nb = _neighbours(psi, k)
         est = _local_mean(np.where(ok, a, 0.0), ok, nb)
         if null is None or len(null) < 2:
             return np.sqrt(np.maximum(est, 0.0))
@@ -162,9 +164,9 @@ def _null_scale(null, ok, nb):
     return float(np.sqrt(np.sum(dev2[use]) / np.sum(np.square(lv[use])) * (1.0 + 1.0 / K)))
 
 
-def _neighbours(psi, k=BIAS_NEIGHBOURS, reach=1):
-    """``(have, S, reach)``: the points with parameters, the sparse (n_have x n_have) sum over each one's ``k``
-    nearest, and the times each side averaged over."""
+def _neighbours(psi, k=BIAS_NEIGHBOURS):
+    """``(have, S)``: the points with parameters and the sparse (n_have x n_have) sum over each one's ``k``
+    nearest."""
     from scipy import sparse
     from scipy.spatial import cKDTree
 
@@ -175,13 +177,13 @@ def _neighbours(psi, k=BIAS_NEIGHBOURS, reach=1):
     # (a[:, nb] at once would hold T x N x k (x 3) values: GBs at paper scale)
     S = sparse.csr_matrix((np.ones(nb.size), (np.repeat(np.arange(have.size), k), nb.ravel())),
                           shape=(have.size, have.size))
-    return have, S, reach
+    return have, S
 
 
 def _local_mean(a, ok, nb):
     """Mean of ``a`` (T, N[, C]; 0 where not ``ok``) over the ``ok`` neighbours ``nb`` (:func:`_neighbours`) at
-    the time and ``reach`` times each side; 0 where none."""
-    have, S, reach = nb
+    the time and the adjacent ones; 0 where none."""
+    have, S = nb
 
     def neighbour_sum(v):
         vh = np.moveaxis(v[:, have], 1, 0)
@@ -193,11 +195,10 @@ def _local_mean(a, ok, nb):
     s[:, have] = neighbour_sum(a)
     n[:, have] = neighbour_sum(okf)
     s2, n2 = s.copy(), n.copy()
-    for j in range(1, reach + 1):
-        s2[j:] += s[:-j]
-        s2[:-j] += s[j:]
-        n2[j:] += n[:-j]
-        n2[:-j] += n[j:]
+    s2[1:] += s[:-1]
+    s2[:-1] += s[1:]
+    n2[1:] += n[:-1]
+    n2[:-1] += n[1:]
     out = np.zeros(a.shape)
     np.divide(s2, n2, out=out, where=n2 > 0)
     return out

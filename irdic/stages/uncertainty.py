@@ -170,22 +170,14 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     notes = []
     ends = (True, True) if window is None else (window.first, window.last)
     ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes, ends)
-    # the bias is averaged over points where the exact interpolation is itself accurate (unflagged)
-    trusted = ~(near_edge(points, sf, visible) | strain_bias)
+    trusted = ~(near_edge(points, sf, visible) | strain_bias)  # the bias references are accurate there
     temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
                                                         s_T, s_g, s_r, window, spatial, trusted,
                                                         footprint_probes(points, window, sigma),
                                                         _values(points, "temperature_paper"))
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
-    # calibration: the projected position's uncertainty moves the sample along the pixel gradient
-    pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
-    cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
     s_x = float(a.get("dic_noise_mm", np.nan))
-    # DIC noise: each point is sampled, and placed in the surface parameters, where its noisy coordinates put
-    # it; that offset is the point's own, fixed over the regressions (demo barrel: 0.003 K of 0.006 K)
-    grad = spatial[1] if spatial is not None else surface_gradient(np.nan_to_num(g_pix), J, sf.tangents)
-    dic = np.nan_to_num(s_x * np.linalg.norm(grad, axis=-1))
-    temp_std = np.sqrt(temp_std ** 2 + cal ** 2 + dic ** 2)
+    temp_std = np.sqrt(temp_std ** 2 + _position_var(points, sf, J, g_pix, s_x, spatial))
     strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
@@ -202,6 +194,18 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         "max_principal_strain": (strain_std, np.array(strain_bias)),
         "notes": "; ".join(notes) if notes else "none",
     }
+
+
+def _position_var(points, sf, J, g_pix, s_x, spatial):
+    """Variance (T, N) K² of the temperature from the points' positions: the calibration's projected-position
+    uncertainty along the pixel gradient, and the DIC noise ``s_x`` (mm) along the surface gradient (each
+    point is sampled, and placed in the surface parameters, where its noisy coordinates put it: an offset of
+    its own that no regression averages; demo barrel: 0.003 K of 0.006 K)."""
+    pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros(sf.x.shape[:2])
+    cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
+    grad = spatial[1] if spatial is not None else surface_gradient(np.nan_to_num(g_pix), J, sf.tangents)
+    dic = np.nan_to_num(s_x * np.linalg.norm(grad, axis=-1))
+    return cal ** 2 + dic ** 2
 
 
 def _rate_bias_flags(rate_biased, visible, notes):
@@ -289,12 +293,12 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             # against the lighter regression of the gradient's input after the same regression in time (the
             # value's reference; the points' own series at each time carried the temporal bias and full noise)
             d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
-            grad_std = np.hypot(grad_std, local_bias(d_grad, acc["g_var"], sf.psi, trusted, acc["g_var_null"]))
+            grad_std = np.hypot(grad_std, local_bias(d_grad, acc["g_var"], sf.psi, trusted, acc["g_var_null"], ks))
             # the exact interpolation of the input at the points is the input itself
             temp_std = np.hypot(temp_std, local_bias(value - value_in, acc["v_var"], sf.psi, trusted,
-                                                    acc["v_var_null"]))
+                                                    acc["v_var_null"], ks))
             if len(spatial) > 5 and W is not None:  # the temporal terms
-                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:7], acc, sf.psi, trusted, temp_std,
+                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:7], acc, sf.psi, trusted, temp_std, ks,
                                                                    rate_std)
     return temp_std, grad_std, rate_std, rate_biased
 
@@ -403,11 +407,11 @@ def _spread(a, near):
     return np.where(np.isfinite(out), out, med)
 
 
-def _space_time_bias(d, acc, psi, trusted, temp_std, rate_std):
+def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std):
     """Temperature and rate std with the space-time regression's bias added, and where the rate's temporal
     bias exceeds its noise.
 
-    ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`;
+    ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`; ``ks``: the spatial spacing;
     ``acc``: the probes' noise variances of those differences
     (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each
     through the same operators as the difference (:func:`~irdic.stages.regression_bias.local_bias`). The
@@ -419,12 +423,12 @@ def _space_time_bias(d, acc, psi, trusted, temp_std, rate_std):
     half of the points.)
     """
     d_rate_t, d_rate_s, d_value_t = d
-    b_t, b_s = (local_bias(x, acc[k], psi, trusted, acc[f"{k}_null"]) for x, k in ((d_rate_t, "rt_var"),
-                                                                                   (d_rate_s, "rs_var")))
+    b_t, b_s = (local_bias(x, acc[k], psi, trusted, acc[f"{k}_null"], ks) for x, k in ((d_rate_t, "rt_var"),
+                                                                                       (d_rate_s, "rs_var")))
     # only the temporal bias is resolved well enough to flag by (the spatial one scatters with the points' noise)
     biased = b_t > rate_std
     rate_std = np.sqrt(rate_std ** 2 + b_t ** 2 + b_s ** 2)
-    temp_std = np.hypot(temp_std, local_bias(d_value_t, acc["vt_var"], psi, trusted, acc["vt_var_null"]))
+    temp_std = np.hypot(temp_std, local_bias(d_value_t, acc["vt_var"], psi, trusted, acc["vt_var_null"], ks))
     return temp_std, rate_std, biased
 
 
@@ -466,7 +470,7 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None)
         k = len(samples[1])
         null = np.square((np.array(samples[0][:k]) - base) - (np.array(samples[1]) - bases[1]))
         std = np.hypot(std, local_bias(base - bases[1], null.mean(axis=0), sf.psi,
-                                       None if trusted is None else trusted[sub], null))
+                                       None if trusted is None else trusted[sub], null, kw["smoothing"]))
     std = _spread(std, near)
     # the strain is zero by definition at the reference stage (stage 0 of the record): no uncertainty there,
     # whatever rounding the probes leave
