@@ -31,13 +31,18 @@ are propagated through those same operators:
 - Calibration: the temperature gets ``pixel_std |∇_pix Θ|`` (the projected
   position's uncertainty times the pixel gradient) in quadrature, and the
   DIC noise ``σ_x |∇Θ|`` (a point's noisy coordinates place its sample).
-- Regression bias: a regression's error is noise plus bias. For the spatial
-  temperature regression (value, gradient) and the surface regression
-  (strain) the difference ``d`` to the exact interpolation of the same input
+- The probes' noise is scaled to the data's: the residuals of each time's
+  spatial regression, data over probes
+  (:func:`~irdic.stages.regression_bias.noise_scale`).
+- Regression bias: a regression's error is noise plus bias. Its difference
+  ``d`` to a less biased reference of the same input (value: the points'
+  own series; gradient and strain: the regression with half the spacing,
+  :func:`~irdic.stages.regression_bias.reference_spacing`; the rate: a
+  local quartic in time, :func:`~irdic.numerics.temporal.local_rate_weights`)
   has ``E d² = b² + v`` (``v``: the noise variance of ``d``, from the same
-  probes through both operators, the first :data:`BIAS_PROBES` of them);
-  ``b² = <d²> - <v>`` averaged locally
-  (:func:`~irdic.stages.regression_bias.local_bias`) is added to the variance.
+  probes through both operators); ``b² = <d²> - <v>`` averaged locally, where
+  it exceeds its own scatter on noise
+  (:func:`~irdic.stages.regression_bias.local_bias`), is added to the variance.
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
@@ -415,12 +420,12 @@ def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std):
     ``acc``: the probes' noise variances of those differences
     (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each
     through the same operators as the difference (:func:`~irdic.stages.regression_bias.local_bias`). The
-    temporal bias is judged against the exact interpolation in time of the
-    spatially regressed series, whose noise is that of the regressed series
-    only: the bias of a fast transient is then resolved well below the
-    rate's noise. (Against the interpolation of the points' own series its
-    estimate scattered by more than the rate's std and was clipped to 0 at
-    half of the points.)
+    temporal bias is judged against a local quartic in time of the
+    spatially regressed series (:func:`~irdic.numerics.temporal.local_rate_weights`;
+    the IMQ interpolant was as biased as the regression), whose noise is that
+    of the regressed series only: the bias of a fast transient is then
+    resolved well below the rate's noise. (Against the points' own series
+    its estimate scattered by more than the rate's std.)
     """
     d_rate_t, d_rate_s, d_value_t = d
     b_t, b_s = (local_bias(x, acc[k], psi, trusted, acc[f"{k}_null"], ks) for x, k in ((d_rate_t, "rt_var"),
