@@ -122,7 +122,8 @@ def paper_value(points, series, space_time, spatial):
     temperatures (the noise probes run through one operator), ``spatial`` its inputs of the bias
     estimates on the footprint temperatures. Returns ``(value (T, N) degC, spatial)`` with the value's entries (the
     input, the output, the temporal difference) from the paper's temperatures and the gradient's and
-    rate's from the footprint (:func:`irdic.stages.uncertainty.uncertainties`).
+    rate's (the last: the gradient's reference input) from the footprint
+    (:func:`irdic.stages.uncertainty.uncertainties`).
 
     Notes
     -----
@@ -134,5 +135,5 @@ def paper_value(points, series, space_time, spatial):
     theta = points["temperature_paper"].values.astype(float)
     ser = None if series is None else series._replace(theta=series.theta_paper)
     _, _, _, value, own, _ = space_time(theta, ser)
-    merged = (spatial[0], spatial[1], own[2], own[3]) + ((spatial[4], spatial[5], own[6]) if len(spatial) > 4 else ())
-    return value, merged
+    merged = (spatial[0], spatial[1], own[2], own[3]) + ((spatial[4], spatial[5], own[6]) if len(spatial) > 5 else ())
+    return value, merged + spatial[-1:]

@@ -29,14 +29,20 @@ are propagated through those same operators:
   fixed operator follows the geometry, which changes slowly from stage to
   stage, and the probes' cost no longer grows with the record.
 - Calibration: the temperature gets ``pixel_std |∇_pix Θ|`` (the projected
-  position's uncertainty times the pixel gradient) in quadrature.
-- Regression bias: a regression's error is noise plus bias. For the spatial
-  temperature regression (value, gradient) and the surface regression
-  (strain) the difference ``d`` to the exact interpolation of the same input
+  position's uncertainty times the pixel gradient) in quadrature, and the
+  DIC noise ``σ_x |∇Θ|`` (a point's noisy coordinates place its sample).
+- The probes' noise is scaled to the data's: the residuals of each time's
+  spatial regression, data over probes
+  (:func:`~irdic.stages.regression_bias.noise_scale`).
+- Regression bias: a regression's error is noise plus bias. Its difference
+  ``d`` to a less biased reference of the same input (value: the points'
+  own series; gradient and strain: the regression with half the spacing,
+  :func:`~irdic.stages.regression_bias.reference_spacing`; the rate: a
+  local quartic in time, :func:`~irdic.numerics.temporal.local_rate_weights`)
   has ``E d² = b² + v`` (``v``: the noise variance of ``d``, from the same
-  probes through both operators, the first :data:`BIAS_PROBES` of them);
-  ``b² = <d²> - <v>`` averaged locally
-  (:func:`_local_bias`) is added to the variance.
+  probes through both operators); ``b² = <d²> - <v>`` averaged locally, where
+  it exceeds its own scatter on noise
+  (:func:`~irdic.stages.regression_bias.local_bias`), is added to the variance.
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
@@ -56,11 +62,12 @@ from typing import NamedTuple
 import numpy as np
 
 from ..gradient import material_rate, surface_gradient
-from ..numerics.temporal import TemporalInterpolant, temporal_window
+from ..numerics.temporal import TemporalInterpolant, local_rate_weights, temporal_window
 from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
 from .footprint_fields import footprint_probes
+from .regression_bias import BIAS_NEIGHBOURS, local_bias, noise_scale, reference_spacing, scaled_probes
 
 __all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
 
@@ -78,8 +85,6 @@ BIAS_PROBES = 4
 PROBE_TIMES = 32
 #: points closer than this to the mask edge (px) have interpolation bias rather than noise
 EDGE_PX = 2.0
-#: nearest points (surface parameters) over which a regression's bias is averaged, at each time and its neighbours
-BIAS_NEIGHBOURS = 32
 
 
 class Window(NamedTuple):
@@ -141,10 +146,13 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         record's own ends are flagged as series ends.
     spatial : tuple, optional
         With the spatial regression of the temperatures: ``(theta, grad,
-        value_in, value[, d_rate_t, d_rate_s, d_value_t])`` (T, N[, 3]): the
-        point temperatures, the regressed gradient, the regression's input
-        and output (their differences to the exact interpolation give its
-        bias); with a regression in time too (``S_t`` in time, ``S`` in
+        value_in, value[, d_rate_t, d_rate_s, d_value_t], grad_in)`` (T, N[,
+        3]): the point temperatures, the regressed gradient, the value
+        regression's input and output (their difference gives its bias), and
+        last the input whose lighter regression is the gradient's bias
+        reference (:func:`~irdic.stages.regression_bias.reference_spacing`;
+        the points' own series after the regression in time, or the point
+        temperatures); with a regression in time too (``S_t`` in time, ``S`` in
         space, ``I_t`` the exact interpolation in time): the rate of
         ``S_t S Θ`` minus that of ``I_t S Θ`` (the temporal bias), minus that
         of ``S_t Θ`` (the spatial one), and the value of ``S_t S Θ`` minus
@@ -167,17 +175,14 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     notes = []
     ends = (True, True) if window is None else (window.first, window.last)
     ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes, ends)
-    # the bias is averaged over points where the exact interpolation is itself accurate (unflagged)
-    trusted = ~(near_edge(points, sf, visible) | strain_bias)
+    trusted = ~(near_edge(points, sf, visible) | strain_bias)  # the bias references are accurate there
     temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
                                                         s_T, s_g, s_r, window, spatial, trusted,
-                                                        footprint_probes(points, window, sigma))
+                                                        footprint_probes(points, window, sigma),
+                                                        _values(points, "temperature_paper"))
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
-    # calibration: the projected position's uncertainty moves the sample along the pixel gradient
-    pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros((T, N))
-    cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
-    temp_std = np.sqrt(temp_std ** 2 + cal ** 2)
     s_x = float(a.get("dic_noise_mm", np.nan))
+    temp_std = np.sqrt(temp_std ** 2 + _position_var(points, sf, J, g_pix, s_x, spatial))
     strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
@@ -194,6 +199,18 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         "max_principal_strain": (strain_std, np.array(strain_bias)),
         "notes": "; ".join(notes) if notes else "none",
     }
+
+
+def _position_var(points, sf, J, g_pix, s_x, spatial):
+    """Variance (T, N) K² of the temperature from the points' positions: the calibration's projected-position
+    uncertainty along the pixel gradient, and the DIC noise ``s_x`` (mm) along the surface gradient (each
+    point is sampled, and placed in the surface parameters, where its noisy coordinates put it: an offset of
+    its own that no regression averages; demo barrel: 0.003 K of 0.006 K)."""
+    pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros(sf.x.shape[:2])
+    cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
+    grad = spatial[1] if spatial is not None else surface_gradient(np.nan_to_num(g_pix), J, sf.tangents)
+    dic = np.nan_to_num(s_x * np.linalg.norm(grad, axis=-1))
+    return cal ** 2 + dic ** 2
 
 
 def _rate_bias_flags(rate_biased, visible, notes):
@@ -220,10 +237,12 @@ def _ir_noise(a):
 
 
 def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None, spatial=None,
-            trusted=None, footprint=None):
+            trusted=None, footprint=None, theta_paper=None):
     """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
-    bias (:func:`_local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None.
-    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.stages.footprint_fields.footprint_probes`."""
+    bias (:func:`~irdic.stages.regression_bias.local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None.
+    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.stages.footprint_fields.footprint_probes`, with
+    ``theta_paper`` (T, N) the paper's point temperatures. The probes' noise is scaled to the data's
+    (:func:`~irdic.stages.regression_bias.noise_scale`)."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
@@ -252,7 +271,8 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         # the rate may come from a lighter regression than the value (irdic.stages.fields._rate_series)
         kr = chosen_k.get("temperature_smoothing_rate") or kt
         tr = ts if kr == kt else operator(kr)
-        W = (ts.weights(t, 0), tr.weights(t, 1), ti.weights(t, 0), ti.weights(t, 1))
+        # the rate's bias reference: a local quartic in time (irdic.stages.fields._space_time)
+        W = (ts.weights(t, 0), tr.weights(t, 1), ti.weights(t, 0), local_rate_weights(ti.times, t))
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
     if ks is not None:
@@ -260,23 +280,30 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         # the value is regressed from the paper's temperatures: their own (white) noise through the operators
         acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
                               spatial is not None)
+        own = None if spatial is None else spatial[0]  # the regressions' input (the footprint's, with one)
+        acc = scaled_probes(acc, noise_scale(own if draw is None else theta_paper, acc, regress_space, ks, trusted))
         if draw is not None:
             # the gradient and rate from the footprint temperatures: their correlated noise, drawn from a stream
             # of its own (the other probes' draws stay as they were)
             acc_fp = _spatial_probes(t, regress_space, geo, visible, rng.spawn(1)[0], s_T, ks, W, window,
                                      spatial is not None, draw)
-            acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var")})
+            acc_fp = scaled_probes(acc_fp, noise_scale(own, acc_fp, regress_space, ks, trusted))
+            acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null",
+                                               "rs_var_null")})
         temp_std, grad_std = np.sqrt(acc["v"]), np.sqrt(acc["g"])
         if W is not None:
             rate_std = np.sqrt(acc["r"])
         if spatial is not None:
             theta, grad, value_in, value = spatial[:4]
-            d_grad = grad - regress_space(theta, geo.dual, 1.0)[0]
-            grad_std = np.hypot(grad_std, _local_bias(d_grad, acc["g_var"], sf.psi, trusted))
+            # against the lighter regression of the gradient's input after the same regression in time (the
+            # value's reference; the points' own series at each time carried the temporal bias and full noise)
+            d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
+            grad_std = np.hypot(grad_std, local_bias(d_grad, acc["g_var"], sf.psi, trusted, acc["g_var_null"], ks))
             # the exact interpolation of the input at the points is the input itself
-            temp_std = np.hypot(temp_std, _local_bias(value - value_in, acc["v_var"], sf.psi, trusted))
-            if len(spatial) > 4 and W is not None:
-                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:], acc, sf.psi, trusted, temp_std,
+            temp_std = np.hypot(temp_std, local_bias(value - value_in, acc["v_var"], sf.psi, trusted,
+                                                    acc["v_var_null"], ks))
+            if len(spatial) > 5 and W is not None:  # the temporal terms
+                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:7], acc, sf.psi, trusted, temp_std, ks,
                                                                    rate_std)
     return temp_std, grad_std, rate_std, rate_biased
 
@@ -291,7 +318,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     ``g`` (T, N, 3, gradient), ``r`` (rate, with ``W``); with ``bias``, the
     noise variance of the regression's difference to the exact interpolation
     (``v_var``, ``g_var``; ``rt_var``, ``rs_var``, ``vt_var`` of
-    :func:`_space_time_bias`), which :func:`_local_bias` subtracts.
+    :func:`_space_time_bias`), which :func:`~irdic.stages.regression_bias.local_bias` subtracts.
     The probes are evaluated at the :data:`PROBE_TIMES` times of
     :func:`_probe_times` (the regression in time mixes all of them first);
     every other time takes the nearest one's mean squares (:func:`_spread`).
@@ -301,8 +328,10 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     T, N = visible.shape
     W0, W1, I0, I1 = W if W is not None else (None,) * 4
     sub, near = _probe_times(T)
-    acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var"), 0.0)
+    acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var", "res"), 0.0)
     n_bias = 0  # probes through the exact interpolation (whole groups, the first BIAS_PROBES or more)
+    # each of the first BIAS_PROBES probes' squared differences: the bias estimates' own scatter on noise
+    nulls = {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
     tw, off = T, 0
     if W0 is not None and window is not None:
         # the temporal regression of a chunk mixes its window's noise; the record-length draw is discarded
@@ -319,9 +348,11 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         if W0 is None:
             g, v = regress_space(noise_c.reshape(m, N), geo.dual[sub], ks)
             value_in = noise_c
+            res = noise_c - v.reshape(noise_c.shape)
         else:
             # in space at each time first, then in time (irdic.stages.fields._space_time)
             s = np.nan_to_num(regress_space(noise.reshape(b * tw, N), None, ks)[1].reshape(b, tw, N))
+            res = (noise - s)[:, off:off + T][:, sub]
             r = np.einsum("ij,kjn->kin", W1[sub], s)
             acc["r"] = acc["r"] + np.sum(r ** 2, axis=0) / PROBES
             smoothed = np.einsum("ij,kjn->kin", W0[sub], s)
@@ -332,21 +363,32 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             if bias:  # the noise in the space-time regression's differences (_space_time_bias)
                 for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - np.nan_to_num(noise)),
                                    ("vt_var", W0 - I0, s)):
-                    acc[key] = acc[key] + np.sum(np.einsum("ij,kjn->kin", Wd[sub], x) ** 2, axis=0) / PROBES
+                    sq = np.einsum("ij,kjn->kin", Wd[sub], x) ** 2
+                    acc[key] = acc[key] + np.sum(sq, axis=0) / PROBES
+                    nulls[key] += list(sq) if start < BIAS_PROBES else []
         g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)
         acc["v"] = acc["v"] + np.sum(v ** 2, axis=0) / PROBES
+        acc["res"] = acc["res"] + np.sum(res ** 2, axis=0) / PROBES  # (noise - S noise): see noise_scale
         acc["g"] = acc["g"] + np.sum(g ** 2, axis=0) / PROBES
         if bias:
             acc["v_var"] = acc["v_var"] + np.sum((v - value_in) ** 2, axis=0) / PROBES
+            nulls["v_var"] += list((v - value_in) ** 2) if start < BIAS_PROBES else []
         if bias and start < BIAS_PROBES:
             # the same probes through the exact interpolation (k = 1): the noise expected in the
             # difference regression - interpolation, which is subtracted from the data's difference
-            g_int = regress_space(noise_c.reshape(m, N), geo.dual[sub], 1.0)[0].reshape(b, sub.size, N, 3)
+            g_int = regress_space(value_in.reshape(m, N), geo.dual[sub], reference_spacing(ks) or 1.0)[0].reshape(
+                b, sub.size, N, 3)
             acc["g_var"] = acc["g_var"] + np.sum((g - g_int) ** 2, axis=0)
+            nulls["g_var"] += list((g - g_int) ** 2)
             n_bias += b
     if n_bias:
         acc["g_var"] = acc["g_var"] / n_bias
-    return {k: _spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
+    out = {k: _spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
+    return {**out, **{f"{k}_null": np.array([_spread(a, near) for a in n]) if n else None for k, n in nulls.items()}}
+
+
+def _values(points, name):
+    return points[name].values.astype(float) if name in points else None
 
 
 def _probe_times(T):
@@ -370,79 +412,29 @@ def _spread(a, near):
     return np.where(np.isfinite(out), out, med)
 
 
-def _space_time_bias(d, acc, psi, trusted, temp_std, rate_std):
+def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std):
     """Temperature and rate std with the space-time regression's bias added, and where the rate's temporal
     bias exceeds its noise.
 
-    ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`;
+    ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`; ``ks``: the spatial spacing;
     ``acc``: the probes' noise variances of those differences
     (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each
-    through the same operators as the difference (:func:`_local_bias`). The
-    temporal bias is judged against the exact interpolation in time of the
-    spatially regressed series, whose noise is that of the regressed series
-    only: the bias of a fast transient is then resolved well below the
-    rate's noise. (Against the interpolation of the points' own series its
-    estimate scattered by more than the rate's std and was clipped to 0 at
-    half of the points.)
+    through the same operators as the difference (:func:`~irdic.stages.regression_bias.local_bias`). The
+    temporal bias is judged against a local quartic in time of the
+    spatially regressed series (:func:`~irdic.numerics.temporal.local_rate_weights`;
+    the IMQ interpolant was as biased as the regression), whose noise is that
+    of the regressed series only: the bias of a fast transient is then
+    resolved well below the rate's noise. (Against the points' own series
+    its estimate scattered by more than the rate's std.)
     """
     d_rate_t, d_rate_s, d_value_t = d
-    b_t = _local_bias(d_rate_t, acc["rt_var"], psi, trusted)
-    b_s = _local_bias(d_rate_s, acc["rs_var"], psi, trusted)
+    b_t, b_s = (local_bias(x, acc[k], psi, trusted, acc[f"{k}_null"], ks) for x, k in ((d_rate_t, "rt_var"),
+                                                                                       (d_rate_s, "rs_var")))
     # only the temporal bias is resolved well enough to flag by (the spatial one scatters with the points' noise)
     biased = b_t > rate_std
     rate_std = np.sqrt(rate_std ** 2 + b_t ** 2 + b_s ** 2)
-    temp_std = np.hypot(temp_std, _local_bias(d_value_t, acc["vt_var"], psi, trusted))
+    temp_std = np.hypot(temp_std, local_bias(d_value_t, acc["vt_var"], psi, trusted, acc["vt_var_null"], ks))
     return temp_std, rate_std, biased
-
-
-def _local_bias(d, noise_var, psi, trusted=None):
-    """Local RMS of a regression's bias from its difference ``d`` to the exact interpolation.
-
-    ``d`` (T, N) or (T, N, C) has the expectation ``b`` (the bias, up to the
-    interpolation's own, much smaller, bias) and the noise variance
-    ``noise_var`` (same shape, from probes); ``E d² = b² + noise_var``. Both
-    are averaged over the :data:`BIAS_NEIGHBOURS` nearest points in the
-    surface parameters ``psi`` (N, 2) at the same and the adjacent times
-    (the bias varies on the scale of the regression's centre spacing, the
-    noise from point to point); ``sqrt(max(0, <d²> - <noise_var>))``, 0 where
-    nothing is known. Only ``trusted`` (T, N) points enter the averages: at
-    the mask's and the point cloud's edges the interpolation's own error is
-    large (those points are flagged as bias-dominated).
-    """
-    a = np.square(d) - noise_var
-    ok = np.isfinite(a)
-    if trusted is not None:
-        ok &= np.asarray(trusted, dtype=bool).reshape(trusted.shape + (1,) * (a.ndim - 2))
-    a = np.where(ok, a, 0.0)
-    have = np.flatnonzero(np.isfinite(psi).all(axis=1))
-    out = np.zeros_like(a)
-    if have.size == 0:
-        return out
-    from scipy import sparse
-    from scipy.spatial import cKDTree
-
-    k = min(BIAS_NEIGHBOURS, have.size)
-    nb = cKDTree(psi[have]).query(psi[have], k=k)[1].reshape(have.size, k)
-    # the sum over each point's neighbours is one sparse product over all times and components
-    # (a[:, nb] at once would hold T x N x k (x 3) values: GBs at paper scale)
-    S = sparse.csr_matrix((np.ones(nb.size), (np.repeat(np.arange(have.size), k), nb.ravel())),
-                          shape=(have.size, have.size))
-
-    def neighbour_sum(v):
-        vh = np.moveaxis(v[:, have], 1, 0)
-        return np.moveaxis((S @ vh.reshape(have.size, -1)).reshape(vh.shape), 0, 1)
-
-    s = np.zeros_like(a)
-    n = np.zeros(a.shape)
-    s[:, have] = neighbour_sum(a)
-    n[:, have] = neighbour_sum(ok.astype(float))
-    s2, n2 = s.copy(), n.copy()
-    s2[1:] += s[:-1]
-    s2[:-1] += s[1:]
-    n2[1:] += n[:-1]
-    n2[:-1] += n[1:]
-    np.divide(s2, n2, out=out, where=n2 > 0)
-    return np.sqrt(np.maximum(out, 0.0))
 
 
 def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None):
@@ -461,9 +453,9 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None)
         kw["smoothing"] = (sf.info["smoothing_shape"], sf.info["smoothing"])
     # every probe fits the same points: the spatial factorisations are shared (with the fields stage's own)
     kw["operators"] = {} if ops is None else ops
-    # a surface regression's bias: against the exact interpolation of the same coordinates (see _local_bias)
+    # a surface regression's bias: against the exact interpolation of the same coordinates (see local_bias)
     regressed = kw["smoothing"] is not None or kw["smoothing_t"] is not None
-    kws = [kw, {**kw, "smoothing": None, "smoothing_t": None}] if regressed else [kw]
+    kws = [kw, {**kw, "smoothing": reference_spacing(kw["smoothing"]), "smoothing_t": None}] if regressed else [kw]
     # the probes are evaluated at the probed times only (every other time takes the nearest one's)
     sub, near = _probe_times(T)
     probe = _StrainProbe(x, sf, t, sub, window)
@@ -481,8 +473,9 @@ def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None)
     std = _probe_std(np.array(samples[0]), base)
     if regressed:
         k = len(samples[1])
-        var = np.mean(np.square((np.array(samples[0][:k]) - base) - (np.array(samples[1]) - bases[1])), axis=0)
-        std = np.hypot(std, _local_bias(base - bases[1], var, sf.psi, None if trusted is None else trusted[sub]))
+        null = np.square((np.array(samples[0][:k]) - base) - (np.array(samples[1]) - bases[1]))
+        std = np.hypot(std, local_bias(base - bases[1], null.mean(axis=0), sf.psi,
+                                       None if trusted is None else trusted[sub], null, kw["smoothing"]))
     std = _spread(std, near)
     # the strain is zero by definition at the reference stage (stage 0 of the record): no uncertainty there,
     # whatever rounding the probes leave

