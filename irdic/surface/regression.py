@@ -221,6 +221,25 @@ def _gradient_operator(p, design, c, R0):
     return scipy.linalg.solve_triangular(Rm, B.T, trans="T", check_finite=False).T
 
 
+def _one_per_separation(p, F, judged, separation, h):
+    """``(p, F, judged)`` of about one point per ``separation`` square when the points (spacing ``h``) are
+    denser; all of them otherwise.
+
+    Points closer than an IR pixel share its noise, and the least smoothed
+    pilot of :func:`gradient_risk_spatial` then follows that correlated
+    noise: its residual underestimates σ² and the risk no longer falls with
+    the spacing (moving tube, 25,960 points 0.64 px apart: 2 spacings
+    chosen, the risk rising from 0.030 to 0.068 K²/mm² at 12). Judged on
+    about one point per pixel the curve falls again and the choice is made
+    in millimetres, as on a sparser grid of the same specimen (12 spacings
+    of the subset: 2.1 mm; 13,104 points: 2.8 mm).
+    """
+    if separation is None or positive(separation, "separation") <= h:
+        return p, F, judged
+    sub = grid_subset(p, separation)
+    return p[sub], F[sub], None if judged is None else judged[sub]
+
+
 def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_CANDIDATES,
                           max_points=GCV_MAX_POINTS, judged=None, separation=None):
     """Choose the spatial regression's centre spacing by the estimated mean squared error of its gradient.
@@ -245,10 +264,8 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
         (mixed pixels at the IR mask's edge, the cloud's rim, where the
         least smoothed pilot follows the data's own error) belong outside.
     separation : float, optional
-        Distance (mm) below which the data's noise is correlated, e.g. one IR
-        pixel for point temperatures interpolated from the pixels. When the
-        points are denser, the risk is judged on a subset of about one point
-        per ``separation`` square (see Notes).
+        Distance (mm) below which the data's noise is correlated (one IR
+        pixel): denser points are judged on a subset (:func:`_one_per_separation`).
 
     Returns
     -------
@@ -282,25 +299,13 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     wider spacings until the bias sets in. On the tube demo (0.05 K IR
     noise, 2-decimal exports) GCV's flat curve chose 5-8 spacings and a
     7.8 % gradient error; see benchmarks/README.md (issue 15).
-
-    The estimate assumes white noise. Points closer than an IR pixel share
-    its noise, and the least smoothed pilot then follows that correlated
-    noise: its residual underestimates σ² and the risk no longer falls with
-    the spacing (moving tube, 25,960 points 0.64 px apart: 2 spacings
-    chosen, the risk rising from 0.030 to 0.068 K²/mm² at 12). Judged on
-    about one point per pixel (``separation``) the curve falls again and the
-    choice is made in millimetres, as on a sparser grid of the same specimen
-    (12 spacings of the subset: 2.1 mm; 13,104 points: 2.8 mm).
     """
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
     judged = None if judged is None else np.asarray(judged, dtype=bool).reshape(p.shape[0])
     h_all = median_spacing(p)
-    if separation is not None and positive(separation, "separation") > h_all:
-        sub = grid_subset(p, separation)
-        p, F, judged = p[sub], F[sub], None if judged is None else judged[sub]
-    p, F, h, judged = _judged_patch(p, F, max_points, judged)
+    p, F, h, judged = _judged_patch(*_one_per_separation(p, F, judged, separation, h_all), max_points)
     n = p.shape[0]
     rows = np.ones(2 * n, bool) if judged is None else np.r_[judged, judged]
     nj = int(rows.sum()) // 2
@@ -311,7 +316,6 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
         raise DataError(f"gradient_risk_spatial: no candidate spacing fits {n} points (too few points)")
     table = [(k * h / h_all, n_par, r) for k, n_par, r in table]
     best = min(table, key=lambda r: r[2])
-    log.info("spatial gradient risk: centre spacing %.3g x %.3g mm (%d parameters%s); %s", best[0], h_all, best[1],
-             "" if h == h_all else f", judged on {p.shape[0]} points {h:.3g} mm apart",
-             ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
+    log.info("spatial gradient risk: centre spacing %.3g x %.3g mm (%d parameters, judged on %d points %.3g mm "
+             "apart); %s", best[0], h_all, best[1], n, h, ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
     return best[0], table
