@@ -14,7 +14,7 @@ and the wall time of ``calibrate`` (detection included).
 
 Usage::
 
-    python benchmarks/bench_calibrate_matrix.py [--seed 0]
+    python benchmarks/bench_calibrate_matrix.py [--seed 0] [--poses oblique] [--levels 3] [--gradients 0]
 """
 
 from __future__ import annotations
@@ -70,8 +70,13 @@ def run_case(pose, contrast, gradient, seed):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--poses", nargs="+", choices=list(POSES), default=list(POSES), help="poses to run")
+    ap.add_argument("--levels", nargs="+", type=int, choices=sorted(GOAL), default=sorted(GOAL, reverse=True),
+                    help="contrast/noise levels to run")
+    ap.add_argument("--gradients", nargs="+", type=float, default=[0.0, 4.0], help="plate gradients to run, K")
     args = ap.parse_args(argv)
-    for name, kw in POSES.items():
+    for name in args.poses:
+        kw = POSES[name]
         cam = lab_camera(**kw)
         tg = open_book_target(cam, noise=0.0, supersample=2)
         d = cam.C - tg.book.hinge_point
@@ -79,10 +84,12 @@ def main(argv=None):
         print(f"pose {name}: wings seen at {ang[0]:.0f} and {ang[1]:.0f} deg from their normals")
     print(f"{'pose':9s} {'C/N':>4s} {'grad':>5s} {'used':>5s} {'RMS px':>8s} {'goal':>6s} {'time s':>7s}")
     ok = True
-    for name in POSES:
+    for name in args.poses:
         for c in CONTRASTS:
             cn = round(c / NOISE)
-            for g in (0.0, 4.0):
+            if cn not in args.levels:
+                continue
+            for g in args.gradients:
                 r = run_case(name, c, g, args.seed)
                 if "error" in r:
                     ok = False
