@@ -223,7 +223,7 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
         Correct the perspective bias of the imaged circle centres.
     marker_radius_mm : float, optional
         Marker radius for the bias correction, mm; estimated from the image
-        when not given.
+        when not given, checked against the image when given.
     min_radius_px, max_radius_px, min_contrast_k : float
         Detection limits (px, px, K).
     outlier_factor : float
@@ -245,7 +245,9 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     ------
     CalibrationError
         The image shows no usable markers, fewer than 6 markers can be used,
-        the markers are coplanar, or the correspondence is uncertain.
+        the markers are coplanar, the correspondence is uncertain, or the
+        markers' radius measured in the image contradicts ``marker_radius_mm``
+        (:func:`~irdic.calibration.guided.check_radius`).
     ConfigError
         Invalid arguments, unknown or contradictory seeds.
     DataError
