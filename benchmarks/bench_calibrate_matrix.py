@@ -10,7 +10,8 @@ calibrates it with :func:`irdic.calibration.calibrate` from 8 clicked seeds
 Reported per case: the projection error against the true camera (RMS
 distance between true and calibrated projections of points on a
 specimen-like cylinder patch in front of the target, px), the markers used,
-and the wall time of ``calibrate`` (detection included).
+and the wall and CPU time of ``calibrate`` (detection included; the time goal
+of 5 s is judged on the CPU time, one BLAS thread).
 
 Usage::
 
@@ -56,15 +57,15 @@ def run_case(pose, contrast, gradient, seed):
     cam = lab_camera(**POSES[pose])
     tg = open_book_target(cam, noise=NOISE, contrast=contrast, gradient_k=gradient, seed=seed)
     seeds = clicked_seeds(tg, 8, sigma_px=2.0, seed=seed)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         cal = calibrate(tg.image, tg.markers, seeds=seeds)
     except IrdicError as exc:
         return dict(error=str(exc), time=time.perf_counter() - t0)
-    dt = time.perf_counter() - t0
+    dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     x = specimen_points()
     err = np.hypot(*(load_camera(cal).project(x) - cam.project(x)).T)
-    return dict(rms=float(np.sqrt(np.mean(err**2))), used=int(cal.attrs["n_used"]), time=dt)
+    return dict(rms=float(np.sqrt(np.mean(err**2))), used=int(cal.attrs["n_used"]), time=dt, cpu=cpu)
 
 
 def main(argv=None):
@@ -82,7 +83,7 @@ def main(argv=None):
         d = cam.C - tg.book.hinge_point
         ang = np.degrees(np.arccos(tg.book.n @ (d / np.linalg.norm(d))))
         print(f"pose {name}: wings seen at {ang[0]:.0f} and {ang[1]:.0f} deg from their normals")
-    print(f"{'pose':9s} {'C/N':>4s} {'grad':>5s} {'used':>5s} {'RMS px':>8s} {'goal':>6s} {'time s':>7s}")
+    print(f"{'pose':9s} {'C/N':>4s} {'grad':>5s} {'used':>5s} {'RMS px':>8s} {'goal':>6s} {'time s':>7s} {'cpu s':>6s}")
     ok = True
     for name in args.poses:
         for c in CONTRASTS:
@@ -95,10 +96,11 @@ def main(argv=None):
                     ok = False
                     print(f"{name:9s} {cn:4d} {g:4.0f}K  FAILED ({r['time']:.1f} s): {r['error'][:300]}")
                     continue
-                good = r["rms"] <= GOAL[cn] and r["time"] < 5.0
+                # the time goal on CPU time: on a shared machine the wall time is set by the other jobs
+                good = r["rms"] <= GOAL[cn] and r["cpu"] < 5.0
                 ok &= good
                 print(f"{name:9s} {cn:4d} {g:4.0f}K {r['used']:5d} {r['rms']:8.4f} {GOAL[cn]:6.2f} "
-                      f"{r['time']:7.2f}{'' if good else '  MISSED'}", flush=True)
+                      f"{r['time']:7.2f} {r['cpu']:6.2f}{'' if good else '  MISSED'}", flush=True)
     print("all cases within the goals" if ok else "some cases missed the goals")
 
 
