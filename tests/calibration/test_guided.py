@@ -6,10 +6,12 @@ import warnings
 import numpy as np
 import pytest
 
-from irdic.calibration import calibrate
+from irdic.calibration import calibrate, detect_markers, match_seeds
 from irdic.calibration.bias import plane_normals, projected_ellipses
-from irdic.calibration.guided import search_predicted
+from irdic.calibration.guided import (RADIUS_TOLERANCE, _coverage, _template_fit, check_radius, find_missing,
+                                      search_predicted)
 from irdic.camera import CameraModel, load_camera
+from irdic.errors import CalibrationError
 from irdic.synthetic.camera import lab_camera
 from irdic.synthetic.target import clicked_seeds, open_book_target
 
@@ -174,8 +176,6 @@ def test_the_template_fit_converges_across_a_thin_faint_ellipse():
     to 3.5 x the bound) or were lost. With the line search on the profiled
     sum of squares none fails.
     """
-    from irdic.calibration.guided import _coverage, _template_fit
-
     lam, vec = np.array([1.72, 6.2]) ** 2, np.array([[0.8, -0.6], [0.6, 0.8]])
     shape = vec @ np.diag(lam) @ vec.T
     s_inv = np.linalg.inv(shape)
@@ -207,9 +207,6 @@ def test_faint_thin_markers_are_all_template_fitted():
     detector's windowed centroid (errors up to 3.1 x their Cramer-Rao
     sigma) where the template fit had not converged, and 2 were not used.
     """
-    from irdic.calibration import detect_markers, match_seeds
-    from irdic.calibration.guided import find_missing
-
     tg = open_book_target(lab_camera(**OBLIQUE), noise=0.1, contrast=0.3, seed=11)
     det = detect_markers(tg.image)
     x, ids = tg.markers.x.values, tg.markers.marker.values
@@ -222,3 +219,47 @@ def test_faint_thin_markers_are_all_template_fitted():
     err = np.hypot(*(np.column_stack([det.u.values, det.v.values])[di] - tg.truth.marker_centroid.values[mi]).T)
     z = err / det.sigma_px.values[di]
     assert np.sqrt(np.mean(z**2)) <= 1.25 and z.max() <= 4.0
+
+
+@pytest.mark.parametrize("factor", [1.3, 1 / 1.3])
+def test_a_wrong_marker_radius_is_refused(faint_oblique, factor):
+    """A given marker radius 30 % off is refused with the given and the measured radius (issue 14).
+
+    Contrast/noise 3, oblique pose: the free-size templates measure 1.594-1.597
+    mm whichever radius predicted them; the tolerance is 5 % + 5 standard
+    errors of their median (~6 % here).
+    """
+    tg = faint_oblique
+    given = factor * tg.book.radius
+    with pytest.raises(CalibrationError) as exc:
+        calibrate(tg.image, tg.markers, seeds=clicked_seeds(tg, 8, sigma_px=2.0, seed=2), marker_radius_mm=given)
+    msg = str(exc.value)
+    assert "`marker_radius_mm`" in msg and f"is {given:.3g} mm" in msg
+    measured = float(msg.split("markers in the target image measure ")[1].split(" mm")[0])
+    assert abs(measured / tg.book.radius - 1) <= 0.01
+
+
+def test_the_right_marker_radius_is_used_as_given(faint_oblique):
+    tg = faint_oblique
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cal = calibrate(tg.image, tg.markers, seeds=clicked_seeds(tg, 8, sigma_px=2.0, seed=2),
+                        marker_radius_mm=1.6)
+    assert cal.attrs["marker_radius_mm"] == 1.6
+    assert camera_error(cal, tg) <= 0.12
+
+
+def test_check_radius_tolerance():
+    """5 % beyond 5 standard errors of the median (1.2533 x 1.4826 MAD / sqrt(n)); too few fits are not judged."""
+    rng = np.random.default_rng(0)
+    scale = rng.normal(0.0, 0.08, 81)
+    scale = 1.0 + scale - np.median(scale)
+    se = 1.2533 * 1.4826 * np.median(np.abs(scale - 1.0)) / 9.0
+    tol = RADIUS_TOLERANCE + 5 * se
+    check_radius(1.6, scale * (1 + 0.98 * tol))
+    check_radius(1.6, scale / (1 + 0.98 * tol))
+    with pytest.raises(CalibrationError, match="marker_radius_mm"):
+        check_radius(1.6, scale * (1 + 1.12 * tol))
+    with pytest.raises(CalibrationError, match=r"measure 1\.2"):
+        check_radius(1.6, scale * 0.75)
+    check_radius(1.6, np.full(5, 0.5))  # fewer than MIN_SIZE_FITS: not judged
