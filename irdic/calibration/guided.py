@@ -67,10 +67,9 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
     again (:func:`~irdic.calibration.correspondence.propagate`, which refits
     the DLT); the next round predicts with that camera. Finally templates
     of free size are fitted to the matched markers (:func:`_template_scales`):
-    unless ``radius_mm`` is given the marker radius is re-estimated from
-    them, and every matched detection is re-measured with templates of that
-    radius (its detector row is kept where the template fit fails); a given
-    ``radius_mm`` is checked against them (:func:`check_radius`).
+    a given ``radius_mm`` is checked against them (:func:`check_radius`),
+    else the marker radius is re-estimated from them and every matched
+    detection re-measured with templates of that radius.
 
     Parameters
     ----------
@@ -92,11 +91,6 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
     rounds : int
         Prediction and search rounds.
 
-    Raises
-    ------
-    CalibrationError
-        ``radius_mm`` disagrees with the markers' measured radius (:func:`check_radius`).
-
     Returns
     -------
     det : xarray.Dataset
@@ -111,13 +105,11 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
     Why the detections are re-measured: the windowed centroid takes every
     window pixel's noise with its lever arm, the template fit weighs each
     pixel by its edge derivative (contrast/noise 3, oblique pose: camera
-    0.17-0.25 -> ~0.04 px; 55, lab: centre 0.015 -> 0.008 px RMS). Both
-    centre a symmetric blob without bias: the perspective correction holds.
+    0.17-0.25 -> ~0.04 px; 55, lab: centre 0.015 -> 0.008 px RMS).
 
-    Why the radius is re-estimated (:func:`_template_scales`): a template of
-    the wrong size shifts the centre with the pixel grid's phase; the
-    detector's sizes are biased low at contrast/noise 3 (1.557 instead of
-    1.6 mm: camera 0.133 -> 0.112 px, seed 5 of the calibration benchmark).
+    Why the radius is re-estimated: a template of the wrong size shifts the
+    centre with the pixel grid's phase; the detector's sizes are biased low
+    at contrast/noise 3 (1.557 instead of 1.6 mm: camera 0.133 -> 0.112 px).
     """
     pol = det.attrs.get("polarity")
     noise = float(det.attrs.get("noise_k", np.nan))

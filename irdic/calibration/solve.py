@@ -253,10 +253,8 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     Raises
     ------
     CalibrationError
-        The image shows no usable markers, fewer than 6 markers can be used,
-        the markers are coplanar, the correspondence is uncertain, or the
-        markers' radius measured in the image contradicts ``marker_radius_mm``
-        (:func:`~irdic.calibration.guided.check_radius`).
+        No usable markers, fewer than 6 usable, coplanar markers, an uncertain
+        correspondence, or ``marker_radius_mm`` contradicts the image.
     ConfigError
         Invalid arguments, unknown or contradictory seeds.
     DataError
