@@ -10,11 +10,12 @@ calibrates it with :func:`irdic.calibration.calibrate` from 8 clicked seeds
 Reported per case: the projection error against the true camera (RMS
 distance between true and calibrated projections of points on a
 specimen-like cylinder patch in front of the target, px), the markers used,
-and the wall time of ``calibrate`` (detection included).
+and the wall and CPU time of ``calibrate`` (detection included; the time goal
+of 5 s is judged on the CPU time, one BLAS thread).
 
 Usage::
 
-    python benchmarks/bench_calibrate_matrix.py [--seed 0]
+    python benchmarks/bench_calibrate_matrix.py [--seed 0] [--poses oblique] [--levels 3] [--gradients 0]
 """
 
 from __future__ import annotations
@@ -56,42 +57,50 @@ def run_case(pose, contrast, gradient, seed):
     cam = lab_camera(**POSES[pose])
     tg = open_book_target(cam, noise=NOISE, contrast=contrast, gradient_k=gradient, seed=seed)
     seeds = clicked_seeds(tg, 8, sigma_px=2.0, seed=seed)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         cal = calibrate(tg.image, tg.markers, seeds=seeds)
     except IrdicError as exc:
         return dict(error=str(exc), time=time.perf_counter() - t0)
-    dt = time.perf_counter() - t0
+    dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     x = specimen_points()
     err = np.hypot(*(load_camera(cal).project(x) - cam.project(x)).T)
-    return dict(rms=float(np.sqrt(np.mean(err**2))), used=int(cal.attrs["n_used"]), time=dt)
+    return dict(rms=float(np.sqrt(np.mean(err**2))), used=int(cal.attrs["n_used"]), time=dt, cpu=cpu)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--poses", nargs="+", choices=list(POSES), default=list(POSES), help="poses to run")
+    ap.add_argument("--levels", nargs="+", type=int, choices=sorted(GOAL), default=sorted(GOAL, reverse=True),
+                    help="contrast/noise levels to run")
+    ap.add_argument("--gradients", nargs="+", type=float, default=[0.0, 4.0], help="plate gradients to run, K")
     args = ap.parse_args(argv)
-    for name, kw in POSES.items():
+    for name in args.poses:
+        kw = POSES[name]
         cam = lab_camera(**kw)
         tg = open_book_target(cam, noise=0.0, supersample=2)
         d = cam.C - tg.book.hinge_point
         ang = np.degrees(np.arccos(tg.book.n @ (d / np.linalg.norm(d))))
         print(f"pose {name}: wings seen at {ang[0]:.0f} and {ang[1]:.0f} deg from their normals")
-    print(f"{'pose':9s} {'C/N':>4s} {'grad':>5s} {'used':>5s} {'RMS px':>8s} {'goal':>6s} {'time s':>7s}")
+    print(f"{'pose':9s} {'C/N':>4s} {'grad':>5s} {'used':>5s} {'RMS px':>8s} {'goal':>6s} {'time s':>7s} {'cpu s':>6s}")
     ok = True
-    for name in POSES:
+    for name in args.poses:
         for c in CONTRASTS:
             cn = round(c / NOISE)
-            for g in (0.0, 4.0):
+            if cn not in args.levels:
+                continue
+            for g in args.gradients:
                 r = run_case(name, c, g, args.seed)
                 if "error" in r:
                     ok = False
                     print(f"{name:9s} {cn:4d} {g:4.0f}K  FAILED ({r['time']:.1f} s): {r['error'][:300]}")
                     continue
-                good = r["rms"] <= GOAL[cn] and r["time"] < 5.0
+                # the time goal on CPU time: on a shared machine the wall time is set by the other jobs
+                good = r["rms"] <= GOAL[cn] and r["cpu"] < 5.0
                 ok &= good
                 print(f"{name:9s} {cn:4d} {g:4.0f}K {r['used']:5d} {r['rms']:8.4f} {GOAL[cn]:6.2f} "
-                      f"{r['time']:7.2f}{'' if good else '  MISSED'}", flush=True)
+                      f"{r['time']:7.2f} {r['cpu']:6.2f}{'' if good else '  MISSED'}", flush=True)
     print("all cases within the goals" if ok else "some cases missed the goals")
 
 

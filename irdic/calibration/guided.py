@@ -10,7 +10,7 @@ position and elliptical shape are known (:func:`projected_ellipses`);
 template of that shape and measures the centre of each clear one, and of
 every marker the detector found, by a least-squares fit of that template
 (amplitude and shift). The templates' size is the marker radius fitted to
-the matched markers themselves (:func:`_template_radius`).
+the matched markers themselves (:func:`_template_scales`).
 """
 
 from __future__ import annotations
@@ -21,12 +21,14 @@ import numpy as np
 import xarray as xr
 
 from ..camera import CameraModel
+from ..errors import CalibrationError
 from .bias import plane_normals, projected_ellipses
 from .correspondence import predicted_spacing, propagate
 from .detection import DETECTION_FIELDS, plane_fit
 from .image import image_array
 
-__all__ = ["find_missing", "search_predicted", "estimate_radius", "MIN_SNR", "WINDOW_FRACTION", "MAX_WINDOW_PX"]
+__all__ = ["find_missing", "search_predicted", "estimate_radius", "check_radius", "MIN_SNR", "WINDOW_FRACTION",
+           "MAX_WINDOW_PX", "MIN_SIZE_FITS", "RADIUS_TOLERANCE"]
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +42,10 @@ WINDOW_FRACTION = 0.4
 MAX_WINDOW_PX = 3.0
 #: Distance (px) from a marker's ellipse beyond which its blurred edge no longer reaches.
 _EDGE_PX = 1.5
+#: Fewest free-size template fits from which the marker radius is measured (and a given one judged).
+MIN_SIZE_FITS = 6
+#: Relative disagreement between a given marker radius and the measured one allowed beyond the fits' scatter.
+RADIUS_TOLERANCE = 0.05
 
 
 def estimate_radius(model: CameraModel, x: np.ndarray, det: xr.Dataset, di: np.ndarray) -> float:
@@ -59,11 +65,11 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
     camera, searches for the unmatched ones (:func:`search_predicted`),
     appends what it finds to the detections and grows the correspondence
     again (:func:`~irdic.calibration.correspondence.propagate`, which refits
-    the DLT); the next round predicts with that camera. Finally, unless
-    ``radius_mm`` is given, the marker radius is re-estimated from templates
-    of free size fitted to the matched markers (:func:`_template_radius`),
-    and every matched detection is re-measured with templates of that
-    radius (its detector row is kept where the template fit fails).
+    the DLT); the next round predicts with that camera. Finally templates
+    of free size are fitted to the matched markers (:func:`_template_scales`):
+    a given ``radius_mm`` is checked against them (:func:`check_radius`),
+    else the marker radius is re-estimated from them and every matched
+    detection re-measured with templates of that radius.
 
     Parameters
     ----------
@@ -99,13 +105,11 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
     Why the detections are re-measured: the windowed centroid takes every
     window pixel's noise with its lever arm, the template fit weighs each
     pixel by its edge derivative (contrast/noise 3, oblique pose: camera
-    0.17-0.25 -> ~0.04 px; 55, lab: centre 0.015 -> 0.008 px RMS). Both
-    centre a symmetric blob without bias: the perspective correction holds.
+    0.17-0.25 -> ~0.04 px; 55, lab: centre 0.015 -> 0.008 px RMS).
 
-    Why the radius is re-estimated (:func:`_template_radius`): a template of
-    the wrong size shifts the centre with the pixel grid's phase; the
-    detector's sizes are biased low at contrast/noise 3 (1.557 instead of
-    1.6 mm: camera 0.133 -> 0.112 px, seed 5 of the calibration benchmark).
+    Why the radius is re-estimated: a template of the wrong size shifts the
+    centre with the pixel grid's phase; the detector's sizes are biased low
+    at contrast/noise 3 (1.557 instead of 1.6 mm: camera 0.133 -> 0.112 px).
     """
     pol = det.attrs.get("polarity")
     noise = float(det.attrs.get("noise_k", np.nan))
@@ -120,8 +124,11 @@ def find_missing(image, det: xr.Dataset, x: np.ndarray, mi: np.ndarray, di: np.n
         radius = radius_mm if radius_mm is not None else estimate_radius(model, x[mi], det, di)
         centre, shape, fine, window = _predict(model, x, normals, radius, min_radius_px, max_radius_px)
         if rnd == rounds:
-            if radius_mm is None:
-                radius = _template_radius(image, det, mi, di, radius, centre, shape, window, fine, kw)
+            scale = _template_scales(image, det, mi, di, centre, shape, window, fine, kw)
+            if radius_mm is not None:
+                check_radius(radius_mm, scale)
+            elif len(scale) >= MIN_SIZE_FITS:  # fewer: the detector's estimate stands
+                radius = float(radius * np.median(scale))
                 centre, shape, fine, window = _predict(model, x, normals, radius, min_radius_px, max_radius_px)
             det = _refit_matched(image, det, mi, di, centre, shape, window, fine, kw, every=radius_mm is None)
             break
@@ -166,10 +173,11 @@ def _matched_starts(det, mi, di, n):
     return start
 
 
-def _template_radius(image, det, mi, di, radius, centre, shape, window, fine, kw) -> float:
-    """Marker radius (mm): ``radius`` times the median size of the matched markers' templates fitted freely.
+def _template_scales(image, det, mi, di, centre, shape, window, fine, kw) -> np.ndarray:
+    """Size of each matched marker's template fitted freely, over the predicted size (both semi-axes).
 
-    The detector's half-contrast sizes behind :func:`estimate_radius` are
+    The marker radius is the predicting radius times their median. The
+    detector's half-contrast sizes behind :func:`estimate_radius` are
     biased at low contrast/noise (-2.7 % at 3, lab pose of the calibration
     benchmark), and a template of the wrong size biases the centre with the
     pixel phase and wastes the edge's information (noise-free 0.005 ->
@@ -179,10 +187,49 @@ def _template_radius(image, det, mi, di, radius, centre, shape, window, fine, kw
     """
     rows = search_predicted(image, centre, shape, window, mi[fine[mi]], fine, fit_scale=True,
                             start=_matched_starts(det, mi, di, centre.shape[0]), **kw)
-    scale = np.array([r["scale"] for r in rows])
-    if len(scale) < 6:
-        return radius  # too few to judge: the detector's estimate stands
-    return float(radius * np.median(scale))
+    return np.array([r["scale"] for r in rows])
+
+
+def check_radius(radius_mm: float, scale: np.ndarray) -> None:
+    """Refuse a given marker radius that the free-size template fits contradict.
+
+    Parameters
+    ----------
+    radius_mm : float
+        The given marker radius, mm (the templates' sizes were predicted with it).
+    scale : ndarray, shape (n,)
+        Fitted over predicted template size of each matched marker
+        (:func:`_template_scales`); fewer than :data:`MIN_SIZE_FITS` are not judged.
+
+    Raises
+    ------
+    CalibrationError
+        ``|median(scale) - 1|`` exceeds :data:`RADIUS_TOLERANCE` plus 5 standard
+        errors of the median.
+
+    Notes
+    -----
+    The standard error of the median is ``1.2533 x 1.4826 MAD / sqrt(n)``
+    (normal scatter); 5 of them keep a false alarm below 1e-6. The relative
+    allowance covers what the template (a sharp ellipse, area coverage) does
+    not describe in a real image, e.g. the optics' blur, which moves the
+    half-contrast edge of a 4 px disc inward by ~3 % at a 1 px blur; on the
+    calibration benchmark the median is within 0.7 % of the truth.
+    """
+    n = len(scale)
+    if n < MIN_SIZE_FITS:
+        return
+    med = float(np.median(scale))
+    se = 1.2533 * 1.4826 * float(np.median(np.abs(scale - med))) / np.sqrt(n)
+    tol = RADIUS_TOLERANCE + 5.0 * se
+    if abs(med - 1.0) > tol:
+        raise CalibrationError(
+            f"`marker_radius_mm` (calibration.marker_radius_mm) is {radius_mm:.3g} mm, but the markers in the "
+            f"target image measure {radius_mm * med:.3f} mm: templates of free size fitted to the {n} matched "
+            f"markers are {100 * (med - 1):+.1f} % of the given size (median; tolerance +-{100 * tol:.1f} % = "
+            f"{100 * RADIUS_TOLERANCE:.0f} % + 5 standard errors of the median). The radius sets the perspective "
+            f"correction of every marker centre: measure the painted markers and give their radius (a call of "
+            f"`irdic.calibration.calibrate` may also leave it out to take it from the image)")
 
 
 def _refit_matched(image, det, mi, di, centre, shape, window, fine, kw, every: bool = False) -> xr.Dataset:
@@ -401,6 +448,19 @@ def _score(uu, vv, c, s_inv, r) -> float:
     return float((t * r).sum()) / np.sqrt(tt) if tt > 0 else -np.inf
 
 
+def _profiled(uu, vv, c, p, s_inv, r):
+    """Template, contrast and residual sum of squares at the parameters ``p`` = (shift u, v[, size factor]).
+
+    The contrast enters linearly and is profiled out:
+    ``SSR(p) = <r, r> - <t, r>^2 / <t, t>`` at ``k = <t, r> / <t, t>``.
+    """
+    t = _coverage(uu, vv, c + p[:2], s_inv / (p[2] ** 2 if len(p) > 2 else 1.0))
+    tt, tr = float((t * t).sum()), float((t * r).sum())
+    if not tt > 0:
+        return t, np.nan, np.inf
+    return t, tr / tt, float((r * r).sum()) - tr * tr / tt
+
+
 def _template_fit(uu, vv, c, s, s_inv, r, noise, h: float = 0.05, fit_scale: bool = False):
     """Least-squares fit of ``k t(c + s)`` to ``r`` over amplitude and shift (Gauss-Newton from ``s``).
 
@@ -410,45 +470,94 @@ def _template_fit(uu, vv, c, s, s_inv, r, noise, h: float = 0.05, fit_scale: boo
     Returns ``(s, k, cov, rho)`` with the covariance of ``(k, s_u, s_v)`` for
     white noise ``noise`` (``rho`` = 1 without ``fit_scale``), or None when
     the fit diverges or loses the marker.
+
+    Notes
+    -----
+    Each Gauss-Newton step ``d`` is followed by a line search on the
+    profiled sum of squares (:func:`_line_search`), and the fit has
+    converged when the step's predicted decrease of the sum of squares,
+    ``-slope / 2`` with ``slope = -2 <res, k dt/dp> . d``, is below
+    ``1e-4 noise^2`` (a step of 1 % of the standard deviation in its
+    direction; a fit that stalls is accepted up to ``5e-2 noise^2``, a step of
+    a fifth of it). Why:
+    at contrast/noise 3 the residual's curvature term that Gauss-Newton
+    leaves out is comparable to ``J^T J`` across a thin ellipse; the plain
+    iteration zig-zagged or crept (successive steps in ratio -0.8 to +0.8),
+    and 7 % of the steep wing's fits (oblique pose of the calibration
+    benchmark) missed a fixed 1e-3 px step limit after 8 steps: those
+    markers kept the detector's centroid (up to 3.5 x the Cramer-Rao
+    bound) or were lost.
     """
-    rho = 1.0
-    for _ in range(12 if fit_scale else 8):
-        si = s_inv / rho**2
-        t = _coverage(uu, vv, c + s, si)
-        tu = (_coverage(uu, vv, c + s + [h, 0], si) - _coverage(uu, vv, c + s - [h, 0], si)) / (2 * h)
-        tv = (_coverage(uu, vv, c + s + [0, h], si) - _coverage(uu, vv, c + s - [0, h], si)) / (2 * h)
-        tt = float((t * t).sum())
-        if not tt > 0:
-            return None
-        k = float((t * r).sum()) / tt
+    p = np.array([*s, 1.0] if fit_scale else s, dtype=np.float64)
+    lim = np.array([0.5, 0.5, 0.1])[:len(p)]  # a trust region: the template is narrow across a thin ellipse
+    t, k, ssr = _profiled(uu, vv, c, p, s_inv, r)
+    done = False
+    for _ in range(16):
         if not k > 0:
             return None
-        cols = [t.ravel(), k * tu.ravel(), k * tv.ravel()]
-        if fit_scale:
-            hr = 0.01
-            tr = (_coverage(uu, vv, c + s, s_inv / (rho + hr) ** 2)
-                  - _coverage(uu, vv, c + s, s_inv / (rho - hr) ** 2)) / (2 * hr)
-            cols.append(k * tr.ravel())
-        A = np.column_stack(cols)
+        A = _design(uu, vv, c, p, s_inv, t, k, h)
+        res = r.ravel() - k * t.ravel()
         ata = A.T @ A
-        step = np.linalg.lstsq(ata, A.T @ (r.ravel() - k * t.ravel()), rcond=None)[0]
-        d = np.clip(step[1:3], -0.5, 0.5)  # a trust region: the template is narrow across a thin ellipse
-        s = s + d
-        dr = 0.0
-        if fit_scale:
-            dr = float(np.clip(step[3], -0.1, 0.1))
-            rho = float(np.clip(rho + dr, 0.6, 1.6))
-        if np.hypot(*d) < 1e-3 and abs(dr) < 1e-4:
+        d = np.clip(np.linalg.lstsq(ata, A.T @ res, rcond=None)[0][1:], -lim, lim)
+        gain = float(res @ (A[:, 1:] @ d)) / noise**2  # predicted decrease of SSR / noise^2
+        if gain < 1e-4:
+            done = True
             break
-    if np.hypot(*d) > 0.01 or abs(dr) > 1e-3:
+        step = _line_search(uu, vv, c, p, d, s_inv, r, ssr, -2.0 * gain * noise**2, lim)
+        if step is None:  # no decrease along the step: converged within the derivatives' precision, or stuck
+            done = gain < 5e-2
+            break
+        t, k, ssr, d = step
+        p = p + d
+        if fit_scale:
+            p[2] = float(np.clip(p[2], 0.6, 1.6))
+    if not (done and k > 0):
         return None
-    t = _coverage(uu, vv, c + s, s_inv / rho**2)
-    k = float((t * r).sum()) / float((t * t).sum())
     try:
         cov = noise**2 * np.linalg.inv(ata)[:3, :3]
     except np.linalg.LinAlgError:
         return None
-    return s, k, cov, rho
+    return p[:2], k, cov, (float(p[2]) if fit_scale else 1.0)
+
+
+def _line_search(uu, vv, c, p, d, s_inv, r, ssr, slope, lim):
+    """``(t, k, SSR, step)`` at the best of ``p + alpha d`` along a Gauss-Newton step, or None without a decrease.
+
+    ``alpha`` is 1 or the minimum of the parabola through ``SSR(p)``, the
+    slope ``slope`` (derivative of SSR at ``alpha = 0``) and ``SSR(p + d)``,
+    within [0.1, ``top``] (``top``: 4, or where a component reaches the
+    trust region ``lim``; ``top`` itself where the parabola has no minimum);
+    then half steps, twice.
+    """
+    t1, k1, f1 = _profiled(uu, vv, c, p + d, s_inv, r)
+    curv = f1 - ssr - slope
+    top = float(min(4.0, np.min(lim / np.maximum(np.abs(d), 1e-12))))
+    alpha = float(np.clip(-slope / (2.0 * curv), 0.1, max(top, 1.0))) if curv > 0 else max(top, 1.0)
+    if abs(alpha - 1.0) > 0.2:
+        t2, k2, f2 = _profiled(uu, vv, c, p + alpha * d, s_inv, r)
+        if f2 < f1:
+            t1, k1, f1, d = t2, k2, f2, alpha * d
+    for _ in range(2):
+        if f1 < ssr:
+            return t1, k1, f1, d
+        d = 0.5 * min(alpha, 1.0) * d
+        t1, k1, f1 = _profiled(uu, vv, c, p + d, s_inv, r)
+    return (t1, k1, f1, d) if f1 < ssr else None
+
+
+def _design(uu, vv, c, p, s_inv, t, k, h):
+    """Design matrix (n_pix, 1 + len(p)) of :func:`_template_fit`: ``t`` and ``k dt/dp`` (central differences)."""
+    rho = p[2] if len(p) > 2 else 1.0
+    si = s_inv / rho**2
+    cols = [t.ravel()]
+    for e in ([h, 0.0], [0.0, h]):
+        cols.append(k * ((_coverage(uu, vv, c + p[:2] + e, si) - _coverage(uu, vv, c + p[:2] - e, si))
+                         / (2 * h)).ravel())
+    if len(p) > 2:
+        hr = 0.01
+        cols.append(k * ((_coverage(uu, vv, c + p[:2], s_inv / (rho + hr) ** 2)
+                          - _coverage(uu, vv, c + p[:2], s_inv / (rho - hr) ** 2)) / (2 * hr)).ravel())
+    return np.column_stack(cols)
 
 
 def _row(pos, a, b, vec, contrast, noise, cov) -> dict:

@@ -31,7 +31,7 @@ from ..camera.dlt import degeneracy
 from ..errors import CalibrationError, ConfigError, IrdicWarning
 from .bias import perspective_bias, plane_normals
 from .correspondence import check_ids, match_seeds
-from .detection import detect_markers
+from .detection import centre_weights, detect_markers
 from .guided import estimate_radius, find_missing
 from .image import image_array
 from .lattice import match_lattice
@@ -183,12 +183,21 @@ def _sensor_size(target_image) -> tuple[int, int]:
     return int(w), int(h)
 
 
-def _fit(x, uv, opts: FitOptions, start: CameraModel | None = None):
-    model, info = fit_dlt(x, uv)
+def _fit(x, uv, opts: FitOptions, start: CameraModel | None = None, weights: np.ndarray | None = None):
+    """DLT (and refinement) of the pairs ``x`` (n, 3) mm, ``uv`` (n, 2) px, each weighted by ``weights`` (1 / px).
+
+    ``info["sigma_px"]`` is the residual standard deviation per coordinate
+    in px also with weights (the weighted fit's own is relative to them).
+    """
+    model, info = fit_dlt(x, uv, weights)
     dlt_rms = info["rms_px"]
     if opts.refine:
-        model, info = refine_camera(start if start is not None else model, x, uv, distortion=opts.distortion)
+        model, info = refine_camera(start if start is not None else model, x, uv, distortion=opts.distortion,
+                                    weights=weights)
     info["dlt_rms_px"] = dlt_rms
+    if weights is not None:
+        dof = max(2 * len(x) - len(info.get("free", range(11))), 1)
+        info["sigma_px"] = float(np.sqrt(np.sum(info["residuals"] ** 2) / dof))
     return model, info
 
 
@@ -223,7 +232,7 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
         Correct the perspective bias of the imaged circle centres.
     marker_radius_mm : float, optional
         Marker radius for the bias correction, mm; estimated from the image
-        when not given.
+        when not given, checked against the image when given.
     min_radius_px, max_radius_px, min_contrast_k : float
         Detection limits (px, px, K).
     outlier_factor : float
@@ -244,8 +253,8 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     Raises
     ------
     CalibrationError
-        The image shows no usable markers, fewer than 6 markers can be used,
-        the markers are coplanar, or the correspondence is uncertain.
+        No usable markers, fewer than 6 usable, coplanar markers, an uncertain
+        correspondence, or ``marker_radius_mm`` contradicts the image.
     ConfigError
         Invalid arguments, unknown or contradictory seeds.
     DataError
@@ -304,12 +313,14 @@ def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np
     outliers: list[int] = []  # indices into X
     limit = opts.max_outliers if opts.max_outliers is not None else max(1, len(mi) // 4)
     loo = np.full(len(X), np.nan)
+    wdet = centre_weights(det)
     for _ in range(limit + 1):
         use = np.array([m for m in mi if m not in outliers])
         duse = np.array([d for m, d in zip(mi, di) if m not in outliers])
+        w = None if wdet is None else wdet[duse]
         if len(use) < 6:
             raise CalibrationError(f"only {len(use)} markers are left after removing outliers; the calibration needs 6")
-        model, info = _fit(X[use], D[duse] - bias[use], opts)
+        model, info = _fit(X[use], D[duse] - bias[use], opts, weights=w)
         if opts.correct_bias:
             if radius is None:
                 radius = estimate_radius(model, X[use], det, duse)
@@ -317,10 +328,10 @@ def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np
             # the bias depends on the camera only weakly: two rounds converge
             for _ in range(2):
                 bias = perspective_bias(model, X, normals, radius)
-                model, info = _fit(X[use], D[duse] - bias[use], opts, start=model)
+                model, info = _fit(X[use], D[duse] - bias[use], opts, start=model, weights=w)
         loo[:] = np.nan
         loo[use] = leave_one_out(X[use], D[duse] - bias[use], method="refine" if opts.refine else "dlt",
-                                 distortion=opts.distortion, start=model if opts.refine else None)
+                                 distortion=opts.distortion, start=model if opts.refine else None, weights=w)
         thr = max(opts.outlier_factor * float(np.nanmedian(loo[use])), opts.outlier_min_px)
         worst = use[int(np.nanargmax(loo[use]))]
         if not loo[worst] > thr or len(outliers) >= limit or len(use) <= 7:

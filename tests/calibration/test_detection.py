@@ -5,6 +5,7 @@ import pytest
 import xarray as xr
 
 from irdic.calibration import detect_markers
+from irdic.calibration.detection import CENTRE_FLOOR_PX, centre_weights
 from irdic.calibration.correspondence import assign
 from irdic.errors import CalibrationError, ConfigError
 from irdic.synthetic.camera import lab_camera
@@ -114,3 +115,14 @@ def test_too_many_nan_pixels_are_refused_naming_the_image(target):
         detect_markers(da)
 
 
+
+
+def test_centre_weights_are_inverse_sigmas_with_a_floor():
+    """1 / sqrt(sigma^2 + floor^2) per detection; equal weights (None) when a sigma is missing."""
+    sig = np.array([0.2, 0.1, 0.01, 0.001])
+    det = xr.Dataset({"sigma_px": ("detection", sig)})
+    np.testing.assert_allclose(centre_weights(det), 1 / np.sqrt(sig**2 + CENTRE_FLOOR_PX**2))
+    # a marker 10 x less precise than another has 1/10 of its weight (GLS), until the floor
+    assert centre_weights(det)[0] / centre_weights(det)[1] == pytest.approx(0.5, rel=0.01)
+    assert centre_weights(det.assign(sigma_px=("detection", [0.1, np.nan, 0.1, 0.1]))) is None
+    assert centre_weights(det.drop_vars("sigma_px")) is None
