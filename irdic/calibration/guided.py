@@ -228,8 +228,8 @@ def check_radius(radius_mm: float, scale: np.ndarray) -> None:
             f"target image measure {radius_mm * med:.3f} mm: templates of free size fitted to the {n} matched "
             f"markers are {100 * (med - 1):+.1f} % of the given size (median; tolerance +-{100 * tol:.1f} % = "
             f"{100 * RADIUS_TOLERANCE:.0f} % + 5 standard errors of the median). The radius sets the perspective "
-            f"correction of every marker centre: measure the painted markers and give their radius (a call of "
-            f"`irdic.calibration.calibrate` may also leave it out to take it from the image)")
+            f"correction of every marker centre: measure the painted markers and give their radius (or null, "
+            f"None in `irdic.calibration.calibrate`, to take it from the image)")
 
 
 def _refit_matched(image, det, mi, di, centre, shape, window, fine, kw, every: bool = False) -> xr.Dataset:

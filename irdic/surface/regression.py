@@ -305,7 +305,8 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     c, R0 = positive(c, "c"), positive(R0, "R0")
     judged = None if judged is None else np.asarray(judged, dtype=bool).reshape(p.shape[0])
     h_all = median_spacing(p)
-    p, F, h, judged = _judged_patch(*_one_per_separation(p, F, judged, separation, h_all), max_points)
+    p, F, judged = _one_per_separation(p, F, judged, separation, h_all)
+    p, F, h, judged = _judged_patch(p, F, max_points, judged)
     n = p.shape[0]
     rows = np.ones(2 * n, bool) if judged is None else np.r_[judged, judged]
     nj = int(rows.sum()) // 2
