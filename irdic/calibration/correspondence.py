@@ -309,14 +309,15 @@ def _robust_seed_fit(x: np.ndarray, uv: np.ndarray, tol: float, max_sets: int = 
     # the sets without one seed and the full set as well: a 6-point DLT through clicks a few px
     # off can extrapolate poorly on an oblique view, where all honest seeds together fit well
     larger = [[j for j in range(n) if j != i] for i in range(n)] + [list(range(n))] if n >= 8 else []
-    best, best_key = None, (-1, -np.inf)
+    best, best_key, best_fit = None, (-1, -np.inf), None
     fatal = None
     for sub in itertools.chain(combos, larger):
         sub = list(sub)
         if planarity(x[sub]) < 1e-3:
             continue
         try:
-            res = np.hypot(*(CameraModel(dlt(x[sub], uv[sub])).project(x) - uv).T)
+            cam = CameraModel(dlt(x[sub], uv[sub]))
+            res = np.hypot(*(cam.project(x) - uv).T)
         except CalibrationError as exc:
             # inconsistent seeds put some markers behind the camera; a mirrored
             # image puts all of them there, which no choice of seeds mends
@@ -327,19 +328,21 @@ def _robust_seed_fit(x: np.ndarray, uv: np.ndarray, tol: float, max_sets: int = 
         inl = res <= tol
         key = (int(inl.sum()), -float(np.minimum(res, tol) ** 2 @ np.ones(n)))
         if key > best_key:
-            best, best_key = inl, key
+            best, best_key, best_fit = inl, key, (cam, res)
     if best is None and fatal is not None:
         raise fatal
     if best is None or best.sum() < 6:
         return np.zeros(n, bool) if best is None else best, None, np.full(n, np.inf)
     inl = best
-    model = None
+    model, res = best_fit
     for _ in range(5):
         try:
-            model = CameraModel(dlt(x[inl], uv[inl]))
+            refit = CameraModel(dlt(x[inl], uv[inl]))
         except CalibrationError:
-            return inl, None, np.full(n, np.inf)
-        res = np.hypot(*(model.project(x) - uv).T)
+            # the DLT of all the inliers can be worse conditioned than the set that found them (an
+            # oblique wing's seeds close together: mirrored by 4 px of one click); keep the last camera
+            break
+        model, res = refit, np.hypot(*(refit.project(x) - uv).T)
         new = res <= tol
         if new.sum() < 6 or (new == inl).all():
             break
