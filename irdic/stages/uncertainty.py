@@ -63,6 +63,7 @@ import numpy as np
 
 from ..gradient import material_rate, surface_gradient
 from ..numerics.temporal import TemporalInterpolant, local_rate_weights, temporal_window
+from ..numerics.threads import parallel_map
 from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
@@ -298,10 +299,11 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             # against the lighter regression of the gradient's input after the same regression in time (the
             # value's reference; the points' own series at each time carried the temporal bias and full noise)
             d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
-            grad_std = np.hypot(grad_std, local_bias(d_grad, acc["g_var"], sf.psi, trusted, acc["g_var_null"], ks))
-            # the exact interpolation of the input at the points is the input itself
-            temp_std = np.hypot(temp_std, local_bias(value - value_in, acc["v_var"], sf.psi, trusted,
-                                                    acc["v_var_null"], ks))
+            # the exact interpolation of the input at the points is the input itself; the two estimates
+            # (sparse products, which release the GIL) on the stage's threads
+            b_g, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], sf.psi, trusted, acc[a[1] + "_null"], ks),
+                                    ((d_grad, "g_var"), (value - value_in, "v_var")))
+            grad_std, temp_std = np.hypot(grad_std, b_g), np.hypot(temp_std, b_v)
             if len(spatial) > 5 and W is not None:  # the temporal terms
                 temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:7], acc, sf.psi, trusted, temp_std, ks,
                                                                    rate_std)
@@ -427,14 +429,12 @@ def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std):
     resolved well below the rate's noise. (Against the points' own series
     its estimate scattered by more than the rate's std.)
     """
-    d_rate_t, d_rate_s, d_value_t = d
-    b_t, b_s = (local_bias(x, acc[k], psi, trusted, acc[f"{k}_null"], ks) for x, k in ((d_rate_t, "rt_var"),
-                                                                                       (d_rate_s, "rs_var")))
+    b_t, b_s, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], psi, trusted, acc[f"{a[1]}_null"], ks),
+                                 zip(d, ("rt_var", "rs_var", "vt_var")))
     # only the temporal bias is resolved well enough to flag by (the spatial one scatters with the points' noise)
     biased = b_t > rate_std
     rate_std = np.sqrt(rate_std ** 2 + b_t ** 2 + b_s ** 2)
-    temp_std = np.hypot(temp_std, local_bias(d_value_t, acc["vt_var"], psi, trusted, acc["vt_var_null"], ks))
-    return temp_std, rate_std, biased
+    return np.hypot(temp_std, b_v), rate_std, biased
 
 
 def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None):
