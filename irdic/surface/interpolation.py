@@ -129,7 +129,7 @@ class SpatialInterpolant:
         self._ls_at = None
         self._local = None
         self._g = None
-        self._fill_lu = {}
+        self._fill_lu = [None, {}, 0]  # (the G they factorise, {missing points: LU}, bytes)
         self._chosen = None
         self.info = {"spacing": self.h, "halo": self.halo, "smoothing": self.k}
 
@@ -269,7 +269,6 @@ class SpatialInterpolant:
             self._local = op
         if rows.size:
             self._g = (rows, G)
-            self._fill_lu = {}  # factorisations of the rows they were built from
         return op
 
     def _eval_local(self, F, pts, kinds, tiles, at_nodes):
@@ -461,7 +460,7 @@ class SpatialInterpolant:
             ms = stages[ms]
             Q = np.flatnonzero(miss[ms[0]])
             GQ = G[pos[Q]]
-            lu = self._fill_factor(GQ, Q, ms[0], int(V[ms[0]].sum()))
+            lu = self._fill_factor(G, GQ, Q, ms[0], int(V[ms[0]].sum()))
             for b in range(0, ms.size, batch):
                 mb = ms[b:b + batch]
                 f = np.where(V[mb].reshape(V[mb].shape + (1,) * len(tail)), X[mb], 0.0).reshape(mb.size, self.n, -1)
@@ -472,17 +471,20 @@ class SpatialInterpolant:
                  int(miss.any(axis=1).sum()), _time.perf_counter() - t0)
         return out, miss
 
-
-    def _fill_factor(self, GQ, Q, stage, n_valid):
-        """LU of ``G_QQ`` for the missing points ``Q``, kept for the next fill with the same points.
+    def _fill_factor(self, G, GQ, Q, stage, n_valid):
+        """LU of ``G_QQ`` for the missing points ``Q``, kept for the next fill with the same points and ``G``.
 
         A stage run fills the same few hundred missing patterns (a moving
         specimen's outline) in every regression and noise probe; their LU
         factorisations were the fill's cost (moving tube, 25,960 points: 67 s
-        of 350 s). Kept up to :data:`_FILL_LU_BYTES` in all.
+        of 350 s). Kept up to :data:`_FILL_LU_BYTES` in all, and only with
+        the rows of ``G`` they came from (more rows are built with other tiles).
         """
+        cache = self._fill_lu
+        if cache[0] is not G:
+            cache = self._fill_lu = [G, {}, 0]
         key = Q.tobytes()
-        lu = self._fill_lu.get(key)
+        lu = cache[1].get(key)
         if lu is not None:
             return lu
         try:
@@ -496,8 +498,10 @@ class SpatialInterpolant:
                 f"stage {stage}: the {n_valid} valid points do not determine the {Q.size} missing ones "
                 "(valid points on a line?)"
             ) from None
-        if sum(f[0].nbytes for f in self._fill_lu.values()) + lu[0].nbytes <= _FILL_LU_BYTES:
-            self._fill_lu[key] = lu
+        # a running total: fills on worker threads may insert while another counts
+        if cache[2] + lu[0].nbytes <= _FILL_LU_BYTES:
+            cache[1][key] = lu
+            cache[2] += lu[0].nbytes
         return lu
 
 

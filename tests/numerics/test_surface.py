@@ -329,7 +329,7 @@ def test_fill_factorisations_are_reused_only_with_their_rows_of_g():
     b[0, rng.choice(n, 200, replace=False)] = False
     sp = SpatialInterpolant(psi)
     first = sp.fill(np.where(a[..., None], X, np.nan), a)[0]
-    assert len(sp._fill_lu) == 1
+    assert len(sp._fill_lu[1]) == 1
     np.testing.assert_array_equal(sp.fill(np.where(a[..., None], X, np.nan), a)[0], first)
     sp.fill(np.where(b[..., None], X, np.nan), b)
     again = sp.fill(np.where(a[..., None], X, np.nan), a)[0]
