@@ -38,10 +38,13 @@ def pixel_pitch(points: xr.Dataset, psi) -> float | None:
     Point temperatures closer than this share their pixels' noise
     (:func:`irdic.surface.regression.gradient_risk_spatial`, ``separation``).
     Taken at the one of five times spread over the record with the most
-    projected points; None when fewer than 6 points are projected there.
+    projected points; None when fewer than 6 points are projected there, or
+    the store holds no pixel positions.
     """
     from scipy.spatial import cKDTree
 
+    if "pixel" not in points:
+        return None
     pix = points["pixel"].transpose("time", "point", "axis")
     psi = np.asarray(psi, dtype=float)
     best = None
