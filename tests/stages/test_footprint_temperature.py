@@ -1,6 +1,7 @@
 """Footprint temperatures (issue 15): local-linear box values of the IR pixels, against analytic truth."""
 
 import numpy as np
+import pytest
 
 from irdic.noise import interpolation_noise_gains
 from irdic.stages.footprint_temperature import FootprintOperator, footprint_side
@@ -118,3 +119,24 @@ def test_noise_factor_matches_monte_carlo_on_the_couple_stage():
         assert ok.sum() > 50
         ratio = np.sqrt(np.mean(e[:, ok] ** 2)) / np.sqrt(np.mean(pred[ok] ** 2))
         assert 0.85 < ratio < 1.15, (ratio, ok.sum())
+
+
+def test_pixel_pitch_is_the_size_of_a_pixel_on_the_surface():
+    """The fields stage judges its regression's spacing on about one point per pixel when the points are denser
+    (:func:`irdic.surface.regression.gradient_risk_spatial`, ``separation``): the pixel's size in mm, from the
+    projected positions of neighbouring points; None without them."""
+    import xarray as xr
+
+    from irdic.stages.footprint_fields import pixel_pitch
+
+    rng = np.random.default_rng(4)
+    psi = np.stack(np.meshgrid(np.arange(30.0), np.arange(20.0)), -1).reshape(-1, 2) * 0.2
+    psi += rng.uniform(-0.02, 0.02, psi.shape)
+    # 0.25 mm per pixel, rotated, moving by a few px over the record, some points not projected
+    rot = np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]])
+    pix = np.stack([psi @ rot.T / 0.25 + [100 + 3 * k, 50] for k in range(7)])
+    pix[2, :40] = np.nan
+    points = xr.Dataset({"pixel": (("time", "point", "axis"), pix)})
+    assert pixel_pitch(points, psi) == pytest.approx(0.25, rel=1e-6)
+    assert pixel_pitch(points.drop_vars("pixel"), psi) is None
+    assert pixel_pitch(points.isel(point=slice(0, 5)), psi[:5]) is None
