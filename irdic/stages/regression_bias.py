@@ -83,7 +83,7 @@ def reference_spacing(k):
     return None if k < 2.0 else k / 2.0
 
 
-def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None):
+def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbourhoods=None):
     """Local RMS of a regression's bias from its difference ``d`` to a less biased reference.
 
     Parameters
@@ -106,6 +106,9 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None):
         neighbourhood's estimate is not resolved, the points within that
         spacing (``π spacing²`` nearest) are averaged instead (the bias
         varies on that scale).
+    neighbourhoods : dict, optional
+        Cache of the neighbourhoods of ``psi`` by their size, shared by the
+        calls on the same points (each is a k-d tree query and a sparse matrix).
 
     Returns
     -------
@@ -137,7 +140,11 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None):
     # the neighbourhood, then a wider one where the bias is below the neighbourhood's resolution
     wide = [] if spacing is None else [int(np.pi * float(np.max(spacing)) ** 2)]
     for k in [BIAS_NEIGHBOURS] + [n for n in wide if n > BIAS_NEIGHBOURS]:
-        nb = _neighbours(psi, k)
+        nb = None if neighbourhoods is None else neighbourhoods.get(k)
+        if nb is None:
+            nb = _neighbours(psi, k)
+            if neighbourhoods is not None:
+                neighbourhoods[k] = nb
         count = _local_count(ok, nb)
         est = _local_mean(np.where(ok, a, 0.0), ok, nb, count)
         if null is None or len(null) < 2:

@@ -301,12 +301,13 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
             # the exact interpolation of the input at the points is the input itself; the two estimates
             # (sparse products, which release the GIL) on the stage's threads
-            b_g, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], sf.psi, trusted, acc[a[1] + "_null"], ks),
-                                    ((d_grad, "g_var"), (value - value_in, "v_var")))
+            nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
+            b_g, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], sf.psi, trusted, acc[a[1] + "_null"], ks,
+                                                         nbs), ((d_grad, "g_var"), (value - value_in, "v_var")))
             grad_std, temp_std = np.hypot(grad_std, b_g), np.hypot(temp_std, b_v)
             if len(spatial) > 5 and W is not None:  # the temporal terms
                 temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:7], acc, sf.psi, trusted, temp_std, ks,
-                                                                   rate_std)
+                                                                   rate_std, nbs)
     return temp_std, grad_std, rate_std, rate_biased
 
 
@@ -414,11 +415,12 @@ def _spread(a, near):
     return np.where(np.isfinite(out), out, med)
 
 
-def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std):
+def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std, neighbourhoods=None):
     """Temperature and rate std with the space-time regression's bias added, and where the rate's temporal
     bias exceeds its noise.
 
     ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`; ``ks``: the spatial spacing;
+    ``neighbourhoods``: :func:`~irdic.stages.regression_bias.local_bias`'s cache for ``psi``;
     ``acc``: the probes' noise variances of those differences
     (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each
     through the same operators as the difference (:func:`~irdic.stages.regression_bias.local_bias`). The
@@ -429,8 +431,8 @@ def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std):
     resolved well below the rate's noise. (Against the points' own series
     its estimate scattered by more than the rate's std.)
     """
-    b_t, b_s, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], psi, trusted, acc[f"{a[1]}_null"], ks),
-                                 zip(d, ("rt_var", "rs_var", "vt_var")))
+    b_t, b_s, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], psi, trusted, acc[f"{a[1]}_null"], ks,
+                                                      neighbourhoods), zip(d, ("rt_var", "rs_var", "vt_var")))
     # only the temporal bias is resolved well enough to flag by (the spatial one scatters with the points' noise)
     biased = b_t > rate_std
     rate_std = np.sqrt(rate_std ** 2 + b_t ** 2 + b_s ** 2)
