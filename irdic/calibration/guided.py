@@ -22,6 +22,7 @@ import xarray as xr
 
 from ..camera import CameraModel
 from ..errors import CalibrationError
+from ..noise import mad_std
 from .bias import plane_normals, projected_ellipses
 from .correspondence import predicted_spacing, propagate
 from .detection import DETECTION_FIELDS, plane_fit
@@ -220,7 +221,7 @@ def check_radius(radius_mm: float, scale: np.ndarray) -> None:
     if n < MIN_SIZE_FITS:
         return
     med = float(np.median(scale))
-    se = 1.2533 * 1.4826 * float(np.median(np.abs(scale - med))) / np.sqrt(n)
+    se = 1.2533 * mad_std(scale) / np.sqrt(n)
     tol = RADIUS_TOLERANCE + 5.0 * se
     if abs(med - 1.0) > tol:
         raise CalibrationError(
