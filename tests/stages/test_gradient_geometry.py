@@ -4,10 +4,16 @@
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
+import xarray as xr
 
+from irdic.camera import CameraModel
+from irdic.stages.couple import couple
+from irdic.stages.fields import fields
 from irdic.stages.gradient_geometry import TANGENT_PROBES, gradient_dic_var, tangent_noise
 from irdic.surface import fit_stages
 from irdic.surface.geometry import surface_geometry
+from irdic.synthetic import HalfShell, experiment, lab_camera
 
 
 def test_gradient_dic_var_matches_the_perturbed_dual_basis():
@@ -57,3 +63,26 @@ def test_tangent_noise_against_the_realised_tangent_error_of_the_fit():
     s2b = tangent_noise(x, sf, 0.006, p, np.random.default_rng(1))
     np.testing.assert_allclose(s2b, 4 * s2, rtol=1e-6)
     assert TANGENT_PROBES >= 2
+
+
+@pytest.mark.slow
+def test_barrel_gradient_std_holds_the_tangent_planes_dic_noise():
+    """Regression: a barrel patch (R 40 mm, heated from one end, |g| ~1 K/mm) with 0.05 K IR and 0.003 mm DIC
+    noise; the DIC noise tilts and stretches the fitted tangent plane, an error of ~0.4 x the IR noise's
+    (benchmark scene) that the std left out: within 2 std 0.868 before, 0.895 now (the band's 0.92 is still
+    missed by the bias estimate's resolution, benchmarks/README)."""
+    ex = experiment("halfshell", "demo", ir_noise=0.05, dic_noise=0.003, seed=3,
+                    specimen=HalfShell(R_o=40.0, R_i=36.0, axis_z=-40.0), camera=lab_camera())
+    ir = xr.Dataset({"temperature": ex.ir_stack().drop_vars("frame_number")})
+    cam = ex.camera
+    cal = CameraModel(K=cam.K, R=cam.R, C=cam.C).to_dataset()
+    cal.attrs.update(sensor_width=cam.width, sensor_height=cam.height)
+    pts = couple(ex.dic()[["x"]], ir, cal)
+    truth = ex.truth().sel(point=pts.point)
+    f = fields(pts, cal)
+    m = pts.visible.values & (truth.patch_edge_distance.values >= 2.0)
+    m[[0, -1]] = False
+    mm = m[..., None] & ~f.temperature_gradient_bias_dominated.values
+    z = np.abs(f.temperature_gradient.values - truth.temperature_gradient.values)[mm] / \
+        f.temperature_gradient_std.values[mm]
+    assert 0.60 <= np.mean(z <= 1) <= 0.76 and np.mean(z <= 2) >= 0.88, (np.mean(z <= 1), np.mean(z <= 2))
