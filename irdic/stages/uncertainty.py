@@ -30,7 +30,9 @@ are propagated through those same operators:
   stage, and the probes' cost no longer grows with the record.
 - Calibration: the temperature gets ``pixel_std |∇_pix Θ|`` (the projected
   position's uncertainty times the pixel gradient) in quadrature, and the
-  DIC noise ``σ_x |∇Θ|`` (a point's noisy coordinates place its sample).
+  DIC noise ``σ_x |∇Θ|`` (a point's noisy coordinates place its sample);
+  the gradient the DIC noise of its tangent plane
+  (:func:`~irdic.stages.gradient_geometry.gradient_dic_var`).
 - The probes' noise is scaled to the data's: the residuals of each time's
   spatial regression, data over probes
   (:func:`~irdic.stages.regression_bias.noise_scale`).
@@ -68,6 +70,7 @@ from ..strain import strain
 from ..surface import fit_surface
 from ..vocabulary import Status
 from .footprint_fields import footprint_probes
+from .gradient_geometry import position_std
 from .regression_bias import BIAS_NEIGHBOURS, local_bias, noise_scale, reference_spacing, scaled_probes
 
 __all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
@@ -183,13 +186,12 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
                                                         _values(points, "temperature_paper"))
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
     s_x = float(a.get("dic_noise_mm", np.nan))
-    temp_std = np.sqrt(temp_std ** 2 + _position_var(points, sf, J, g_pix, s_x, spatial))
+    temp_std, grad_std = position_std(points, sf, geo, J, g_pix, temp_std, grad_std, s_x, p, spatial, rng, ops)
     strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
-    for arr in (temp_std, rate_std):
+    for arr in (temp_std, rate_std, grad_std):
         arr[~visible] = np.nan
-    grad_std[~visible] = np.nan
     log.info("fields: uncertainty from IR noise %.3g K (point %.3g K) and DIC noise %.3g mm; median std: temperature "
              "%.3g K, rate %.3g K/s, max principal strain %.3g", sigma, s_T, s_x, _median(temp_std),
              _median(rate_std), _median(strain_std))
@@ -200,18 +202,6 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         "max_principal_strain": (strain_std, np.array(strain_bias)),
         "notes": "; ".join(notes) if notes else "none",
     }
-
-
-def _position_var(points, sf, J, g_pix, s_x, spatial):
-    """Variance (T, N) K² of the temperature from the points' positions: the calibration's projected-position
-    uncertainty along the pixel gradient, and the DIC noise ``s_x`` (mm) along the surface gradient (each
-    point is sampled, and placed in the surface parameters, where its noisy coordinates put it: an offset of
-    its own that no regression averages; demo barrel: 0.003 K of 0.006 K)."""
-    pix_std = points["pixel_std"].values.astype(float) if "pixel_std" in points else np.zeros(sf.x.shape[:2])
-    cal = np.nan_to_num(pix_std) * np.linalg.norm(np.nan_to_num(g_pix), axis=-1)
-    grad = spatial[1] if spatial is not None else surface_gradient(np.nan_to_num(g_pix), J, sf.tangents)
-    dic = np.nan_to_num(s_x * np.linalg.norm(grad, axis=-1))
-    return cal ** 2 + dic ** 2
 
 
 def _rate_bias_flags(rate_biased, visible, notes):
