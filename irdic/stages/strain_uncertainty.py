@@ -124,8 +124,7 @@ def _mse(c, C, z, w):
     resid = np.maximum(C[:, 0, 0] - np.sum(beta ** 2, axis=1), 0.0)
     d_hat = c[:, 1:]
     r_hat = np.hypot(d_hat[:, 0], d_hat[:, 1])
-    # resolved only beyond one standard error of the noise's |n|² (2 tr C_d²: a Gaussian quadratic form)
-    r = np.sqrt(np.maximum(r_hat ** 2 - lam.sum(axis=1) - BIAS_Z * np.sqrt(2 * np.sum(lam ** 2, axis=1)), 0.0))
+    r = resolved_magnitude(c, C)
     d = d_hat * np.divide(r, r_hat, out=np.zeros_like(r), where=r_hat > 0)[:, None]
     # far from degeneracy the linearised variance (the quadrature's to < 0.3 % in std)
     u = np.divide(d, r[:, None], out=np.zeros_like(d), where=r[:, None] > 0)
@@ -139,6 +138,34 @@ def _mse(c, C, z, w):
     err = np.hypot(x0, x1) - col(r) + col(beta[:, 0]) * z0 + col(beta[:, 1]) * z1
     out[near] = resid[near] + np.square(err) @ w
     return out
+
+
+def resolved_magnitude(comp, cov):
+    """The method-of-moments magnitude of the deviatoric part (...) of :func:`max_principal_rms` (Notes): 0 where
+    ``|d̂|²`` is within :data:`~irdic.stages.regression_bias.BIAS_Z` standard errors of its noise mean."""
+    Cd = np.asarray(cov)[..., 1:, 1:]
+    noise = np.trace(Cd, axis1=-2, axis2=-1) + BIAS_Z * np.sqrt(2 * np.sum(np.square(Cd), axis=(-2, -1)))
+    return np.sqrt(np.maximum(np.sum(np.square(np.asarray(comp)[..., 1:]), axis=-1) - noise, 0.0))
+
+
+def _e_max_part(base, cov):
+    """``c -> `` the part (...) of tensor differences ``c`` (..., 3) that moves ``e_max`` at the estimate ``base``:
+    ``c_m + uᵀ c_d`` (``u`` along ``base``'s deviatoric part) where its magnitude is resolved
+    (:func:`resolved_magnitude`), the norm ``|c|`` where not (the direction is noise there, and a bias ``b``
+    of a zero tensor moves ``e_max`` by ``b_m + |b_d|``).
+
+    Notes
+    -----
+    Linear in ``c`` where resolved: its noise is the probes' (the difference
+    of two max principal values holds their magnitudes' noise bias), and far
+    from degeneracy it is the linearised difference of ``e_max`` the bias
+    was estimated from before. The norm alone counted ``e_min``'s bias too
+    (tiny tube: 0.86 within 1 std).
+    """
+    r = np.linalg.norm(base[..., 1:], axis=-1, keepdims=True)
+    u = np.divide(base[..., 1:], r, out=np.zeros_like(base[..., 1:]), where=r > 0)
+    resolved = resolved_magnitude(base, cov) > 0
+    return lambda c: np.where(resolved, c[..., 0] + np.sum(c[..., 1:] * u, axis=-1), np.linalg.norm(c, axis=-1))
 
 
 def below_noise_floor(e_max, std):
@@ -167,14 +194,13 @@ def strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None):
     sub, near = probe_times(T)
     base, samples, bases, regressed, smoothing = _probe_tensors(points, sf, t, p, s_x, rng, window, ops, sub)
     dev = np.array(samples[0]) - base
-    std = max_principal_rms(base, np.einsum("ksni,ksnj->snij", dev, dev) / dev.shape[0])
+    cov = np.einsum("ksni,ksnj->snij", dev, dev) / dev.shape[0]
+    std = max_principal_rms(base, cov)
     if regressed:
-        # pooled over the three components: one bias of the tensor, judged against the noise of all three
-        # (per component, each estimate's excess over its own noise passed for a bias: demo barrel 8.9e-5
-        # against the regression's true 1e-5)
         k = len(samples[1])
-        null = np.sum(np.square((np.array(samples[0][:k]) - base) - (np.array(samples[1]) - bases[1])), axis=-1)
-        std = np.hypot(std, local_bias(np.linalg.norm(base - bases[1], axis=-1), null.mean(axis=0), sf.psi,
+        e_max_part = _e_max_part(base, cov)
+        null = np.square(e_max_part((np.array(samples[0][:k]) - base) - (np.array(samples[1]) - bases[1])))
+        std = np.hypot(std, local_bias(e_max_part(base - bases[1]), null.mean(axis=0), sf.psi,
                                        None if trusted is None else trusted[sub], null, smoothing))
     std = spread(std, near)
     # the strain is zero by definition at the reference stage (stage 0 of the record): no uncertainty there,
