@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..strain import strain
+from ..strain import strain_components
 from ..surface import fit_surface
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
 from .regression_bias import BIAS_Z, local_bias, reference_spacing
@@ -215,7 +215,7 @@ def _probe_tensors(points, sf, t, p, s_x, rng, window, ops, sub):
     operator: the fit's and, for a regression, the reference spacing's first ones), the reference's own
     without noise; whether the fit regresses, and its spatial spacing(s)."""
     x = points["x"].transpose("time", "point", "component").values.astype(float)
-    base = tensor_components(strain(sf.tangents[sub], sf.ref_tangents, tensors=False).E2)
+    base = tensor_components(strain_components(sf.tangents[sub], sf.ref_tangents))
     kw = dict(c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"], solver=p["solver"],
               smoothing=sf.info.get("smoothing", None), smoothing_t=sf.info.get("smoothing_t", None))
     kw = {k: (None if k.startswith("smoothing") and v is not None and v <= 1.0 else v) for k, v in kw.items()}
@@ -276,7 +276,7 @@ class _StrainProbe:
             for dx, dref in draws:
                 pf = (fit_surface(self.x + dx, self.t, psi=sf.psi, t_eval=self.t[self.sub], **kw) if w is None
                       else _window_probe(w, self.t[self.sub], sf.psi, kw, dx, dref))
-                out.append(tensor_components(strain(pf.tangents, pf.ref_tangents, tensors=False).E2))
+                out.append(tensor_components(strain_components(pf.tangents, pf.ref_tangents)))
             return out
         stages, shapes = [], []
         for dx, dref in draws:
@@ -293,7 +293,7 @@ class _StrainProbe:
                              **kws)
         tang = tang.reshape((len(draws), -1) + tang.shape[1:])
         first = 0 if w is None else 1
-        return [tensor_components(strain(g[first:], g[0], tensors=False).E2) for g in tang]
+        return [tensor_components(strain_components(g[first:], g[0])) for g in tang]
 
 
 def _window_probe(window, t, psi, kw, dx, dref):

@@ -68,7 +68,7 @@ import numpy as np
 from ..gradient import material_rate, surface_gradient
 from ..numerics.temporal import TemporalInterpolant, local_rate_weights, temporal_window
 from ..numerics.threads import parallel_map
-from ..strain import strain
+from ..strain import principal_2d, strain_components
 from ..vocabulary import Status
 from .footprint_fields import footprint_probes
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
@@ -412,7 +412,7 @@ def _strain_std(points, sf, t, p, s_x, rng, window, trusted, ops, notes):
     """The max principal strain's std (:func:`~irdic.stages.strain_uncertainty.strain_std`); appends to ``notes``
     where the strain is below its noise floor somewhere."""
     std = strain_std(points, sf, t, p, s_x, rng, window, trusted, ops)
-    e_max = strain(sf.tangents, sf.ref_tangents, tensors=False).e_max
+    e_max = principal_2d(strain_components(sf.tangents, sf.ref_tangents))[0]
     if below_noise_floor(e_max, std).any():
         # no count: a time chunk's note becomes the gathered store's
         notes.append(f"max_principal_strain: below its noise floor where |max_principal_strain| < "
