@@ -7,7 +7,7 @@ from scipy.special import i0e, i1e
 
 from irdic.stages.regression_bias import BIAS_Z
 from irdic.stages.strain_uncertainty import below_noise_floor, max_principal_rms, tensor_components
-from irdic.strain import principal_2d
+from irdic.strain import principal_2d, strain, strain_components
 
 #: the demo barrel's strain noise: mean and both deviatoric components alike (3.7-4.1e-5 each), here in units
 #: of it; and an anisotropic, correlated one
@@ -35,6 +35,12 @@ def test_tensor_components_give_the_principal_values():
     e_max, e_min, _ = principal_2d(E2)
     np.testing.assert_allclose(c[:, 0] + np.hypot(c[:, 1], c[:, 2]), e_max, rtol=0, atol=1e-15)
     np.testing.assert_allclose(c[:, 0] - np.hypot(c[:, 1], c[:, 2]), e_min, rtol=0, atol=1e-15)
+
+
+def test_strain_components_are_strains_tensor():
+    rng = np.random.default_rng(2)
+    a, A = rng.normal(size=(4, 5, 2, 3)), rng.normal(size=(5, 2, 3))
+    np.testing.assert_array_equal(strain_components(a, A), strain(a, A, tensors=False).E2)
 
 
 @pytest.mark.parametrize("r0", [0.0, 0.3, 1.0, 1.5, 3.0, 8.0])
