@@ -23,11 +23,15 @@ are propagated through those same operators:
 - Spatial regression and strain: propagated by random probes, ``K`` noise
   realisations run through the same operator with the smoothing parameters
   frozen at the chosen values; the standard deviation over the probes.
-  In a record longer than :data:`PROBE_TIMES` DIC times the probes are
-  evaluated at that many times spread over it, and every other time takes
-  the nearest probed time's standard deviation: the noise propagated by a
-  fixed operator follows the geometry, which changes slowly from stage to
-  stage, and the probes' cost no longer grows with the record.
+  In a record longer than :data:`~irdic.stages.probes.PROBE_TIMES` DIC
+  times the probes are evaluated at that many times spread over it, and
+  every other time takes the nearest probed time's standard deviation: the
+  noise propagated by a fixed operator follows the geometry, which changes
+  slowly from stage to stage, and the probes' cost no longer grows with the
+  record. The strain's probes give the covariance of the strain tensor, and
+  the max principal strain's std is its RMS error at the tensor estimated
+  from it, the upward noise bias of a (near-)degenerate tensor included
+  (:mod:`irdic.stages.strain_uncertainty`).
 - Calibration: the temperature gets ``pixel_std |∇_pix Θ|`` (the projected
   position's uncertainty times the pixel gradient) in quadrature, and the
   DIC noise ``σ_x |∇Θ|`` (a point's noisy coordinates place its sample);
@@ -66,27 +70,18 @@ import numpy as np
 from ..gradient import material_rate, surface_gradient
 from ..numerics.temporal import TemporalInterpolant, local_rate_weights, temporal_window
 from ..numerics.threads import parallel_map
-from ..strain import strain
-from ..surface import fit_surface
+from ..strain import principal_2d, strain_components
 from ..vocabulary import Status
 from .footprint_fields import footprint_probes
 from .gradient_geometry import position_std
+from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
 from .regression_bias import BIAS_NEIGHBOURS, local_bias, noise_scale, reference_spacing, scaled_probes
+from .strain_uncertainty import NOISE_FLOOR_STDS, below_noise_floor, strain_std
 
 __all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
 
 log = logging.getLogger(__name__)
 
-#: random probes of the operators propagated by Monte Carlo
-PROBES = 16
-#: probes run through the spatial regressions together (their memory is PROBE_GROUP x times x points)
-PROBE_GROUP = 4
-#: the first BIAS_PROBES probes also run through the exact interpolation, for the noise variance of a
-#: regression's difference to it (the costliest operator; the variance is averaged locally anyway)
-BIAS_PROBES = 4
-#: the noise probes are evaluated at at most this many times spread over the record; each other time takes
-#: the nearest probed time's standard deviation (the noise follows the slowly changing geometry)
-PROBE_TIMES = 32
 #: points closer than this to the mask edge (px) have interpolation bias rather than noise
 EDGE_PX = 2.0
 
@@ -116,11 +111,6 @@ class Window(NamedTuple):
     theta_paper: np.ndarray | None = None
     pixel: np.ndarray | None = None
     noise_factor: np.ndarray | None = None
-
-
-def _probe_std(samples, base):
-    """Standard deviation over the probe axis 0 of ``samples - base`` (zero-mean by construction)."""
-    return np.sqrt(np.mean(np.square(samples - base), axis=0))
 
 
 def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None, spatial=None,
@@ -187,7 +177,7 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
     s_x = float(a.get("dic_noise_mm", np.nan))
     temp_std, grad_std = position_std(points, sf, geo, J, g_pix, temp_std, grad_std, s_x, p, spatial, rng, ops)
-    strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
+    strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops, notes)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
     for arr in (temp_std, rate_std, grad_std):
@@ -304,23 +294,23 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
 def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias, draw=None):
     """Noise probes through the spatial (and temporal) regression of the temperatures.
 
-    :data:`PROBES` white-noise fields of the point noise ``s_T`` (K) run
-    through the regressions with the smoothing frozen, :data:`PROBE_GROUP` at
+    :data:`~irdic.stages.probes.PROBES` white-noise fields of the point noise ``s_T`` (K) run
+    through the regressions with the smoothing frozen, :data:`~irdic.stages.probes.PROBE_GROUP` at
     a time (one regression call each, so memory does not grow with the
     probes). Returns the mean squares over the probes (T, N): ``v`` (value),
     ``g`` (T, N, 3, gradient), ``r`` (rate, with ``W``); with ``bias``, the
     noise variance of the regression's difference to the exact interpolation
     (``v_var``, ``g_var``; ``rt_var``, ``rs_var``, ``vt_var`` of
     :func:`_space_time_bias`), which :func:`~irdic.stages.regression_bias.local_bias` subtracts.
-    The probes are evaluated at the :data:`PROBE_TIMES` times of
-    :func:`_probe_times` (the regression in time mixes all of them first);
-    every other time takes the nearest one's mean squares (:func:`_spread`).
+    The probes are evaluated at the :data:`~irdic.stages.probes.PROBE_TIMES` times of
+    :func:`~irdic.stages.probes.probe_times` (the regression in time mixes all of them first);
+    every other time takes the nearest one's mean squares (:func:`~irdic.stages.probes.spread`).
     ``draw(rng, b)``: ``b`` unit-variance noise fields (b, T_w, N) with the
     input's spatial correlation instead of white ones.
     """
     T, N = visible.shape
     W0, W1, I0, I1 = W if W is not None else (None,) * 4
-    sub, near = _probe_times(T)
+    sub, near = probe_times(T)
     acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var", "res"), 0.0)
     n_bias = 0  # probes through the exact interpolation (whole groups, the first BIAS_PROBES or more)
     # each of the first BIAS_PROBES probes' squared differences: the bias estimates' own scatter on noise
@@ -376,33 +366,12 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             n_bias += b
     if n_bias:
         acc["g_var"] = acc["g_var"] / n_bias
-    out = {k: _spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
-    return {**out, **{f"{k}_null": np.array([_spread(a, near) for a in n]) if n else None for k, n in nulls.items()}}
+    out = {k: spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
+    return {**out, **{f"{k}_null": np.array([spread(a, near) for a in n]) if n else None for k, n in nulls.items()}}
 
 
 def _values(points, name):
     return points[name].values.astype(float) if name in points else None
-
-
-def _probe_times(T):
-    """The probed times of ``T`` (at most :data:`PROBE_TIMES`, spread evenly, first and last included; all
-    when there are no more) and, for each of the ``T`` times, the position of the nearest probed one."""
-    sub = np.unique(np.linspace(0, T - 1, min(T, PROBE_TIMES)).round().astype(int))
-    return sub, np.searchsorted((sub[1:] + sub[:-1]) / 2, np.arange(T))
-
-
-def _spread(a, near):
-    """Per-time values ``a`` (S, N, ...) at the probed times -> (T, N, ...): the nearest probed time's; a
-    point without a value there (hidden then) takes its median over the probed times."""
-    out = a[near]
-    if a.shape[0] == near.size:  # every time probed
-        return out
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # points never seen: all NaN
-        med = np.nanmedian(a, axis=0)
-    return np.where(np.isfinite(out), out, med)
 
 
 def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std, neighbourhoods=None):
@@ -429,120 +398,19 @@ def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std, neighbourhood
     return np.hypot(temp_std, b_v), rate_std, biased
 
 
-def _strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None):
-    """Standard uncertainty of the max principal strain: DIC noise probes through the surface fit
-    (smoothing frozen) and the strain; NaN when the DIC noise is unknown or zero."""
-    T, N = sf.x.shape[:2]
-    if not (np.isfinite(s_x) and s_x > 0):
-        return np.full((T, N), np.nan)
-    x = points["x"].transpose("time", "point", "component").values.astype(float)
-    base = strain(sf.tangents, sf.ref_tangents, tensors=False).e_max
-    kw = dict(c=p["c_space"], R0=p["R0_space"], c_t=p["c_time"], R0_t=p["R0_time"], solver=p["solver"],
-              smoothing=sf.info.get("smoothing", None), smoothing_t=sf.info.get("smoothing_t", None))
-    kw = {k: (None if k.startswith("smoothing") and v is not None and v <= 1.0 else v) for k, v in kw.items()}
-    if kw["smoothing"] is not None and sf.info.get("smoothing_shape") not in (None, sf.info["smoothing"]):
-        # the fit's own pair of spacings (shape, motion), so that the probes regress as the fit did
-        kw["smoothing"] = (sf.info["smoothing_shape"], sf.info["smoothing"])
-    # every probe fits the same points: the spatial factorisations are shared (with the fields stage's own)
-    kw["operators"] = {} if ops is None else ops
-    # a surface regression's bias: against the exact interpolation of the same coordinates (see local_bias)
-    regressed = kw["smoothing"] is not None or kw["smoothing_t"] is not None
-    kws = [kw, {**kw, "smoothing": reference_spacing(kw["smoothing"]), "smoothing_t": None}] if regressed else [kw]
-    # the probes are evaluated at the probed times only (every other time takes the nearest one's)
-    sub, near = _probe_times(T)
-    probe = _StrainProbe(x, sf, t, sub, window)
-    samples, bases = [[] for _ in kws], [base[sub]]
-    for start in range(0, PROBES, PROBE_GROUP):
-        draws = [probe.draw(rng, s_x) for _ in range(min(PROBE_GROUP, PROBES - start))]
-        samples[0] += probe.e_max(kws[0], draws)
-        if regressed and start < BIAS_PROBES:
-            # the exact interpolation's own result (no noise) with its first probes: one evaluation pass
-            out = probe.e_max(kws[1], ([] if len(bases) > 1 else [probe.zero]) + draws)
-            if len(bases) == 1:
-                bases.append(out.pop(0))
-            samples[1] += out
-    base = bases[0]
-    std = _probe_std(np.array(samples[0]), base)
-    if regressed:
-        k = len(samples[1])
-        null = np.square((np.array(samples[0][:k]) - base) - (np.array(samples[1]) - bases[1]))
-        std = np.hypot(std, local_bias(base - bases[1], null.mean(axis=0), sf.psi,
-                                       None if trusted is None else trusted[sub], null, kw["smoothing"]))
-    std = _spread(std, near)
-    # the strain is zero by definition at the reference stage (stage 0 of the record): no uncertainty there,
-    # whatever rounding the probes leave
-    t_ref = t[0] if window is None else window.t_ref[0]
-    std[np.asarray(t) == t_ref] = 0.0
+def _strain_std(points, sf, t, p, s_x, rng, window, trusted, ops, notes):
+    """The max principal strain's std (:func:`~irdic.stages.strain_uncertainty.strain_std`); appends to ``notes``
+    where the strain is below its noise floor somewhere."""
+    std = strain_std(points, sf, t, p, s_x, rng, window, trusted, ops)
+    e_max = principal_2d(strain_components(sf.tangents, sf.ref_tangents))[0]
+    if below_noise_floor(e_max, std).any():
+        # no count: a time chunk's note becomes the gathered store's
+        notes.append(f"max_principal_strain: below its noise floor where |max_principal_strain| < "
+                     f"{NOISE_FLOOR_STDS:g} max_principal_strain_std (a static or unloaded region, the first "
+                     "stages, an equi-biaxial state): there the value is mostly noise, biased upwards as the max "
+                     "principal value of a noisy tensor, and the std is its RMS error about the true strain with "
+                     "that bias")
     return std
-
-
-class _StrainProbe:
-    """The max principal strain at the probed times ``t[sub]`` of the surface fit with DIC noise added.
-
-    Without a regression in time (the usual case) the surface at a stage's
-    own time is that stage's spatial fit (:func:`irdic.surface.fit_stages`):
-    only the probed stages and the reference stage are fitted, all probes of
-    a group in one evaluation. With one, each probe refits the whole record
-    (or the chunk's window, :func:`_window_probe`) as the fields stage does.
-    """
-
-    def __init__(self, x, sf, t, sub, window):
-        self.x, self.sf, self.t, self.sub, self.window = x, sf, t, sub, window
-        src_t = t if window is None else window.t
-        self.idx = np.searchsorted(src_t, t[sub])
-        self.shape = x.shape if window is None else window.x.shape
-        self.stagewise = sf.info.get("smoothing_t") in (None, 1.0) and bool(np.asarray(sf.stage_used)[self.idx].all())
-        self.nodes = np.flatnonzero(np.isfinite(sf.x).all(axis=-1).any(axis=0))
-        self.zero = (0.0, None if window is None else 0.0)
-
-    def draw(self, rng, s_x):
-        """One probe's coordinate noise: (window or record, reference stages), kept at the stages it needs."""
-        dx = rng.standard_normal(self.shape) * s_x
-        dref = rng.standard_normal(self.window.x_ref.shape) * s_x if self.window is not None else None
-        return (dx[self.idx], dref) if self.stagewise else (dx, dref)
-
-    def e_max(self, kw, draws):
-        """Max principal strain (S, N) at the probed times of each probe of ``draws``."""
-        from ..surface import fit_stages
-
-        sf, w = self.sf, self.window
-        if not self.stagewise:
-            out = []
-            for dx, dref in draws:
-                pf = (fit_surface(self.x + dx, self.t, psi=sf.psi, t_eval=self.t[self.sub], **kw) if w is None
-                      else _window_probe(w, self.t[self.sub], sf.psi, kw, dx, dref))
-                out.append(strain(pf.tangents, pf.ref_tangents, tensors=False).e_max)
-            return out
-        stages, shapes = [], []
-        for dx, dref in draws:
-            if w is None:  # the probed times include stage 0, the reference and the shape stage
-                st = self.x[self.sub] + dx
-                x0 = st[0]
-            else:
-                x0 = w.x_ref[0] + (dref[0] if np.ndim(dref) else 0.0)
-                st = np.concatenate([x0[None], w.x[self.idx] + dx])
-            stages.append(st)
-            shapes.append(np.broadcast_to(x0, st.shape))
-        kws = {k: v for k, v in kw.items() if k not in ("c_t", "R0_t", "smoothing_t")}
-        _, tang = fit_stages(np.concatenate(stages), sf.psi, shape_stage=np.concatenate(shapes), nodes=self.nodes,
-                             **kws)
-        tang = tang.reshape((len(draws), -1) + tang.shape[1:])
-        first = 0 if w is None else 1
-        return [strain(g[first:], g[0], tensors=False).e_max for g in tang]
-
-
-def _window_probe(window, t, psi, kw, dx, dref):
-    """A surface fit of a chunk as the fields stage fits it, with the coordinate noise ``dx`` (window) and
-    ``dref`` (the record's first two stages) added: over its window, at its times ``t``, with the strain's
-    reference from the record's first two stages."""
-    dref = np.zeros(window.x_ref.shape) + (0.0 if dref is None else dref)
-    pf = fit_surface(window.x + dx, window.t, psi, t_eval=t, record_times=window.record,
-                     shape_stage=window.x_ref[0] + dref[0], **kw)
-    if window.t[0] > window.t_ref[0]:
-        ref = fit_surface(window.x_ref + dref, window.t_ref, psi,
-                          t_eval=window.t_ref[:1], **{**kw, "smoothing_t": None})
-        pf = pf._replace(ref_x=ref.ref_x, ref_tangents=ref.ref_tangents)
-    return pf
 
 
 def _bias_flags(points, sf, visible, q, sig_n, notes, ends=(True, True)):

@@ -172,9 +172,12 @@ def test_uncertainty_coverage_monte_carlo():
             # quartic in time also sees the interpolant's (5 stages; seeds 1, 2: 0.79 / 0.98, 0.75 / 0.97)
             assert 0.60 <= one <= (0.80 if v == "temperature_rate" else 0.76) and 0.89 <= two <= 0.98, (v, one, two)
             continue
-        # the strain's std is conservative (0.90 within 1 std): its bias term is estimated against an exact
-        # interpolation far noisier than the regression, and that estimate's scatter adds to it
-        top = 0.93 if v == "max_principal_strain" else 0.82
+        # the strain's std is conservative (0.92 within 1 std): its bias term is estimated against an exact
+        # interpolation far noisier than the regression, and that estimate's scatter adds to it; since the std
+        # holds the upward noise bias of this static shell's zero tensor and its bias term the norm of the
+        # tensor's difference (the deviatoric direction is noise there), 0.94 / 0.98
+        # (irdic.stages.strain_uncertainty; on the demo barrel the same change brings 0.57 / 0.85 up to 0.61 / 0.90)
+        top = 0.95 if v == "max_principal_strain" else 0.82
         assert 0.55 <= one <= top and 0.86 <= two <= 0.99, (v, one, two)
 
 
@@ -264,6 +267,19 @@ def test_uncertainty_coverage_demo_halfshell_bias_estimates():
         assert 0.60 <= within[v][0] <= 0.76 and 0.90 <= within[v][1] <= 0.98, (v, within[v])
     assert 0.60 <= within["temperature_gradient"][0] <= 0.76 and within["temperature_gradient"][1] >= 0.86, within
     assert 0.60 <= within["max_principal_strain"][0] <= 0.90, within
+
+
+def test_static_shell_strain_std_holds_the_noise_bias_of_a_zero_tensor():
+    """Issue 15: a static specimen's true strain tensor is 0, and the max principal value of its noisy estimate
+    is biased upwards; the probes' spread of that value about the noisy estimate is not its error's RMS. Demo
+    half-shell (true strain 0), seed 5: 0.67 / 0.91 within 1 / 2 std with that spread, 0.71 / 0.95 with the RMS
+    error at the tensor estimated from the probes' covariance (:mod:`irdic.stages.strain_uncertainty`); the
+    store says the strain is below its noise floor."""
+    pts, truth, f, m = _noisy("halfshell", "demo", dic_noise=0.003, seed=5)
+    mm = m & ~f.max_principal_strain_bias_dominated.values
+    z = np.abs(f.max_principal_strain.values - truth.strain_max.values)[mm] / f.max_principal_strain_std.values[mm]
+    assert 0.60 <= np.mean(z <= 1) <= 0.76 and 0.92 <= np.mean(z <= 2) <= 0.98, (np.mean(z <= 1), np.mean(z <= 2))
+    assert "max_principal_strain: below its noise floor" in f.attrs["uncertainty_notes"]
 
 
 def test_footprint_unused_where_auto_interpolates():
