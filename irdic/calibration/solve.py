@@ -30,7 +30,7 @@ from ..camera import refine as refine_camera
 from ..camera.dlt import degeneracy
 from ..errors import CalibrationError, ConfigError, IrdicWarning
 from .bias import perspective_bias, plane_normals
-from .correspondence import check_ids, match_seeds
+from .correspondence import check_ids, judge_pending, match_seeds_deferred
 from .detection import centre_weights, detect_markers
 from .guided import estimate_radius, find_missing
 from .image import image_array
@@ -287,14 +287,17 @@ def _match(target_image, det: xr.Dataset, table: MarkerTable, seeds: Mapping | N
     detection) index pairs, from seeds or automatically, and which way."""
     X = table.x[table.measured]
     D = np.column_stack([det["u"].values, det["v"].values])
+    pending = None
     if seeds:
-        mi, di, model = match_seeds(D, X, table.ids[table.measured], seeds)
+        mi, di, model, pending = match_seeds_deferred(D, X, table.ids[table.measured], seeds)
         how = "seeds"
     else:
         mi, di, model = match_lattice(D, X)
         how = "automatic"
     # faint markers on a steep wing escape the detector: the first camera says where to look
     det, mi, di, _ = find_missing(target_image, det, X, mi, di, model, radius_mm=radius_mm, **limits)
+    # a seed that the camera of the other seeds misses is judged by that of every matched marker
+    judge_pending(pending, X, np.column_stack([det["u"].values, det["v"].values]), mi, di)
     log.info("correspondence (%s): %d of %d markers matched to %d detections", how, len(mi), len(X),
              det.sizes["detection"])
     return det, mi, di, how
