@@ -317,6 +317,46 @@ def test_seed_on_the_wrong_marker_is_named(oblique):
         calibrate(oblique.image, oblique.markers, seeds=seeds)
 
 
+@pytest.fixture(scope="module")
+def faint_oblique_19():
+    """Noise field 19 of the calibration matrix at the oblique pose, contrast/noise 3, 4 K gradient: the steep
+    wing's markers are not detected before the guided search, so its four seeds are judged as clicked."""
+    tg = open_book_target(lab_camera(**OBLIQUE), noise=0.1, contrast=0.3, gradient_k=4.0, seed=19)
+    return tg, clicked_seeds(tg, 8, sigma_px=2.0, seed=19)
+
+
+def test_honest_seed_far_from_the_camera_of_the_others_is_accepted(faint_oblique_19):
+    """Seed 124, clicked 2.9 px from its undetected marker, is 6.6 px off the camera of the other seven (which
+    extrapolates poorly from seeds close together on the 74 deg wing): it was refused. The camera of the markers
+    matched from the other seven puts it 2.9 px off."""
+    tg, seeds = faint_oblique_19
+    i = int(np.flatnonzero(tg.markers.marker.values == 124)[0])
+    assert 2.5 < np.hypot(*(np.asarray(seeds[124]) - tg.truth.marker_pixel.values[i])) < 3.5
+    with pytest.warns(IrdicWarning):  # the faintest markers are outliers of the fit, and reported
+        cal = calibrate(tg.image, tg.markers, seeds=seeds)
+    assert cal.attrs["n_used"] >= 80
+    x = specimen_points()
+    assert np.sqrt(np.mean(np.sum((load_camera(cal).project(x) - tg.camera.project(x)) ** 2, axis=1))) < 0.12
+
+
+@pytest.mark.parametrize("wrong", [124, 10])
+def test_seed_on_the_wrong_marker_of_the_steep_wing_is_named(faint_oblique_19, wrong):
+    """A steep-wing seed moved onto its neighbour (markers ~10 px apart there, its own undetected): still refused
+    by the camera of the matched markers, with its distance and the tolerance in px."""
+    tg, seeds = faint_oblique_19
+    ids, pix = tg.markers.marker.values, tg.truth.marker_pixel.values
+    i = int(np.flatnonzero(ids == wrong)[0])
+    assert wing_of(tg)[i] == 1
+    d = np.hypot(*(pix - pix[i]).T)
+    d[i] = np.inf
+    bad = dict(seeds)
+    bad[wrong] = (pix[int(np.argmin(d))] + np.asarray(seeds[wrong]) - pix[i]).tolist()
+    with pytest.raises(ConfigError, match=rf"7 of the 8 seeds fit one camera within 6.0 px .* the worst is seed "
+                                          rf"{wrong} at .* \((9|1\d)\.\d px off\), judged by the camera of the "
+                                          r"8\d markers matched with the other seeds"):
+        calibrate(tg.image, tg.markers, seeds=bad)
+
+
 def test_foreshortened_markers_are_centred(oblique):
     """Markers seen 74 deg from the wing normal: accepted as blobs and centred like the others."""
     from irdic.camera import CameraModel
