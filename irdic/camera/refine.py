@@ -44,9 +44,8 @@ def refine(model: CameraModel, x, uv, *, distortion: str = "none", weights=None,
     weights : array_like, shape (N,), optional
         Weight of each point's residual (``1 / sigma``).
     point_covariances : array_like, shape (N, 2, 2), optional
-        Covariance of each measured position, px^2 (up to a common factor);
-        the fit does not change, its covariance becomes that of the fit's
-        estimator under these (see :func:`_covariance`).
+        Covariance of each measured position, px^2 (up to a common factor): the
+        fit stays, its covariance is the estimator's under these (:func:`_covariance`).
     max_nfev : int
         Limit of function evaluations (per free parameter scale, see
         :func:`scipy.optimize.least_squares`).

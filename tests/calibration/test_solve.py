@@ -120,6 +120,14 @@ def test_dataset_contract_and_store_round_trip(lab, lab_cal, tmp_path):
     assert back.status.values.tolist() == cal.status.values.tolist()
     text = summarize(back)
     assert "RMS" in text and "IFOV 0.57" in text and "84 of 84 markers used" in text
+    cc = back.centre_covariance
+    assert cc.dims == ("marker", "axis", "axis_2") and cc.attrs["units"] == "px^2"
+    np.testing.assert_allclose(cc.values, np.swapaxes(cc.values, 1, 2))
+    assert (np.linalg.eigvalsh(cc.values) > 0).all()
+    # a store written before the centres' covariances were kept still opens and gives the same camera
+    older = write_dataset(cal.drop_vars(["centre_covariance", "axis_2"]), tmp_path / "older.zarr", stage="calibrate")
+    np.testing.assert_allclose(load_camera(open_store(older)).project(x), load_camera(cal).project(x), atol=1e-9)
+    assert load_camera(open_store(older)).projection_uncertainty(x).shape == (len(x),)
 
 
 def test_flags_outlier_missing_and_unassigned(lab):
