@@ -147,12 +147,15 @@ def propagate(model: CameraModel, marker_x, detected_uv, *, gate_px: float | Non
 
 def grow_from_seeds(model: CameraModel, marker_x, detected_uv, seed_index, *, gate_px: float | None = None,
                     steps=(1.25, 2.5, 4.0, 6.0)) -> tuple[np.ndarray, np.ndarray, CameraModel]:
-    """:func:`propagate` from the camera of a few seeds, grown outwards from them.
+    """:func:`propagate` from the camera of a few seeds, grown outwards from them and at once.
 
     Before the assignment over all markers, the markers within ``steps`` x
     the marker spacing (mm) of a seed marker are assigned, ring by ring,
     each ring with the DLT of the one before (a ring whose DLT cannot be
     fitted, e.g. all on one wing, keeps the camera it was assigned with).
+    :func:`propagate` straight from the seeds' camera is the other
+    hypothesis; the one whose pairs fit their DLT with the smaller RMS
+    residual is returned (the same pairs where both are right).
 
     Parameters
     ----------
@@ -184,11 +187,16 @@ def grow_from_seeds(model: CameraModel, marker_x, detected_uv, seed_index, *, ga
     markers slipped by one marker there (12 wrong pairs) and the DLT of the
     wrong pairs settled on a camera 4.2 px from the truth (calibration
     benchmark, noise field 25, contrast/noise 6). Grown ring by ring, each
-    prediction is an interpolation of markers already matched around it.
+    prediction is an interpolation of markers already matched around it
+    (RMS residual 0.10 px against 1.79 px at once). Growth from a seed on
+    the wrong marker spreads its error instead, which the assignment at once
+    can outvote (noise field 21, contrast/noise 3: 16 wrong pairs grown,
+    RMS 1.01 px, against none at once, 0.21 px).
     """
     X = np.asarray(marker_x, dtype=np.float64)
     D = np.asarray(detected_uv, dtype=np.float64)
     seed_x = X[np.asarray(seed_index, dtype=int)]
+    start = model
     if len(X) >= 2:
         near, _ = cKDTree(seed_x).query(X)
         spacing = float(np.median(cKDTree(X).query(X, k=2)[0][:, 1]))
@@ -201,7 +209,13 @@ def grow_from_seeds(model: CameraModel, marker_x, detected_uv, seed_index, *, ga
                 model = CameraModel(dlt(X[mi], D[di]))
             except CalibrationError:
                 continue
-    return propagate(model, X, D, gate_px=gate_px)
+    grown = propagate(model, X, D, gate_px=gate_px)
+    try:
+        at_once = propagate(start, X, D, gate_px=gate_px)
+    except CalibrationError:
+        return grown
+    # a slip by one marker leaves residuals of a fraction of the spacing: keep the better-fitting growth
+    return min((grown, at_once), key=lambda g: reprojection_rms(g[2], X[g[0]], D[g[1]]))
 
 
 def _seed_table(seeds: Mapping, marker_ids) -> tuple[np.ndarray, np.ndarray, list]:

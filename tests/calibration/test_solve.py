@@ -365,15 +365,18 @@ def test_seed_on_the_wrong_marker_of_the_steep_wing_is_named(faint_oblique_19, w
         calibrate(tg.image, tg.markers, seeds=bad)
 
 
-def test_correspondence_grown_from_the_seeds_does_not_slip_on_the_steep_wing():
-    """Noise field 25 at the oblique pose, contrast/noise 6: the seeds' camera predicted the steep wing's markers far
-    from the seeds more than half a spacing off (~10 px apart there), the assignment slipped by one marker (12 wrong
-    pairs) and the calibration ended 4.2 px from the true camera, 19 markers called outliers, without an error."""
-    tg = open_book_target(lab_camera(**OBLIQUE), noise=0.1, contrast=0.6, seed=25)
-    cal = calibrate(tg.image, tg.markers, seeds=clicked_seeds(tg, 8, sigma_px=2.0, seed=25))
-    assert cal.attrs["n_used"] >= 82 and cal.attrs["n_outliers"] == 0
+@pytest.mark.parametrize("contrast, field, goal", [(0.6, 25, 0.06), (0.3, 21, 0.12)])
+def test_correspondence_from_the_seeds_does_not_slip_on_the_steep_wing(contrast, field, goal):
+    """Oblique pose. Noise field 25, contrast/noise 6: the seeds' camera predicted the steep wing's markers far from
+    the seeds more than half a spacing off (~10 px apart there), the assignment slipped by one marker (12 wrong
+    pairs) and the calibration ended 4.2 px from the true camera, 19 markers called outliers, without an error;
+    grown ring by ring from the seeds it does not. Field 21, contrast/noise 3: a seed snapped to the neighbour of
+    its undetected marker, which growth from the seeds spreads and the assignment at once outvotes."""
+    tg = open_book_target(lab_camera(**OBLIQUE), noise=0.1, contrast=contrast, seed=field)
+    cal = calibrate(tg.image, tg.markers, seeds=clicked_seeds(tg, 8, sigma_px=2.0, seed=field))
+    assert cal.attrs["n_used"] >= 82 and cal.attrs["n_outliers"] <= 1
     x = specimen_points()
-    assert np.sqrt(np.mean(np.sum((load_camera(cal).project(x) - tg.camera.project(x)) ** 2, axis=1))) < 0.06
+    assert np.sqrt(np.mean(np.sum((load_camera(cal).project(x) - tg.camera.project(x)) ** 2, axis=1))) < goal
 
 
 def test_foreshortened_markers_are_centred(oblique):
