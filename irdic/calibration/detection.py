@@ -37,7 +37,7 @@ from skimage.morphology import convex_hull_image
 from ..errors import CalibrationError, ConfigError, IrdicWarning
 from .image import check_image, image_array, noise_sigma, saturation_error
 
-__all__ = ["detect_markers", "centre_weights", "DETECTION_FIELDS", "CENTRE_FLOOR_PX"]
+__all__ = ["detect_markers", "centre_weights", "centre_covariances", "DETECTION_FIELDS", "CENTRE_FLOOR_PX"]
 
 log = logging.getLogger(__name__)
 
@@ -208,6 +208,8 @@ def _measure_at(img, sign, vc, uc, r0, a0, others_mask, noise, smooth=0.0, inval
         "semi_minor_px": shape["semi_minor_px"], "orientation_rad": float(np.arctan2(evecs[1, 1], evecs[0, 1])),
         "eccentricity": shape["eccentricity"], "solidity": shape["solidity"], "contrast_k": contrast,
         "area_px": shape["area_px"], "snr": snr, "sigma_px": float(sig),
+        # the windowed centroid's uncertainty is known as a total only: split evenly between the axes
+        "cov_uu_px2": float(sig) ** 2 / 2, "cov_vv_px2": float(sig) ** 2 / 2, "cov_uv_px2": 0.0,
     }, None
 
 
@@ -290,7 +292,10 @@ DETECTION_FIELDS = {
     "contrast_k": ("K", "marker contrast against the local background plane (absolute)"),
     "area_px": ("px^2", "area above half contrast"),
     "snr": ("1", "contrast / pixel noise"),
-    "sigma_px": ("px", "standard uncertainty of the centre from pixel noise"),
+    "sigma_px": ("px", "standard uncertainty of the centre from pixel noise (root of the covariance's trace)"),
+    "cov_uu_px2": ("px^2", "variance of the centre's u from pixel noise"),
+    "cov_vv_px2": ("px^2", "variance of the centre's v from pixel noise"),
+    "cov_uv_px2": ("px^2", "covariance of the centre's u and v from pixel noise"),
 }
 
 
@@ -524,3 +529,29 @@ def centre_weights(det: xr.Dataset) -> np.ndarray | None:
     if not (np.isfinite(sig).all() and (sig > 0).all()):
         return None
     return 1.0 / np.hypot(sig, CENTRE_FLOOR_PX)
+
+
+def centre_covariances(det: xr.Dataset) -> np.ndarray | None:
+    """Covariance (D, 2, 2) px^2 of each detection's centre, with the floor :data:`CENTRE_FLOOR_PX`.
+
+    None unless every detection carries finite ``cov_uu_px2``,
+    ``cov_vv_px2`` and ``cov_uv_px2`` (detections from elsewhere, or
+    stored before these were measured, may not).
+
+    Notes
+    -----
+    The floor's variance is split evenly between the axes, so that the
+    trace is ``sigma_px^2 + CENTRE_FLOOR_PX^2``, the variance behind
+    :func:`centre_weights`. A thin marker's covariance is far from
+    isotropic (on a wing seen 74 deg from its normal the centre is ~2 x less
+    precise across the ellipse than along it), which the weights, one number
+    per marker, leave out; the camera's covariance takes it in.
+    """
+    keys = ("cov_uu_px2", "cov_vv_px2", "cov_uv_px2")
+    if not all(k in det for k in keys):
+        return None
+    uu, vv, uv = (np.asarray(det[k].values, dtype=np.float64) for k in keys)
+    cov = np.stack([np.stack([uu, uv], -1), np.stack([uv, vv], -1)], -2)
+    if not (np.isfinite(cov).all() and (uu > 0).all() and (vv > 0).all()):
+        return None
+    return cov + np.eye(2) * CENTRE_FLOOR_PX**2 / 2

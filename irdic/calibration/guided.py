@@ -567,4 +567,5 @@ def _row(pos, a, b, vec, contrast, noise, cov) -> dict:
             "semi_minor_px": float(b), "orientation_rad": float(np.arctan2(vec[1, 1], vec[0, 1])),
             "eccentricity": float(np.sqrt(max(0.0, 1.0 - (b / a) ** 2))), "solidity": 1.0,
             "contrast_k": float(contrast), "area_px": float(np.pi * a * b), "snr": float(contrast / noise),
-            "sigma_px": float(np.sqrt(max(cov[1, 1] + cov[2, 2], 0.0)))}
+            "sigma_px": float(np.sqrt(max(cov[1, 1] + cov[2, 2], 0.0))), "cov_uu_px2": float(cov[1, 1]),
+            "cov_vv_px2": float(cov[2, 2]), "cov_uv_px2": float(cov[1, 2])}

@@ -30,8 +30,8 @@ from ..camera import refine as refine_camera
 from ..camera.dlt import degeneracy
 from ..errors import CalibrationError, ConfigError, IrdicWarning
 from .bias import perspective_bias, plane_normals
-from .correspondence import check_ids, match_seeds
-from .detection import centre_weights, detect_markers
+from .correspondence import check_ids, judge_pending, match_seeds_deferred
+from .detection import centre_covariances, centre_weights, detect_markers
 from .guided import estimate_radius, find_missing
 from .image import image_array
 from .lattice import match_lattice
@@ -183,8 +183,12 @@ def _sensor_size(target_image) -> tuple[int, int]:
     return int(w), int(h)
 
 
-def _fit(x, uv, opts: FitOptions, start: CameraModel | None = None, weights: np.ndarray | None = None):
+def _fit(x, uv, opts: FitOptions, start: CameraModel | None = None, weights: np.ndarray | None = None,
+         cov: np.ndarray | None = None):
     """DLT (and refinement) of the pairs ``x`` (n, 3) mm, ``uv`` (n, 2) px, each weighted by ``weights`` (1 / px).
+
+    ``cov`` (n, 2, 2) px^2, the centres' covariances, shapes the refined
+    camera's covariance (:func:`irdic.camera.refine`).
 
     ``info["sigma_px"]`` is the residual standard deviation per coordinate
     in px also with weights (the weighted fit's own is relative to them).
@@ -193,7 +197,7 @@ def _fit(x, uv, opts: FitOptions, start: CameraModel | None = None, weights: np.
     dlt_rms = info["rms_px"]
     if opts.refine:
         model, info = refine_camera(start if start is not None else model, x, uv, distortion=opts.distortion,
-                                    weights=weights)
+                                    weights=weights, point_covariances=cov)
     info["dlt_rms_px"] = dlt_rms
     if weights is not None:
         dof = max(2 * len(x) - len(info.get("free", range(11))), 1)
@@ -287,14 +291,17 @@ def _match(target_image, det: xr.Dataset, table: MarkerTable, seeds: Mapping | N
     detection) index pairs, from seeds or automatically, and which way."""
     X = table.x[table.measured]
     D = np.column_stack([det["u"].values, det["v"].values])
+    pending = None
     if seeds:
-        mi, di, model = match_seeds(D, X, table.ids[table.measured], seeds)
+        mi, di, model, pending = match_seeds_deferred(D, X, table.ids[table.measured], seeds)
         how = "seeds"
     else:
         mi, di, model = match_lattice(D, X)
         how = "automatic"
     # faint markers on a steep wing escape the detector: the first camera says where to look
     det, mi, di, _ = find_missing(target_image, det, X, mi, di, model, radius_mm=radius_mm, **limits)
+    # a seed that the camera of the other seeds misses is judged by that of every matched marker
+    judge_pending(pending, X, np.column_stack([det["u"].values, det["v"].values]), mi, di)
     log.info("correspondence (%s): %d of %d markers matched to %d detections", how, len(mi), len(X),
              det.sizes["detection"])
     return det, mi, di, how
@@ -313,14 +320,15 @@ def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np
     outliers: list[int] = []  # indices into X
     limit = opts.max_outliers if opts.max_outliers is not None else max(1, len(mi) // 4)
     loo = np.full(len(X), np.nan)
-    wdet = centre_weights(det)
+    wdet, cdet = centre_weights(det), centre_covariances(det)
     for _ in range(limit + 1):
         use = np.array([m for m in mi if m not in outliers])
         duse = np.array([d for m, d in zip(mi, di) if m not in outliers])
         w = None if wdet is None else wdet[duse]
+        c = None if cdet is None else cdet[duse]
         if len(use) < 6:
             raise CalibrationError(f"only {len(use)} markers are left after removing outliers; the calibration needs 6")
-        model, info = _fit(X[use], D[duse] - bias[use], opts, weights=w)
+        model, info = _fit(X[use], D[duse] - bias[use], opts, weights=w, cov=c)
         if opts.correct_bias:
             if radius is None:
                 radius = estimate_radius(model, X[use], det, duse)
@@ -328,7 +336,7 @@ def _solve(X: np.ndarray, D: np.ndarray, det: xr.Dataset, mi: np.ndarray, di: np
             # the bias depends on the camera only weakly: two rounds converge
             for _ in range(2):
                 bias = perspective_bias(model, X, normals, radius)
-                model, info = _fit(X[use], D[duse] - bias[use], opts, start=model, weights=w)
+                model, info = _fit(X[use], D[duse] - bias[use], opts, start=model, weights=w, cov=c)
         loo[:] = np.nan
         loo[use] = leave_one_out(X[use], D[duse] - bias[use], method="refine" if opts.refine else "dlt",
                                  distortion=opts.distortion, start=model if opts.refine else None, weights=w)
@@ -398,7 +406,8 @@ def calibration_dataset(table: MarkerTable, det: xr.Dataset, sol: Solution, sens
         reprojected), ``residual_norm``, ``loo_residual``,
         ``projection_uncertainty``, ``status``, ``detection_index``,
         ``marker_radius_px``, ``marker_contrast_k``, ``marker_snr`` (contrast /
-        pixel noise). Detections without a marker: ``unassigned_uv(unassigned,
+        pixel noise), ``centre_covariance(marker, axis, axis_2)`` (px^2, NaN
+        where unknown; stores written before it lack it). Detections without a marker: ``unassigned_uv(unassigned,
         axis)``. Scalars ``rms_px``, ``max_px`` over the used markers.
         Attributes: ``method``, ``settings`` (JSON), ``sensor_width``,
         ``sensor_height``, counts and the IDs of flagged markers.
@@ -417,7 +426,7 @@ def calibration_dataset(table: MarkerTable, det: xr.Dataset, sol: Solution, sens
     snr = _per_marker(det["snr"].values, det_index) if "snr" in det else np.full(n, np.nan)
     unassigned = np.setdiff1d(np.arange(len(D)), sol.detection_index)
     px = {"units": "px"}
-    ds = model.to_dataset().assign_coords(marker=np.asarray(table.ids),
+    ds = model.to_dataset().assign_coords(marker=np.asarray(table.ids), axis_2=["u", "v"],
                                           detection_unassigned=("unassigned", unassigned))
     ds["marker_x"] = (("marker", "component"), table.x, {"units": "mm", "long_name": "marker centre (DIC frame)"})
     ds["detected"] = (("marker", "axis"), detected, {**px, "long_name": "detected marker centre (raw)"})
@@ -440,6 +449,10 @@ def calibration_dataset(table: MarkerTable, det: xr.Dataset, sol: Solution, sens
     ds["marker_contrast_k"] = (("marker",), _per_marker(det["contrast_k"].values, det_index),
                                {"units": "K", "long_name": "detected contrast"})
     ds["marker_snr"] = (("marker",), snr, {"units": "1", "long_name": "detected contrast / pixel noise"})
+    cdet = centre_covariances(det)
+    ds["centre_covariance"] = (("marker", "axis", "axis_2"), np.full((n, 2, 2), np.nan) if cdet is None else
+                               _per_marker(cdet, det_index), {"units": "px^2", "long_name": "covariance of the "
+                                                              "detected centre (pixel noise, floor included)"})
     ds["unassigned_uv"] = (("unassigned", "axis"), D[unassigned].reshape(-1, 2),
                            {**px, "long_name": "detections not assigned to any marker"})
     ds["rms_px"] = ((), float(np.sqrt(np.mean(rnorm[used] ** 2))),

@@ -23,7 +23,7 @@ log = logging.getLogger(__name__)
 DISTORTIONS = {"none": (), "k1": ("k1",), "k1k2": ("k1", "k2")}
 
 
-def refine(model: CameraModel, x, uv, *, distortion: str = "none", weights=None,
+def refine(model: CameraModel, x, uv, *, distortion: str = "none", weights=None, point_covariances=None,
            max_nfev: int = 200) -> tuple[CameraModel, dict]:
     """Minimise the reprojection error by Levenberg-Marquardt from a start model.
 
@@ -43,6 +43,9 @@ def refine(model: CameraModel, x, uv, *, distortion: str = "none", weights=None,
         Which radial distortion coefficients are free ("none": pinhole, k = 0).
     weights : array_like, shape (N,), optional
         Weight of each point's residual (``1 / sigma``).
+    point_covariances : array_like, shape (N, 2, 2), optional
+        Covariance of each measured position, px^2 (up to a common factor): the
+        fit stays, its covariance is the estimator's under these (:func:`_covariance`).
     max_nfev : int
         Limit of function evaluations (per free parameter scale, see
         :func:`scipy.optimize.least_squares`).
@@ -93,7 +96,7 @@ def refine(model: CameraModel, x, uv, *, distortion: str = "none", weights=None,
     R = rotation_from_vector(p[3:6]) @ R0
     if p[0] <= 0:
         raise CalibrationError(f"refinement ended with a negative focal length ({p[0]:.1f} px)")
-    cov, s2 = _covariance(fun, p, free, R, n)
+    cov, s2 = _covariance(fun, p, free, R, n, _point_covariances(point_covariances, n, wr))
     out = _physical_model(p, R, cov, x)
     resid = out.project(x) - uv
     info = residual_info(resid, np.sqrt(s2))
@@ -119,18 +122,54 @@ def _physical_model(p: np.ndarray, R: np.ndarray, cov: np.ndarray, x: np.ndarray
     return out
 
 
-def _covariance(fun, p: np.ndarray, free: np.ndarray, R: np.ndarray, n: int) -> tuple[np.ndarray, float]:
+def _point_covariances(cov, n: int, wr: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(C, w)``: the points' covariances (n, 2, 2) px^2 and weights (n,), checked; None without covariances."""
+    if cov is None:
+        return None
+    c = np.asarray(cov, dtype=np.float64)
+    if c.shape != (n, 2, 2) or not np.isfinite(c).all():
+        raise ConfigError(f"`point_covariances` must be finite with shape ({n}, 2, 2), got {c.shape}")
+    det = c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] * c[:, 1, 0]
+    if not ((c[:, 0, 0] > 0) & (det > 0)).all():
+        raise ConfigError("`point_covariances` must be positive definite (px^2)")
+    return c, (np.ones(n) if wr is None else wr[0::2])
+
+
+def _covariance(fun, p: np.ndarray, free: np.ndarray, R: np.ndarray, n: int,
+                points: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, float]:
     """Covariance (11, 11) over :data:`PHYSICAL_PARAMETERS` at the solution ``p`` and the residual variance.
 
     ``fun(q, R_base, base)`` gives the weighted residuals (2n,) of the free
-    parameters ``q`` around the rotation ``R_base``.
+    parameters ``q`` around the rotation ``R_base``; ``points`` = ``(C, w)``,
+    the measured positions' covariances (n, 2, 2) px^2 and the fit's
+    weights (n,), when known.
 
     Notes
     -----
     The Jacobian is taken with the rotation re-based at the solution, so
     that the covariance of ``(rx, ry, rz)`` is that of a small rotation about
-    the final ``R``: :math:`\\Sigma = s^2 (J^T J)^{-1}` with
-    :math:`s^2 = SSR / (2n - P)`. Rows and columns of fixed parameters are 0.
+    the final ``R``. Without ``points``: :math:`\\Sigma = s^2 (J^T J)^{-1}`
+    with :math:`s^2 = SSR / (2n - P)` (weighted residuals and Jacobian).
+    With them, the covariance of the weighted least-squares estimator
+    when point :math:`i` has covariance :math:`\\lambda C_i` (sandwich):
+
+    .. math::
+
+        \\Sigma = \\lambda A B A, \\quad
+        A = (J^T J)^{-1}, \\quad
+        B = \\sum_i J_i^T w_i^2 C_i J_i, \\quad
+        \\lambda = \\frac{r^T r}{\\sum_i w_i^2 \\operatorname{tr} C_i - \\operatorname{tr}(A B)}
+
+    with :math:`J_i` the point's two weighted rows and :math:`r` the
+    weighted residuals: the denominator is :math:`E[r^T r]` for
+    :math:`\\lambda = 1` (:math:`\\operatorname{tr}((I - H) W C)`,
+    :math:`H = J A J^T`), so the scale comes from the residuals as
+    :math:`s^2` does and the shape of each point's uncertainty from
+    :math:`C_i`. With :math:`C_i \\propto I / w_i^2` the two agree. (Scaling
+    by the whitened :math:`\\sum_i e_i^T C_i^{-1} e_i / (2n - P)` instead
+    over-predicts: the weighted fit leaves residual in the directions
+    where a thin marker's centre is precise.) Rows and columns of fixed
+    parameters are 0.
     """
     pb = p.copy()
     pb[3:6] = 0.0
@@ -145,7 +184,17 @@ def _covariance(fun, p: np.ndarray, free: np.ndarray, R: np.ndarray, n: int) -> 
     dof = max(2 * n - len(free), 1)
     s2 = float(r @ r) / dof
     try:
-        cov_free = s2 * np.linalg.inv(J.T @ J)
+        A = np.linalg.inv(J.T @ J)
+        if points is None:
+            cov_free = s2 * A
+        else:
+            C, w = points
+            Cw = C * (w**2)[:, None, None]
+            Ji = J.reshape(n, 2, len(free))
+            B = np.einsum("nia,nij,njb->ab", Ji, Cw, Ji)
+            # E[r^T r] = tr((I - H) C_w) for the weighted residuals r, H = J A J^T
+            lam = float(r @ r) / max(float(np.trace(Cw, axis1=1, axis2=2).sum() - np.trace(A @ B)), 1e-300)
+            cov_free = lam * A @ B @ A
     except np.linalg.LinAlgError:
         cov_free = np.full((len(free), len(free)), np.nan)
     cov = np.zeros((len(PHYSICAL_PARAMETERS),) * 2)

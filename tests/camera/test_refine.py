@@ -58,3 +58,31 @@ def test_leave_one_out_shows_the_bad_marker():
     assert np.isnan(leave_one_out(x[:6], uv[:6])).all()  # 5 left: no fit possible
 
 
+
+
+def test_covariance_from_anisotropic_point_covariances():
+    """Centres precise in u (0.005 px) and not in v (0.05 px), fitted with one weight per point: the covariance
+    from the points' 2 x 2 covariances matches the spread of the fitted principal point over noise draws; the
+    pooled isotropic residual variance over-predicts it by 30-45 %."""
+    cam = lab_camera()
+    x = cloud(60, seed=4)
+    start = CameraModel(K=cam.K, R=cam.R, C=cam.C)
+    sd = np.array([0.005, 0.05])
+    C = np.broadcast_to(np.diag(sd**2), (60, 2, 2))
+    w = np.full(60, 1 / np.hypot(*sd))
+    rng = np.random.default_rng(5)
+    pp, new, old = [], [], []
+    k = [PHYSICAL_PARAMETERS.index("cx"), PHYSICAL_PARAMETERS.index("cy")]
+    for t in range(200):
+        uv = cam.project(x) + rng.normal(0.0, sd, (60, 2))
+        m, _ = refine(start, x, uv, weights=w, point_covariances=C)
+        pp.append(m.decompose().principal_point)
+        new.append(np.diag(m.covariance)[k])
+        if t % 20 == 0:
+            old.append(np.diag(refine(start, x, uv, weights=w)[0].covariance)[k])
+    var = np.var(np.array(pp), axis=0)  # 200 draws: the variances to +-10 % (1 sigma)
+    assert np.mean(new, axis=0) == pytest.approx(var, rel=0.15)  # 0.99, 1.03
+    ratio = np.mean(old, axis=0) / var
+    assert ratio[0] > 1.3 and ratio[1] > 1.2  # what the isotropic model said (1.44, 1.32)
+    with pytest.raises(ConfigError, match="point_covariances"):
+        refine(start, x, cam.project(x), point_covariances=np.zeros((60, 2, 2)))
