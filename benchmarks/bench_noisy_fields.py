@@ -25,7 +25,7 @@ not the first or last DIC time):
 
 Usage (repository root, one BLAS thread on a shared machine)::
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_noisy_fields.py [--scale tiny|demo] [--seed 3] [--scenes barrel tube]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_noisy_fields.py [--scale tiny|demo] [--seed 3] [--scenes barrel tube] [--ir-noise K] [--dic-noise MM]
 """
 
 from __future__ import annotations
@@ -67,18 +67,18 @@ def realistic_stack(ex, rng) -> xr.DataArray:
                         attrs={"units": "°C"}, name="temperature")
 
 
-def scene(name: str, scale: str, seed: int):
+def scene(name: str, scale: str, seed: int, ir_noise: float = IR_NOISE, dic_noise: float = DIC_NOISE):
     if name == "barrel":
         # R 40 mm; the axis 40 mm behind the origin puts the patch where the R 65 mm shell was
         spec = HalfShell(R_o=40.0, R_i=36.0, axis_z=-40.0)
         # another specimen than the default needs its own crop window: pass the camera explicitly
-        return experiment("halfshell", scale, ir_noise=IR_NOISE, dic_noise=DIC_NOISE, seed=seed, specimen=spec,
+        return experiment("halfshell", scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed, specimen=spec,
                           camera=lab_camera())
-    return experiment("tube", scale, ir_noise=IR_NOISE, dic_noise=DIC_NOISE, seed=seed)
+    return experiment("tube", scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
 
 
-def measure(name: str, scale: str, seed: int) -> dict:
-    ex = scene(name, scale, seed)
+def measure(name: str, scale: str, seed: int, ir_noise: float = IR_NOISE, dic_noise: float = DIC_NOISE) -> dict:
+    ex = scene(name, scale, seed, ir_noise, dic_noise)
     rng = np.random.default_rng([seed, 15])
     ir = xr.Dataset({"temperature": realistic_stack(ex, rng)})
     cam = ex.camera
@@ -132,10 +132,13 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--scenes", nargs="+", default=["barrel", "tube"], choices=("barrel", "tube"),
                     help="the scenes to run (default both)")
+    ap.add_argument("--ir-noise", type=float, default=IR_NOISE, help=f"IR pixel noise, K (default {IR_NOISE})")
+    ap.add_argument("--dic-noise", type=float, default=DIC_NOISE,
+                    help=f"DIC coordinate noise, mm (default {DIC_NOISE})")
     args = ap.parse_args(argv)
     print(f"load average {os.getloadavg()[0]:.1f}; scale {args.scale}, seed {args.seed}; "
-          f"IR {IR_NOISE} K, {DECIMALS} decimals, mixed edge pixels; DIC {DIC_NOISE} mm")
-    res = [measure(n, args.scale, args.seed) for n in args.scenes]
+          f"IR {args.ir_noise} K, {DECIMALS} decimals, mixed edge pixels; DIC {args.dic_noise} mm")
+    res = [measure(n, args.scale, args.seed, args.ir_noise, args.dic_noise) for n in args.scenes]
     for r in res:
         print(f"{r['scene']}: {r['points']} points x {r['dic_times']} DIC times, {r['ir_frames']} IR frames, "
               f"{r['interior']} interior (time, point); estimated noise DIC {r['dic_noise_mm']:.4f} mm, "
