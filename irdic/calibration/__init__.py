@@ -4,17 +4,20 @@
 - :mod:`~irdic.calibration.detection`: marker detection with sub-pixel centres;
 - :mod:`~irdic.calibration.bias`: marker planes and the perspective bias of
   imaged circle centres;
-- :mod:`~irdic.calibration.correspondence`: assignment, seeds, propagation;
+- :mod:`~irdic.calibration.correspondence`: assignment and propagation;
+- :mod:`~irdic.calibration.seeds`: the user's seeds, checked against each other and the
+  calibrated camera;
 - :mod:`~irdic.calibration.lattice`: automatic correspondence for grid targets;
 - :mod:`~irdic.calibration.solve`: the calibration itself, its dataset and the
   stage entry :func:`calibrate_from_files`.
 """
 
 from .bias import perspective_bias
-from .correspondence import check_ids, match_seeds
+from .correspondence import check_ids
 from .detection import detect_markers
 from .image import image_array
 from .lattice import match_lattice
+from .seeds import match_seeds
 from .solve import calibrate, calibrate_from_files, summarize
 
 __all__ = ["calibrate", "calibrate_from_files", "summarize", "detect_markers", "image_array", "match_seeds",

@@ -30,11 +30,12 @@ from ..camera import refine as refine_camera
 from ..camera.dlt import degeneracy
 from ..errors import CalibrationError, ConfigError, IrdicWarning
 from .bias import perspective_bias, plane_normals
-from .correspondence import check_ids, judge_pending, match_seeds_deferred
+from .correspondence import check_ids
 from .detection import centre_covariances, centre_weights, detect_markers
 from .guided import estimate_radius, find_missing
 from .image import image_array
 from .lattice import match_lattice
+from .seeds import judge_pending, match_seeds_deferred, warn_seeds_off
 
 __all__ = ["calibrate", "summarize", "calibrate_from_files", "STATUSES", "MarkerTable", "FitOptions", "Solution",
            "calibration_dataset"]
@@ -277,6 +278,7 @@ def calibrate(target_image, markers, *, seeds: Mapping | None = None, polarity: 
     det, mi, di, how = _match(target_image, det, table, seeds, marker_radius_mm, limits)
     D = np.column_stack([det["u"].values, det["v"].values])
     sol = _solve(table.x[table.measured], D, det, mi, di, how, opts, table.ids[table.measured])
+    warn_seeds_off(sol.model, table.x[table.measured], table.ids[table.measured], seeds, sol.info["rms_px"])
     settings = dict(polarity=det.attrs.get("polarity", polarity), distortion=distortion, refine=refine,
                     correct_bias=correct_bias, marker_radius_mm=marker_radius_mm, **limits,
                     outlier_factor=outlier_factor, outlier_min_px=outlier_min_px,

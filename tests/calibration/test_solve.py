@@ -414,3 +414,34 @@ def test_click_near_an_undetected_marker_is_not_judged_by_its_snapped_neighbour(
     assert cal.attrs["n_used"] >= 60
     x = specimen_points()
     assert np.sqrt(np.mean(np.sum((load_camera(cal).project(x) - tg.camera.project(x)) ** 2, axis=1))) < 0.06
+
+
+def _on_neighbour(tg, seeds, key):
+    """The seeds with seed ``key`` moved onto the nearest other marker (its click offset kept)."""
+    ids, pix = tg.markers.marker.values, tg.truth.marker_pixel.values
+    i = int(np.flatnonzero(ids == key)[0])
+    d = np.hypot(*(pix - pix[i]).T)
+    d[i] = np.inf
+    return {**seeds, key: (pix[int(np.argmin(d))] + np.asarray(seeds[key]) - pix[i]).tolist()}
+
+
+def test_seed_on_a_neighbour_that_the_fit_does_not_rest_on_is_named_by_the_calibrated_camera(faint_oblique_19):
+    """Seed 110 (steep wing, clicked 4.2 px off) moved onto its neighbour 9.9 px away still fits the camera of
+    the other seeds, which extrapolates poorly; the correspondence and the fit of all 84 markers do not rest on
+    it, so the camera is right, and the calibrated camera names the seed (it passed silently before)."""
+    tg, seeds = faint_oblique_19
+    with pytest.warns(IrdicWarning, match=r"seed 110 at \(.*\) is (9|1\d)\.\d px from the projection of its marker "
+                                          r"by the calibrated camera \(RMS 0\.\d\d px over the markers\), more "
+                                          r"than the seed tolerance of 6 px"):
+        cal = calibrate(tg.image, tg.markers, seeds=_on_neighbour(tg, seeds, 110))
+    x = specimen_points()
+    assert np.sqrt(np.mean(np.sum((load_camera(cal).project(x) - tg.camera.project(x)) ** 2, axis=1))) < 0.12
+
+
+def test_a_wrong_seed_that_holds_the_growth_is_suspected_in_the_message(faint_oblique_19):
+    """Seed 13 moved onto its neighbour agrees with the six others on a camera, whose growth stops at 28 of 84
+    markers; their camera blames the honest seed 110. The message says that one of the others may be wrong."""
+    tg, seeds = faint_oblique_19
+    with pytest.raises(ConfigError, match=r"The other seeds matched only \d+ of the 84 markers, so one of them "
+                                          r"may be the wrong one instead"):
+        calibrate(tg.image, tg.markers, seeds=_on_neighbour(tg, seeds, 13))
