@@ -11,7 +11,12 @@ import numpy as np
 from ..errors import CalibrationError
 from ..validation import image_array
 
-__all__ = ["image_array", "noise_sigma", "check_image", "saturation_error", "MAX_INVALID_FRACTION"]
+__all__ = ["image_array", "mean_frame", "noise_sigma", "check_image", "saturation_error", "MAX_INVALID_FRACTION",
+           "MAX_DRIFT_PX"]
+
+#: Largest RMS motion (px) of the target between the frames of a multi-frame
+#: target image: the mean of moving frames blurs the markers.
+MAX_DRIFT_PX = 0.05
 
 #: Largest fraction of NaN (invalid) pixels accepted in a calibration target
 #: image. Markers whose measurement window touches a NaN pixel are left out;
@@ -77,3 +82,70 @@ def saturation_error(clip: dict) -> CalibrationError | None:
         "that covers its temperature"
     )
 
+
+def mean_frame(image, where: str = ""):
+    """The mean of a multi-frame target image (dims ``time``, ``v``, ``u``), checked for motion; other images
+    as they are.
+
+    Averaging ``N`` frames of a still target divides the pixel noise by
+    ``sqrt(N)``: a faint target seen obliquely is calibrated as if its
+    contrast were ``sqrt(N)`` times higher. A target that moves between the
+    frames blurs in their mean.
+
+    Parameters
+    ----------
+    image : xarray.DataArray or array_like
+        The target image; a DataArray with a ``time`` dimension of length > 1
+        is averaged over it (NaN pixels ignored).
+    where : str
+        Prefix of the error message (the file).
+
+    Returns
+    -------
+    xarray.DataArray or array_like
+        ``image`` itself, or the mean frame (dims ``v``, ``u``, the same
+        coordinates, attrs ``frames_averaged``).
+
+    Raises
+    ------
+    CalibrationError
+        The target moved between the frames by more than
+        :data:`MAX_DRIFT_PX` RMS.
+
+    Notes
+    -----
+    A motion of ``δ`` px RMS adds ``|∇I|² δ²`` to the temporal variance
+    ``s²`` of a pixel with the spatial gradient ``∇I`` of the mean frame; a
+    uniform drift of the temperature adds the same to every pixel. ``δ²`` is
+    the slope of the least-squares line of ``s²`` on ``|∇I|²`` over the
+    pixels (the noise's sample mean and variance are independent, so the
+    noise in ``∇I`` does not bias it); the target is refused where the slope
+    exceeds ``MAX_DRIFT_PX²`` by three of its standard errors (a faint
+    target's gradients are small and its slope noisy).
+    """
+    import xarray as xr
+
+    if not (isinstance(image, xr.DataArray) and "time" in image.dims and image.sizes["time"] > 1):
+        return image
+    frames = image.transpose("time", "v", "u")
+    mean = frames.mean("time", skipna=True)
+    v = np.asarray(frames.values, dtype=np.float64)
+    m = np.asarray(mean.values, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        s2 = np.nanvar(v, axis=0, ddof=1)
+        gv, gu = np.gradient(m)
+        g2 = gv ** 2 + gu ** 2
+    ok = np.isfinite(s2) & np.isfinite(g2)
+    if ok.sum() > 100:
+        # the temporal variance regressed on the squared gradient over all pixels: slope δ², with its standard error
+        x, y = g2[ok] - g2[ok].mean(), s2[ok] - s2[ok].mean()
+        sxx = float(x @ x)
+        slope = float(x @ y) / max(sxx, 1e-300)
+        se = float(np.sqrt(np.sum((y - slope * x) ** 2) / (x.size - 2) / max(sxx, 1e-300)))
+        if slope - 3.0 * se > MAX_DRIFT_PX ** 2:
+            raise CalibrationError(
+                f"{where}the target moved between the {v.shape[0]} frames of the target image (~{np.sqrt(slope):.2f} "
+                f"px RMS, more than {MAX_DRIFT_PX:g} px): their mean would blur the markers; give one frame, or "
+                "frames of a still target"
+            )
+    return mean.assign_attrs({**image.attrs, "frames_averaged": int(v.shape[0])})

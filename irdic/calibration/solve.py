@@ -32,7 +32,7 @@ from .correspondence import check_ids, propagate
 from .dataset import STATUSES, calibration_dataset
 from .detection import centre_covariances, centre_weights, detect_markers
 from .guided import estimate_radius, find_missing
-from .image import image_array
+from .image import image_array, mean_frame
 from .lattice import match_lattice
 from .seeds import judge_pending, match_seeds_deferred, warn_seeds_off
 from .summary import report, summarize
@@ -450,10 +450,10 @@ def calibrate_from_files(markers_path: str | os.PathLike, target_path: str | os.
 
     mk = read_markers(markers_path)
     image = read_ir(target_path, format=target_format)
-    if "time" in image.dims:
-        if image.sizes["time"] > 1:
-            log.info("target image has %d frames: calibrating on their mean", image.sizes["time"])
-        image = image.mean("time", keep_attrs=True)
+    if "time" in image.dims and image.sizes["time"] > 1:
+        log.info("target image has %d frames: calibrating on their mean", image.sizes["time"])
+    # the frames of a still target average its noise down; a moving one is refused
+    image = mean_frame(image, where=f"{target_path}: ")
     kw = {k: v for k, v in settings.items() if k in ("min_radius_px", "max_radius_px", "min_contrast_k")}
     det = detect_markers(image, polarity=settings.get("polarity", "auto"), **kw)
     try:
