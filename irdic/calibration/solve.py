@@ -307,9 +307,9 @@ def _match(target_image, det: xr.Dataset, table: MarkerTable, seeds: Mapping | N
 
 def _solve_and_rematch(target_image, raw: xr.Dataset, det: xr.Dataset, mi, di, how: str, table: MarkerTable,
                        opts: FitOptions, radius_mm, limits: dict) -> tuple[xr.Dataset, Solution]:
-    """The fit of the matched pairs (:func:`_solve`) and, where it left two or more markers out as outliers or
-    markers in the image unmatched, the fit of the correspondence grown again from its camera over the ``raw``
-    detections, when that uses more markers.
+    """The fit of the matched pairs (:func:`_solve`) and, where more than 2 (and 5 %) of the markers are
+    outliers or unmatched in the image, the fit of the correspondence grown again from its camera over the
+    ``raw`` detections, when that uses more markers.
 
     The first correspondence grows from the camera of a few seeds (or of a
     lattice guess); a slip there on a steep, faint wing leaves wrong pairs,
@@ -321,9 +321,11 @@ def _solve_and_rematch(target_image, raw: xr.Dataset, det: xr.Dataset, mi, di, h
     """
     X, ids = table.x[table.measured], table.ids[table.measured]
     sol = _solve(X, np.column_stack([det["u"].values, det["v"].values]), det, mi, di, how, opts, ids)
-    (w, h), uv = _sensor_size(target_image), sol.model.project(X)
-    unmatched = np.isin(np.arange(len(X)), mi, invert=True) & (uv >= 0).all(axis=1) & (uv < [w, h]).all(axis=1)
-    if len(sol.outliers) < 2 and not unmatched.any():  # one outlier is a bad marker, not a slip
+    img, u0, v0 = image_array(target_image)
+    uv = sol.model.project(X) - [u0, v0]
+    unmatched = np.isin(np.arange(len(X)), mi, invert=True) & (uv >= 0).all(axis=1) & (uv < img.shape[::-1]).all(1)
+    # a few outliers or unfound markers are bad markers (the same again, at ~1 s); a slip leaves many
+    if len(sol.outliers) + unmatched.sum() <= max(2, len(X) // 20):
         return det, sol
     D = np.column_stack([raw["u"].values, raw["v"].values])
     try:
