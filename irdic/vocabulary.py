@@ -141,6 +141,7 @@ COORD_ATTRS: dict[str, dict[str, str]] = {
     "coefficient": {"long_name": "lens distortion coefficient"},
     "parameter": {"long_name": "parameter of the refined camera model"},
     "parameter_2": {"long_name": "parameter of the refined camera model (second covariance index)"},
+    "axis_2": {"long_name": "image axis (u, v) of a 2 x 2 covariance's second index"},
     "unassigned": {"long_name": "detection without a marker"},
     "detection_unassigned": {"long_name": "index of a detection without a marker"},
 }
