@@ -170,10 +170,10 @@ def _null_scale(null, ok, nb):
     # on the moving tube, 300 times x 13,104 points, 452 neighbours)
     T = ok.shape[0]
     if T > NULL_TIMES + 2:
-        sel = np.unique(np.clip(np.linspace(1, T - 2, NULL_TIMES).round().astype(int)[:, None] + [-1, 0, 1],
-                                0, T - 1))
+        mid = np.linspace(1, T - 2, NULL_TIMES).round().astype(int)
+        sel = np.unique(np.clip(mid[:, None] + [-1, 0, 1], 0, T - 1))
         ok, null = ok[sel], null[:, sel]
-        centre = np.isin(sel, np.linspace(1, T - 2, NULL_TIMES).round().astype(int))
+        centre = np.isin(sel, mid)
     else:
         centre = np.ones(T, bool)
     mean = np.where(ok, null.mean(axis=0), 0.0)
