@@ -45,7 +45,7 @@ from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
 from .footprint_fields import footprint_temperatures, paper_value, pixel_pitch, window_extras
 from .parameters import settings
-from .uncertainty import Window, uncertainties
+from .uncertainty import Window, uncertainties, uncertainty_notes
 
 __all__ = ["run", "run_gather", "fields"]
 
@@ -472,7 +472,7 @@ def _with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
         ds[f"{name}_bias_dominated"] = (dims, np.asarray(bias, dtype=bool),
                                         {"long_name": f"the method's bias (mask edge, extrapolation, series end, "
                                          f"export rounding) dominates the noise: {name}_std does not bound the error"})
-    ds.attrs["uncertainty_notes"] = unc["notes"]
+    ds.attrs["uncertainty_notes"] = uncertainty_notes(unc, ds["max_principal_strain"].values)
     return ds
 
 

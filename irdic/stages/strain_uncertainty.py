@@ -28,7 +28,7 @@ from ..surface import fit_surface
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
 from .regression_bias import BIAS_Z, local_bias, reference_spacing
 
-__all__ = ["strain_std", "max_principal_rms", "tensor_components", "below_noise_floor"]
+__all__ = ["strain_std", "max_principal_rms", "tensor_components", "below_noise_floor", "noise_floor_note"]
 
 #: Gauss-Hermite nodes per dimension of the 2-D quadrature over the deviatoric noise
 QUADRATURE_NODES = 8
@@ -174,6 +174,18 @@ def below_noise_floor(e_max, std):
     e, s = np.asarray(e_max, dtype=float), np.asarray(std, dtype=float)
     with np.errstate(invalid="ignore"):
         return (s > 0) & (np.abs(e) < NOISE_FLOOR_STDS * s)
+
+
+def noise_floor_note(e_max, std) -> str | None:
+    """The store's note where the max principal strain ``e_max`` (T, N) is below its noise floor
+    (:func:`below_noise_floor` of its ``std``) somewhere; None where nowhere."""
+    if not below_noise_floor(e_max, std).any():
+        return None
+    # no count: a time chunk's note becomes the gathered store's
+    return (f"max_principal_strain: below its noise floor where |max_principal_strain| < {NOISE_FLOOR_STDS:g} "
+            "max_principal_strain_std (a static or unloaded region, the first stages, an equi-biaxial state): there "
+            "the value is mostly noise, biased upwards as the max principal value of a noisy tensor, and the std is "
+            "its RMS error about the true strain with that bias")
 
 
 def strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None):

@@ -70,15 +70,14 @@ import numpy as np
 from ..gradient import material_rate, surface_gradient
 from ..numerics.temporal import TemporalInterpolant, local_rate_weights, temporal_window
 from ..numerics.threads import parallel_map
-from ..strain import principal_2d, strain_components
 from ..vocabulary import Status
 from .footprint_fields import footprint_probes
 from .gradient_geometry import position_std
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
 from .regression_bias import BIAS_NEIGHBOURS, local_bias, noise_scale, reference_spacing, scaled_probes
-from .strain_uncertainty import NOISE_FLOOR_STDS, below_noise_floor, strain_std
+from .strain_uncertainty import noise_floor_note, strain_std
 
-__all__ = ["uncertainties", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
+__all__ = ["uncertainties", "uncertainty_notes", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
 
 log = logging.getLogger(__name__)
 
@@ -177,21 +176,29 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
     s_x = float(a.get("dic_noise_mm", np.nan))
     temp_std, grad_std = position_std(points, sf, geo, J, g_pix, temp_std, grad_std, s_x, p, spatial, rng, ops)
-    strain_std = _strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops, notes)
+    e_std = strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
     for arr in (temp_std, rate_std, grad_std):
         arr[~visible] = np.nan
     log.info("fields: uncertainty from IR noise %.3g K (point %.3g K) and DIC noise %.3g mm; median std: temperature "
              "%.3g K, rate %.3g K/s, max principal strain %.3g", sigma, s_T, s_x, _median(temp_std),
-             _median(rate_std), _median(strain_std))
+             _median(rate_std), _median(e_std))
     return {
         "temperature": (temp_std, ir_bias),
         "temperature_gradient": (grad_std, np.repeat(ir_bias[..., None], 3, axis=-1)),
         "temperature_rate": (rate_std, rate_bias),
-        "max_principal_strain": (strain_std, np.array(strain_bias)),
+        "max_principal_strain": (e_std, np.array(strain_bias)),
         "notes": "; ".join(notes) if notes else "none",
     }
+
+
+def uncertainty_notes(unc, e_max):
+    """The store's ``uncertainty_notes``: those of :func:`uncertainties` (``unc``), and where the max principal
+    strain ``e_max`` (T, N), which the fields stage computes after them, is below its noise floor
+    (:func:`~irdic.stages.strain_uncertainty.noise_floor_note`)."""
+    floor = noise_floor_note(e_max, unc["max_principal_strain"][0])
+    return "; ".join(n for n in (unc["notes"], floor) if n and n != "none") or "none"
 
 
 def _rate_bias_flags(rate_biased, visible, notes):
@@ -396,21 +403,6 @@ def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std, neighbourhood
     biased = b_t > rate_std
     rate_std = np.sqrt(rate_std ** 2 + b_t ** 2 + b_s ** 2)
     return np.hypot(temp_std, b_v), rate_std, biased
-
-
-def _strain_std(points, sf, t, p, s_x, rng, window, trusted, ops, notes):
-    """The max principal strain's std (:func:`~irdic.stages.strain_uncertainty.strain_std`); appends to ``notes``
-    where the strain is below its noise floor somewhere."""
-    std = strain_std(points, sf, t, p, s_x, rng, window, trusted, ops)
-    e_max = principal_2d(strain_components(sf.tangents, sf.ref_tangents))[0]
-    if below_noise_floor(e_max, std).any():
-        # no count: a time chunk's note becomes the gathered store's
-        notes.append(f"max_principal_strain: below its noise floor where |max_principal_strain| < "
-                     f"{NOISE_FLOOR_STDS:g} max_principal_strain_std (a static or unloaded region, the first "
-                     "stages, an equi-biaxial state): there the value is mostly noise, biased upwards as the max "
-                     "principal value of a noisy tensor, and the std is its RMS error about the true strain with "
-                     "that bias")
-    return std
 
 
 def _bias_flags(points, sf, visible, q, sig_n, notes, ends=(True, True)):
