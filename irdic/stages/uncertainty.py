@@ -96,7 +96,8 @@ class Window(NamedTuple):
     (:func:`~irdic.stages.footprint_fields.footprint_temperatures`):
     ``theta_paper`` (T_w, N), the paper's point temperatures, and ``pixel``
     (T_w, N, 2) px, the points' projected positions, ``noise_factor`` (T_w, N)
-    their footprint temperatures' (``points.temperature_footprint_noise_factor``).
+    their footprint temperatures' (``points.temperature_footprint_noise_factor``), ``extrapolated`` (T_w, N)
+    where the couple stage extrapolated them from the mask edge.
     """
 
     theta: np.ndarray
@@ -110,6 +111,7 @@ class Window(NamedTuple):
     theta_paper: np.ndarray | None = None
     pixel: np.ndarray | None = None
     noise_factor: np.ndarray | None = None
+    extrapolated: np.ndarray | None = None
 
 
 def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None, spatial=None,

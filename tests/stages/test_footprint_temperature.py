@@ -140,3 +140,48 @@ def test_pixel_pitch_is_the_size_of_a_pixel_on_the_surface():
     assert pixel_pitch(points, psi) == pytest.approx(0.25, rel=1e-6)
     assert pixel_pitch(points.drop_vars("pixel"), psi) is None
     assert pixel_pitch(points.isel(point=slice(0, 5)), psi[:5]) is None
+
+
+def test_probes_carry_the_correlated_noise_of_points_extrapolated_from_the_edge():
+    """The noise probes of the fields stage (:func:`footprint_probes`) against Monte Carlo on the couple stage
+    (demo tube, 3 px between points): a point extrapolated from the mask edge and its nearest extrapolated
+    neighbour take their values from the same pixels just inside the edge, and their noise is as correlated
+    in the probes as over 6 noise realisations (within the spread of that estimate); drawn independently,
+    as before, the probes put that correlation near 0."""
+    from scipy.spatial import cKDTree
+
+    from irdic.stages.couple import couple
+    from irdic.stages.footprint_fields import footprint_noise, footprint_probes, footprint_temperatures
+
+    from .._synthetic_stores import synthetic_inputs
+
+    errs, pts = [], None
+    for seed in range(6):
+        dic, ir, cal, truth = synthetic_inputs("tube", "demo", ir_noise=0.05, seed=seed)
+        pts = couple(dic, ir, cal)
+        errs.append(pts.temperature_footprint.values - truth.sel(point=pts.point).temperature.values)
+    e = np.array(errs)
+    e = e - e.mean(axis=0)  # the noise: the box's offset is not
+    ext = pts.status.values == 1
+    pixel = pts.pixel.transpose("time", "point", "axis").values
+    pairs = []  # (time, extrapolated point, the nearest point inside within 4 px)
+    for k in range(ext.shape[0]):
+        have = np.isfinite(pixel[k]).all(axis=1)
+        i, o = np.flatnonzero(ext[k] & have), np.flatnonzero(~ext[k] & have)
+        if i.size and o.size:
+            d, j = cKDTree(pixel[k][o]).query(pixel[k][i])
+            pairs += [(k, a, b) for a, b in zip(i[d < 4.0], o[j[d < 4.0]])]
+    k, a, b = np.array(pairs).T
+    assert k.size > 200
+
+    def corr(noise):
+        x, y = noise[:, k, a], noise[:, k, b]
+        ok = np.isfinite(x) & np.isfinite(y)
+        return float(np.sum((x * y)[ok]) / np.sqrt(np.sum((x * x)[ok]) * np.sum((y * y)[ok])))
+
+    real = corr(e)
+    probes = corr(footprint_probes(footprint_temperatures(pts), None, 0.05)[0](np.random.default_rng(1), 32))
+    factor = np.nan_to_num(pts.temperature_footprint_noise_factor.values, nan=1.0)
+    independent = corr(footprint_noise(np.random.default_rng(1), pixel, pts.attrs["footprint_px"], (32,)) * factor)
+    assert abs(probes - real) < 0.15, (real, probes)
+    assert real - independent > 0.3, (real, independent)
