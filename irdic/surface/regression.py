@@ -21,7 +21,7 @@ from ..validation import float_array, positive, psi_array
 from .parametrisation import MIN_POINTS, median_spacing
 
 __all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "gradient_risk_spatial", "SURFACE_CANDIDATES",
-           "GRADIENT_CANDIDATES"]
+           "GRADIENT_CANDIDATES", "GRADIENT_MIN_PARAMETERS"]
 
 #: Centre spacing factors GCV tries for the DIC surface. Wider than the default of
 #: :func:`gcv_spatial`: the displacement of a static or uniformly strained specimen
@@ -31,10 +31,15 @@ SURFACE_CANDIDATES = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 1
 
 #: Centre spacing factors the gradient-risk criterion tries for the temperature (:func:`gradient_risk_spatial`).
 #: Wider than GCV's: a smooth temperature field's gradient keeps falling in error up to 12 spacings at
-#: 0.05 K (tube demo: 7.8 % at GCV's 5-8, 4.7 % at 12), which GCV, judging values, does not see. Not wider:
-#: with the 6-9 centres of 16-20 spacings on the demo clouds the estimate (a small difference of the
-#: pilot's large variance terms) no longer resolves the bias (tube demo: it chose 20, 5.6 %).
-GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0)
+#: 0.05 K (tube demo: 7.8 % at GCV's 5-8, 4.7 % at 12), which GCV, judging values, does not see. The wider
+#: ones only where they keep :data:`GRADIENT_MIN_PARAMETERS`: with the 6-9 centres of 16-20 spacings on the
+#: demo clouds the estimate (a small difference of the pilot's large variance terms) no longer resolves the
+#: bias (tube demo: it chose 20, 5.6 %), while a cloud of paper density (9,821 points, 4 times the demo's
+#: per mm) needs them (paper tube: 61 parameters at 12 spacings, the risk still falling, 11.5 %).
+GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 24.0, 32.0)
+#: The fewest parameters (centres and the 3 monomials) of a candidate beyond the first that the gradient-risk
+#: criterion judges (the demo tube: 18 at 12 spacings, chosen; 9-12 at 16-20, not resolved)
+GRADIENT_MIN_PARAMETERS = 16
 
 log = logging.getLogger(__name__)
 
@@ -194,6 +199,8 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates):
         except GeometryError:
             continue
         Qm = design[3]
+        if table and Qm.shape[1] < GRADIENT_MIN_PARAMETERS:
+            break  # wider spacings have fewer still
         coef = Qm.T @ F
         M = _gradient_operator(p, design, c, R0)[rows]
         g = M @ coef
