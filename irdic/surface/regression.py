@@ -37,8 +37,8 @@ SURFACE_CANDIDATES = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 1
 #: bias (tube demo: it chose 20, 5.6 %), while a cloud of paper density (9,821 points, 4 times the demo's
 #: per mm) needs them (paper tube: 61 parameters at 12 spacings, the risk still falling, 11.5 %).
 GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 24.0, 32.0)
-#: The fewest parameters (centres and the 3 monomials) of a candidate beyond the first that the gradient-risk
-#: criterion judges (the demo tube: 18 at 12 spacings, chosen; 9-12 at 16-20, not resolved)
+#: The fewest parameters (centres and the 3 monomials) of a candidate beyond 12 spacings that the
+#: gradient-risk criterion judges (the demo tube: 18 at 12 spacings, chosen; 9-12 at 16-20, not resolved)
 GRADIENT_MIN_PARAMETERS = 16
 
 log = logging.getLogger(__name__)
@@ -199,7 +199,7 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates):
         except GeometryError:
             continue
         Qm = design[3]
-        if table and Qm.shape[1] < GRADIENT_MIN_PARAMETERS:
+        if k > 12.0 and Qm.shape[1] < GRADIENT_MIN_PARAMETERS:
             break  # wider spacings have fewer still
         coef = Qm.T @ F
         M = _gradient_operator(p, design, c, R0)[rows]
