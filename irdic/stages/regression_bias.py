@@ -19,8 +19,8 @@ import logging
 
 import numpy as np
 
-__all__ = ["local_bias", "reference_spacing", "noise_scale", "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z",
-           "REFERENCE_SHARE", "REFERENCE_Z"]
+__all__ = ["local_bias", "reference_spacing", "reference_options", "noise_scale", "scaled_probes",
+           "BIAS_NEIGHBOURS", "BIAS_Z", "REFERENCE_SHARE", "REFERENCE_Z"]
 
 log = logging.getLogger(__name__)
 
@@ -87,10 +87,10 @@ def reference_spacing(k):
     gradient's bias at the chosen spacing and at half of it were 1.47e-3 and
     1.41e-3 K/mm RMS, correlated 0.02 (barrel), 9.1e-5 and 4.1e-5, -0.10
     (tube). The difference then holds both biases: ``E d² - v = b² + b_ref²``,
-    and its local value says little about where ``b`` is large. The
-    callers take :data:`REFERENCE_SHARE` of it, averaged over a wider region
-    where the neighbourhood does not resolve it (:func:`local_bias`,
-    ``pooled``).
+    and its local value says little about where ``b`` is large: from 2 point
+    spacings on the callers take :data:`REFERENCE_SHARE` of it, averaged over
+    all points where the neighbourhood does not resolve it
+    (:func:`reference_options`).
     """
     if k is None:
         return None
@@ -98,6 +98,27 @@ def reference_spacing(k):
         ref = tuple(reference_spacing(float(v)) for v in k)
         return None if all(r is None for r in ref) else tuple(1.0 if r is None else r for r in ref)
     return None if k < 2.0 else k / 2.0
+
+
+def reference_options(k):
+    """The :func:`local_bias` options for a difference to the half-spacing reference of spacing(s) ``k``.
+
+    From a reference of 2 point spacings on (``k >= 4``) the reference is a
+    regression whose bias is as large as the regression's own and
+    uncorrelated with it (:func:`reference_spacing`): :data:`REFERENCE_SHARE`
+    of the difference, at :data:`REFERENCE_Z` standard errors, pooled over
+    all points where no neighbourhood resolves it. Below, the reference is
+    an almost exact interpolation whose own error dominates the difference
+    (the noise of the points' positions through a nearly interpolating fit;
+    demo half-shell, ``k = 3``: 3.1e-3 K/mm against the regression's bias of
+    1.4e-3): there the halved, pooled estimate put 0.87-0.89 of the
+    gradient's errors within 1 std, the local one at one standard error
+    0.70-0.72 / 0.90-0.91 (seeds 1, 3, 5), and the local one is kept.
+    """
+    k_min = None if k is None else float(np.min(k))
+    if k_min is None or k_min < 4.0:
+        return {}
+    return dict(z=REFERENCE_Z, share=REFERENCE_SHARE, pooled=True)
 
 
 def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbourhoods=None, *, z=BIAS_Z, share=1.0,
@@ -162,9 +183,10 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     average rarely resolves the bias (demo barrel: at about half of the
     points, and not where the bias is largest), while the average over the
     specimen does: there ``pooled`` with ``z = 2`` and ``share = 1/2``
-    brought the gradient's coverage of its errors from 0.59-0.67 / 0.84-0.90
-    within 1 / 2 std to 0.66-0.75 / 0.93-0.97 (barrel, tube 0.68-0.79 /
-    0.92-0.96; seeds 1, 3, 5, 7 and IR noise 0.03-0.08 K).
+    (:func:`reference_options`) brought the gradient's coverage of its
+    errors from 0.59-0.67 / 0.84-0.90 within 1 / 2 std to 0.66-0.75 /
+    0.93-0.97 (barrel, tube 0.68-0.79 / 0.92-0.96; seeds 1, 3, 5, 7 and IR
+    noise 0.03-0.08 K).
     """
     a = np.square(d) - noise_var
     ok = np.isfinite(a)

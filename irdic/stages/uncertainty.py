@@ -49,11 +49,11 @@ are propagated through those same operators:
   same probes through both operators); ``b² = <d²> - <v>`` averaged locally, where
   it exceeds its own scatter on noise
   (:func:`~irdic.stages.regression_bias.local_bias`), is added to the variance.
-  The gradient's reference is as biased as the regression (``b_ref ≈ b``,
-  :func:`~irdic.stages.regression_bias.reference_spacing`): half of that
-  average, where it exceeds two of its standard errors, over the whole
-  specimen where no neighbourhood resolves it: an RMS over the region, not
-  a local value.
+  The gradient's reference, from 2 point spacings on, is as biased as the
+  regression (``b_ref ≈ b``, :func:`~irdic.stages.regression_bias.reference_options`):
+  half of that average, where it exceeds two of its standard errors, over
+  the whole specimen where no neighbourhood resolves it: there an RMS over
+  the region, not a local value.
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
@@ -79,8 +79,8 @@ from ..vocabulary import Status
 from .footprint_fields import footprint_probes
 from .gradient_geometry import position_std
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
-from .regression_bias import (BIAS_NEIGHBOURS, REFERENCE_SHARE, REFERENCE_Z, local_bias, noise_scale,
-                              reference_spacing, scaled_probes)
+from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
+                              scaled_probes)
 from .strain_uncertainty import noise_floor_note, strain_std
 
 __all__ = ["uncertainties", "uncertainty_notes", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
@@ -297,11 +297,10 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             # the exact interpolation of the input at the points is the input itself; the two estimates
             # (sparse products, which release the GIL) on the stage's threads
             nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
-            # the gradient's reference, half the spacing, is as biased as the regression (reference_spacing)
+            # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
             b_g, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], sf.psi, trusted, acc[a[1] + "_null"], ks,
                                                          nbs, **a[2]),
-                                    ((d_grad, "g_var", dict(z=REFERENCE_Z, share=REFERENCE_SHARE, pooled=True)),
-                                     (value - value_in, "v_var", {})))
+                                    ((d_grad, "g_var", reference_options(ks)), (value - value_in, "v_var", {})))
             grad_std, temp_std = np.hypot(grad_std, b_g), np.hypot(temp_std, b_v)
             if len(spatial) > 5 and W is not None:  # the temporal terms
                 temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:7], acc, sf.psi, trusted, temp_std, ks,

@@ -4,7 +4,7 @@ reference in time (irdic.numerics.temporal.local_rate_weights)."""
 import numpy as np
 
 from irdic.numerics.temporal import TemporalInterpolant, local_rate_weights
-from irdic.stages.regression_bias import BIAS_Z, local_bias, reference_spacing
+from irdic.stages.regression_bias import BIAS_Z, local_bias, reference_options, reference_spacing
 
 
 def _grid(n=30):
@@ -62,6 +62,8 @@ def test_pooled_bias_below_the_neighbourhoods_resolution():
 
 
 def test_reference_spacing():
+    assert reference_options(None) == {} and reference_options(3.0) == {} and reference_options((3.0, 8.0)) == {}
+    assert reference_options(4.0) == reference_options((5.0, 12.0)) == dict(z=2.0, share=0.5, pooled=True)
     assert reference_spacing(None) is None and reference_spacing(1.5) is None
     assert reference_spacing(5.0) == 2.5
     assert reference_spacing((2.5, 16.0)) == (1.25, 8.0) and reference_spacing((1.0, 1.5)) is None
