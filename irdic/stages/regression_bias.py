@@ -30,6 +30,9 @@ BIAS_NEIGHBOURS = 32
 BIAS_Z = 1.0
 #: times (each with its neighbours) over which the estimate's scatter on pure noise is pooled
 NULL_TIMES = 16
+#: the most points of the wider neighbourhood (its sparse sums cost that many per point, time and component;
+#: a paper-density cloud's 24 point spacings would ask for 1,809)
+WIDE_MAX = 512
 #: the share of the difference to the half-spacing reference that is the regression's own bias (see
 #: :func:`reference_spacing`): the reference's bias is as large and uncorrelated
 REFERENCE_SHARE = 0.5
@@ -144,7 +147,7 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
         The regression's centre spacing in point spacings: where the
         neighbourhood's estimate is not resolved, the points within that
         spacing (``π spacing²`` nearest) are averaged instead (the bias
-        varies on that scale).
+        varies on that scale; at most :data:`WIDE_MAX`).
     neighbourhoods : dict, optional
         Cache of the neighbourhoods of ``psi`` by their size, shared by the
         calls on the same points (each is a k-d tree query and a sparse matrix).
@@ -196,7 +199,7 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
         return np.zeros_like(a)
     out = None
     # the neighbourhood, then a wider one where the bias is below the neighbourhood's resolution, then all points
-    wide = [] if spacing is None else [int(np.pi * float(np.max(spacing)) ** 2)]
+    wide = [] if spacing is None else [min(WIDE_MAX, int(np.pi * float(np.max(spacing)) ** 2))]
     for k in [BIAS_NEIGHBOURS] + [n for n in wide if n > BIAS_NEIGHBOURS] + ([None] if pooled else []):
         nb = None if neighbourhoods is None or k is None else neighbourhoods.get(k)
         if nb is None and k is not None:
