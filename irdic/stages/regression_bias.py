@@ -116,7 +116,9 @@ def reference_options(k):
     demo half-shell, ``k = 3``: 3.1e-3 K/mm against the regression's bias of
     1.4e-3): there the halved, pooled estimate put 0.87-0.89 of the
     gradient's errors within 1 std, the local one at one standard error
-    0.70-0.72 / 0.90-0.91 (seeds 1, 3, 5), and the local one is kept.
+    0.70-0.72 / 0.90-0.91 (seeds 1, 3, 5), and the local one is kept. From
+    2 spacings on (the demo barrel and tube) the gradient's coverage went
+    from 0.59-0.81 / 0.84-0.97 within 1 / 2 std to 0.67-0.79 / 0.93-0.97.
     """
     k_min = None if k is None else float(np.min(k))
     if k_min is None or k_min < 4.0:
@@ -126,7 +128,7 @@ def reference_options(k):
 
 def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbourhoods=None, *, z=BIAS_Z, share=1.0,
                pooled=False):
-    """Local RMS of a regression's bias from its difference ``d`` to a less biased reference.
+    """Local RMS of a regression's bias from its difference ``d`` to a reference.
 
     Parameters
     ----------
@@ -151,16 +153,10 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     neighbourhoods : dict, optional
         Cache of the neighbourhoods of ``psi`` by their size, shared by the
         calls on the same points (each is a k-d tree query and a sparse matrix).
-    z : float
-        Significance: an average counts where it exceeds this many of its
-        standard errors on pure noise.
-    share : float
-        The part of ``d²`` that is the regression's own bias (1 against an
-        unbiased reference; :data:`REFERENCE_SHARE` against the half-spacing
-        regression, see :func:`reference_spacing`).
-    pooled : bool
-        Last, where no neighbourhood resolves it, the average over all
-        trusted points (at the time and the adjacent ones).
+    z, share, pooled
+        Significance (standard errors on pure noise), the part of ``d²`` that
+        is the regression's own bias, and whether all trusted points are
+        averaged last (:func:`reference_options`).
 
     Returns
     -------
@@ -181,15 +177,6 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     ``s`` pooled over the points from the probes' own estimates
     ``L(d_j² - v̄)``; ``b²`` counts where it exceeds ``z`` such errors,
     else 0.
-
-    Against the half-spacing reference of the gradient the neighbourhood's
-    average rarely resolves the bias (demo barrel: at about half of the
-    points, and not where the bias is largest), while the average over the
-    specimen does: there ``pooled`` with ``z = 2`` and ``share = 1/2``
-    (:func:`reference_options`) brought the gradient's coverage of its
-    errors from 0.59-0.67 / 0.84-0.90 within 1 / 2 std to 0.66-0.75 /
-    0.93-0.97 (barrel, tube 0.68-0.79 / 0.92-0.96; seeds 1, 3, 5, 7 and IR
-    noise 0.03-0.08 K).
     """
     a = np.square(d) - noise_var
     ok = np.isfinite(a)
