@@ -69,8 +69,10 @@ def test_tangent_noise_against_the_realised_tangent_error_of_the_fit():
 def test_barrel_gradient_std_holds_the_tangent_planes_dic_noise():
     """Regression: a barrel patch (R 40 mm, heated from one end, |g| ~1 K/mm) with 0.05 K IR and 0.003 mm DIC
     noise; the DIC noise tilts and stretches the fitted tangent plane, an error of ~0.4 x the IR noise's
-    (benchmark scene) that the std left out: within 2 std 0.868 before, 0.895 now (the band's 0.92 is still
-    missed by the bias estimate's resolution, benchmarks/README)."""
+    (benchmark scene) that the std left out: within 2 std 0.868 before, 0.895 with it, 0.98 since the bias
+    against the half-spacing reference is its RMS over the specimen where no neighbourhood resolves it
+    (:func:`irdic.stages.regression_bias.reference_options`). Within 1 std 0.78 on these clean exports (0.67-0.75
+    on the benchmark's rounded ones, benchmarks/README): that RMS stands also where the ripple is small."""
     ex = experiment("halfshell", "demo", ir_noise=0.05, dic_noise=0.003, seed=3,
                     specimen=HalfShell(R_o=40.0, R_i=36.0, axis_z=-40.0), camera=lab_camera())
     ir = xr.Dataset({"temperature": ex.ir_stack().drop_vars("frame_number")})
@@ -85,4 +87,4 @@ def test_barrel_gradient_std_holds_the_tangent_planes_dic_noise():
     mm = m[..., None] & ~f.temperature_gradient_bias_dominated.values
     z = np.abs(f.temperature_gradient.values - truth.temperature_gradient.values)[mm] / \
         f.temperature_gradient_std.values[mm]
-    assert 0.60 <= np.mean(z <= 1) <= 0.76 and np.mean(z <= 2) >= 0.88, (np.mean(z <= 1), np.mean(z <= 2))
+    assert 0.60 <= np.mean(z <= 1) <= 0.80 and 0.92 <= np.mean(z <= 2) <= 0.99, (np.mean(z <= 1), np.mean(z <= 2))
