@@ -149,12 +149,20 @@ def _extrapolated_noise(box, offsets, w, side):
 
 
 def footprint_probes(points, window, sigma):
-    """``(draw, s_paper)`` for the noise probes of :mod:`irdic.stages.uncertainty` when the fields regress
-    footprint temperatures (:func:`footprint_temperatures`), else None: ``draw(rng, b)`` gives ``b`` probes
-    of :func:`footprint_noise` at the record's (or the chunk window's) points, ``s_paper`` (K) the noise of
-    the paper's point temperatures (pixel noise ``sigma`` times their gain), whose regression is the value."""
+    """``(draw, s_paper)`` for the noise probes of :mod:`irdic.stages.uncertainty`: ``draw(rng, b)`` gives ``b``
+    probes of :func:`footprint_noise` at the record's (or the chunk window's) points. When the fields regress
+    footprint temperatures (:func:`footprint_temperatures`) ``s_paper`` (K) is the noise of the paper's point
+    temperatures (pixel noise ``sigma`` times their gain), whose regression is the value; without them the
+    probes of the paper's temperatures have the nearest pixel's noise (``side`` 1) and ``s_paper`` is None
+    (the demo tube forced to side 1: the regressed gradient's noise was 1.9 x white probes'; the paper tube,
+    points 0.25 mm apart: ``d`` 1.21 -> 1.07 x its probes' noise). None without pixel positions."""
     if "temperature_paper" not in points:
-        return None
+        if "pixel" not in points:
+            return None
+        # the paper's temperatures alone: points closer than a pixel share its noise
+        pixel = points["pixel"].transpose("time", "point", "axis").values if window is None else window.pixel
+        ext = extrapolated(points) if window is None else window.extrapolated
+        return (lambda rng, b: footprint_noise(rng, pixel, 1, (b,), ext)), None
     side = int(points.attrs.get("footprint_px", 1))
     if window is None:
         pixel = points["pixel"].transpose("time", "point", "axis").values
@@ -169,9 +177,12 @@ def footprint_probes(points, window, sigma):
 
 
 def window_extras(points, w) -> dict:
-    """The :class:`~irdic.stages.uncertainty.Window` fields of the footprint (none without it) at times ``w``."""
+    """The :class:`~irdic.stages.uncertainty.Window` fields of the noise probes at times ``w``: the footprint's,
+    or the pixel positions and extrapolated points alone without it (none without pixel positions)."""
     if "temperature_paper" not in points:
-        return {}
+        return {} if "pixel" not in points else dict(
+            extrapolated=extrapolated(points.isel(time=w)),
+            pixel=points["pixel"].isel(time=w).transpose("time", "point", "axis").values)
     factor = points.get("temperature_footprint_noise_factor")
     return dict(theta_paper=points["temperature_paper"].isel(time=w).values.astype(float),
                 extrapolated=extrapolated(points.isel(time=w)),

@@ -273,9 +273,12 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
     if ks is not None:
         draw, s_paper = (None, None) if footprint is None else footprint
-        # the value is regressed from the paper's temperatures: their own (white) noise through the operators
+        pix_draw = None
+        if draw is not None and s_paper is None:  # no footprint: one set of probes, with the pixels' correlation
+            pix_draw, draw = draw, None
+        # the value is regressed from the paper's temperatures: their own noise through the operators
         acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
-                              spatial is not None)
+                              spatial is not None, pix_draw)
         own = None if spatial is None else spatial[0]  # the regressions' input (the footprint's, with one)
         acc = scaled_probes(acc, noise_scale(own if draw is None else theta_paper, acc, regress_space, ks, trusted))
         if draw is not None:

@@ -185,3 +185,26 @@ def test_probes_carry_the_correlated_noise_of_points_extrapolated_from_the_edge(
     independent = corr(footprint_noise(np.random.default_rng(1), pixel, pts.attrs["footprint_px"], (32,)) * factor)
     assert abs(probes - real) < 0.15, (real, probes)
     assert real - independent > 0.3, (real, independent)
+
+
+def test_probes_without_footprint_share_the_nearest_pixels_noise():
+    """Points denser than the pixels (no footprint, side 1): the probes of points with the same nearest pixel
+    are the same noise, the others independent (white probes put the regressed gradient's noise of the demo
+    tube forced to side 1 at 1 / 1.9 of the data's); a chunk's window carries the positions for them."""
+    import xarray as xr
+
+    from irdic.stages.footprint_fields import footprint_probes, window_extras
+
+    pix = np.array([[[10.2, 5.1], [9.8, 4.9], [13.0, 5.0], [20.0, 9.0]]] * 3)
+    pts = xr.Dataset({"pixel": (("time", "point", "axis"), pix),
+                      "status": (("time", "point"), np.zeros((3, 4), np.int8)),
+                      "edge_distance": (("time", "point"), np.full((3, 4), 5.0))})
+    draw, s_paper = footprint_probes(pts, None, 0.05)
+    assert s_paper is None
+    z = draw(np.random.default_rng(0), 2000)
+    assert z.shape == (2000, 3, 4)
+    np.testing.assert_array_equal(z[:, :, 0], z[:, :, 1])
+    c = np.corrcoef(z[:, 0].T)
+    assert abs(c[0, 2]) < 0.1 and abs(c[2, 3]) < 0.1 and abs(np.std(z) - 1) < 0.05
+    w = window_extras(pts, slice(1, 3))
+    assert w["pixel"].shape == (2, 4, 2) and np.isnan(w["extrapolated"]).all()
