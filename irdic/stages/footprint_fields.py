@@ -102,7 +102,7 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None):
         ext = np.zeros(N, bool) if extrapolated is None else ok & np.isfinite(extrapolated[k])
         inner = ok & ~ext
         centres = np.round(pixel[k][inner])
-        lines = _extrapolation_lines(pixel[k], inner, ext, extrapolated, k)
+        lines = None if not ext.any() else _extrapolation_lines(pixel[k], inner, ext, extrapolated[k][ext])
         if lines is not None:
             centres = np.concatenate([centres, np.round(lines[0].reshape(-1, 2))])
         c = centres.astype(np.int64)
@@ -117,17 +117,16 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None):
     return out
 
 
-def _extrapolation_lines(pix, inner, ext, extrapolated, k):
-    """The couple stage's samples of the extrapolated points at one time: ``(samples (n_ext, S, 2) px,
-    sample offsets (n_ext, S, 2) px, parabola weights (n_ext, S))``, or None. The line into the mask runs
-    towards the mean of the 4 nearest points inside (the mask is not known here), from ``q`` at the point's
-    distance ``L`` outside (:func:`irdic.stages.extrapolation.extrapolate`)."""
+def _extrapolation_lines(pix, inner, ext, L):
+    """The couple stage's samples of the extrapolated points ``ext`` at one time, ``L`` (n_ext,) px their
+    distances outside the mask: ``(samples (n_ext, S, 2) px, sample offsets (n_ext, S, 2) px, parabola weights
+    (n_ext, S))``, or None. The line into the mask runs towards the mean of the 4 nearest points inside (the
+    mask is not known here), from ``q`` at ``L`` outside (:func:`irdic.stages.extrapolation.extrapolate`)."""
     from scipy.spatial import cKDTree
 
-    if not ext.any() or inner.sum() < 4:
+    if inner.sum() < 4:
         return None
     p, q_in = pix[ext], pix[inner]
-    L = extrapolated[k][ext]
     towards = q_in[cKDTree(q_in).query(p, k=4)[1]].mean(axis=1) - p
     e = -towards / np.maximum(np.linalg.norm(towards, axis=1), 1e-12)[:, None]
     s = np.arange(EXTRAP_SAMPLES, dtype=float)

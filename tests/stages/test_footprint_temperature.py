@@ -97,21 +97,27 @@ def test_noise_factor_of_a_box_cut_by_a_straight_edge():
     np.testing.assert_allclose(f, [[1.0, np.sqrt(3.0)]], rtol=1e-12)
 
 
-def test_noise_factor_matches_monte_carlo_on_the_couple_stage():
-    """Per point, the footprint temperature's scatter over IR noise realisations is the probe gain times the
-    noise factor (whole boxes, cut boxes and points extrapolated from the edge), within the Monte Carlo
-    spread (8 realisations: about 25 % per point, a few % over a group)."""
+def _footprint_errors(scale, n):
+    """The tube's footprint temperatures minus the truth over ``n`` IR noise realisations (0.05 K) through the
+    couple stage: (n, T, N) K, and the last realisation's points."""
     from irdic.stages.couple import couple
 
     from .._synthetic_stores import synthetic_inputs
 
     errs, pts = [], None
-    for seed in range(8):
-        dic, ir, cal, truth = synthetic_inputs("tube", "tiny", ir_noise=0.05, seed=seed)
+    for seed in range(n):
+        dic, ir, cal, truth = synthetic_inputs("tube", scale, ir_noise=0.05, seed=seed)
         pts = couple(dic, ir, cal)
         errs.append(pts.temperature_footprint.values - truth.sel(point=pts.point).temperature.values)
-    e = np.array(errs)
-    e = (e - e.mean(axis=0)) * np.sqrt(len(errs) / (len(errs) - 1))  # the noise: the box's offset is not
+    return np.array(errs), pts
+
+
+def test_noise_factor_matches_monte_carlo_on_the_couple_stage():
+    """Per point, the footprint temperature's scatter over IR noise realisations is the probe gain times the
+    noise factor (whole boxes, cut boxes and points extrapolated from the edge), within the Monte Carlo
+    spread (8 realisations: about 25 % per point, a few % over a group)."""
+    e, pts = _footprint_errors("tiny", 8)
+    e = (e - e.mean(axis=0)) * np.sqrt(len(e) / (len(e) - 1))  # the noise: the box's offset is not
     pred = 0.05 * pts.attrs["ir_noise_gain_temperature_footprint"] * pts.temperature_footprint_noise_factor.values
     status = pts.status.values
     for group in (status == 0, status == 1):
@@ -144,23 +150,15 @@ def test_pixel_pitch_is_the_size_of_a_pixel_on_the_surface():
 
 def test_probes_carry_the_correlated_noise_of_points_extrapolated_from_the_edge():
     """The noise probes of the fields stage (:func:`footprint_probes`) against Monte Carlo on the couple stage
-    (demo tube, 3 px between points): a point extrapolated from the mask edge and its nearest extrapolated
-    neighbour take their values from the same pixels just inside the edge, and their noise is as correlated
-    in the probes as over 6 noise realisations (within the spread of that estimate); drawn independently,
-    as before, the probes put that correlation near 0."""
+    (demo tube, 3 px between points): a point extrapolated from the mask edge takes its value from the pixels
+    just inside the edge, and its noise is as correlated with the nearest point inside in the probes as over
+    6 noise realisations (within the spread of that estimate); drawn independently, as before, the probes put
+    that correlation near 0."""
     from scipy.spatial import cKDTree
 
-    from irdic.stages.couple import couple
     from irdic.stages.footprint_fields import footprint_noise, footprint_probes, footprint_temperatures
 
-    from .._synthetic_stores import synthetic_inputs
-
-    errs, pts = [], None
-    for seed in range(6):
-        dic, ir, cal, truth = synthetic_inputs("tube", "demo", ir_noise=0.05, seed=seed)
-        pts = couple(dic, ir, cal)
-        errs.append(pts.temperature_footprint.values - truth.sel(point=pts.point).temperature.values)
-    e = np.array(errs)
+    e, pts = _footprint_errors("demo", 6)
     e = e - e.mean(axis=0)  # the noise: the box's offset is not
     ext = pts.status.values == 1
     pixel = pts.pixel.transpose("time", "point", "axis").values
