@@ -38,7 +38,7 @@ from ..surface import fit_surface, surface_geometry, surface_parameters
 from ..surface.parametrisation import median_spacing
 from ..chunks import chunk_slice, gathered, window
 from ..numerics.series import fill_series, smooth_series
-from ..numerics.temporal import RATE_MAX_FRACTION, local_rate_weights, temporal_window
+from ..numerics.temporal import RATE_MAX_FRACTION, rate_reference_weights, temporal_window
 from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
@@ -397,10 +397,10 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, o
     own_rate = own.rate if rate_fit.smoothing == fit.smoothing else \
         smooth_series(th_in, ts_in, t_eval, smoothing=rate_fit.smoothing, **tkw).rate
     # the temporal regressions' bias: against the same (regressed) series, whose noise is small (against the
-    # points' own series the estimate drowned in their noise): the rate's against a local quartic in time
+    # points' own series the estimate drowned in their noise): the rate's against a local polynomial in time
     exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)
-    bias_inputs = (theta, grad, (own_v := np.where(visible, own.value, np.nan)), value, total - local_rate_weights(
-        ts_in, t_eval) @ th_s, total - own_rate, smoothed - exact.value, own_v)
+    bias_inputs = (theta, grad, (own_v := np.where(visible, own.value, np.nan)), value, total - rate_reference_weights(
+        ts_in, t_eval, smoothing=rate_fit.smoothing) @ th_s, total - own_rate, smoothed - exact.value, own_v)
     return grad, total, total - convective, value, bias_inputs, chosen
 
 

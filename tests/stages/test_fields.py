@@ -256,7 +256,9 @@ def test_uncertainty_coverage_demo_halfshell_bias_estimates():
     were estimated against references as biased (the rate's: the IMQ interpolant in time, 3 % off on the true
     series) or as noisy (the exact interpolation) as the error they judged, and every positive local estimate
     was kept: within 1 std temperature 0.82, gradient 0.85, strain 0.99, and 75 % of the rates flagged
-    bias-dominated for a 0.26 % error. Now (seed 3): 0.71, 0.71, 0.84, rate 0.67 / 0.92 with 21 % flagged."""
+    bias-dominated for a 0.26 % error. Now (seed 3): 0.71, 0.71, 0.84, rate 0.70 / 0.95 with 28 % flagged (the
+    temporal regression's bias against a degree-6 fit over 25 stages instead of the quartic through 5: 0.68 /
+    0.92 with 20 %; seeds 1, 5: 0.69 / 0.93 with 25-26 %, 0.66-0.68 / 0.91-0.92 with 14-17 % before)."""
     pts, truth, f, m = _noisy("halfshell", "demo", dic_noise=0.003, seed=3)
     truth_name = {"max_principal_strain": "strain_max"}
     within = {}
