@@ -53,7 +53,8 @@ are propagated through those same operators:
   regression (``b_ref ≈ b``, :func:`~irdic.stages.regression_bias.reference_options`):
   half of that average, where it exceeds two of its standard errors, over
   the whole specimen where no neighbourhood resolves it: there an RMS over
-  the region, not a local value.
+  the region, not a local value. The strain's likewise, at one standard
+  error (:func:`~irdic.stages.regression_bias.strain_reference_options`).
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or

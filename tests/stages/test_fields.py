@@ -1,5 +1,7 @@
 """Fields stage against the analytic truth of the synthetic half-shell and tube."""
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -30,13 +32,16 @@ def _inner(pts, truth):
     return m
 
 
+@functools.lru_cache(maxsize=1)
 def _noisy(scene, scale, *, dic_noise, seed, ir_noise=0.05):
     """A noisy synthetic scene coupled and through fields (default config): points, truth at them, fields,
-    and the interior mask of :func:`_inner`."""
+    and the interior mask of :func:`_inner` (read-only). The last scene is kept: the demo tube's tests share it."""
     dic, ir, cal, truth = synthetic_inputs(scene, scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
     pts = couple(dic, ir, cal)
     truth = truth.sel(point=pts.point)
-    return pts, truth, fields(pts, cal), _inner(pts, truth)
+    m = _inner(pts, truth)
+    m.flags.writeable = False
+    return pts, truth, fields(pts, cal), m
 
 
 def test_noise_free_accuracy(case):
@@ -249,6 +254,19 @@ def test_tube_gradient_from_the_footprint_temperatures_and_its_coverage():
     mm = m[..., None] & ~f.temperature_gradient_bias_dominated.values
     z = np.abs(err[mm]) / f.temperature_gradient_std.values[mm]
     assert 0.60 <= np.mean(z <= 1) <= 0.83 and 0.88 <= np.mean(z <= 2) <= 0.98, (np.mean(z <= 1), np.mean(z <= 2))
+
+
+def test_tube_strain_std_holds_the_regression_bias():
+    """Issue 15: the tube's strain bias (4.4e-4 RMS, as large as its noise) is estimated against the surface
+    regression at half the spacing, whose own strain bias is as large and uncorrelated (4.32e-4, correlation
+    -0.08 on the noise-free coordinates): half of ``<d² - v>``, over the whole specimen where no neighbourhood
+    resolves it (:func:`irdic.stages.regression_bias.strain_reference_options`). This seed: 0.75 / 0.935 within
+    1 / 2 std with the local estimate alone, 0.83 / 0.98 now; pooled over the benchmark's seeds 1, 3, 5, 7
+    0.69 / 0.91 -> 0.74 / 0.94 (this seed is the benchmark's most covered)."""
+    pts, truth, f, m = _noisy("tube", "demo", dic_noise=0.003, seed=3)
+    mm = m & ~f.max_principal_strain_bias_dominated.values
+    z = np.abs(f.max_principal_strain.values - truth.strain_max.values)[mm] / f.max_principal_strain_std.values[mm]
+    assert 0.60 <= np.mean(z <= 1) <= 0.86 and 0.95 <= np.mean(z <= 2) <= 0.99, (np.mean(z <= 1), np.mean(z <= 2))
 
 
 def test_uncertainty_coverage_demo_halfshell_bias_estimates():

@@ -4,7 +4,8 @@ reference in time (irdic.numerics.temporal.local_rate_weights)."""
 import numpy as np
 
 from irdic.numerics.temporal import TemporalInterpolant, local_rate_weights, rate_reference_stencil
-from irdic.stages.regression_bias import BIAS_Z, local_bias, reference_options, reference_spacing
+from irdic.stages.regression_bias import (BIAS_Z, local_bias, reference_options, reference_spacing,
+                                         strain_reference_options)
 
 
 def _grid(n=30):
@@ -59,6 +60,14 @@ def test_pooled_bias_below_the_neighbourhoods_resolution():
     np.testing.assert_allclose(half ** 2, 0.5 * b ** 2, rtol=1e-12)
     noise = local_bias(rng.normal(0.0, 2.0, v.shape), v, psi, null=null, z=2.0, pooled=True)
     assert np.mean(noise > 0) < 0.05, np.mean(noise > 0)
+
+
+def test_strain_reference_options():
+    """The strain's reference: half of the difference, pooled, at one standard error, wherever the reference is
+    itself a regression; the local estimate where it is the exact interpolation."""
+    assert strain_reference_options(None) == strain_reference_options(1.5) == strain_reference_options((1.0, 1.5)) == {}
+    assert strain_reference_options((2.5, 5.0)) == strain_reference_options(3.0) == dict(z=BIAS_Z, share=0.5,
+                                                                                      pooled=True)
 
 
 def test_reference_spacing():
