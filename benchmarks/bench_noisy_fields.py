@@ -186,7 +186,6 @@ def main(argv=None):
         row(v, lambda r: f"{r['coverage'][v][0]:.2f} / {r['coverage'][v][1]:.2f} ({100 * r['coverage'][v][2]:.0f} %)")
 
 
-
 def monte_carlo(args):
     """The ``--seeds`` report: errors and coverage per scene, per seed and pooled."""
     print(f"load average {os.getloadavg()[0]:.1f}; scale {args.scale}, seeds {args.seeds}; "

@@ -155,22 +155,20 @@ def footprint_probes(points, window, sigma):
     probes of the paper's temperatures have the nearest pixel's noise (``side`` 1) and ``s_paper`` is None
     (the demo tube forced to side 1: the regressed gradient's noise was 1.9 x white probes'; the paper tube,
     points 0.25 mm apart: ``d`` 1.21 -> 1.07 x its probes' noise). None without pixel positions."""
+    if "pixel" not in points:
+        return None
+    pixel = points["pixel"].transpose("time", "point", "axis").values if window is None else window.pixel
+    ext = extrapolated(points) if window is None else window.extrapolated
     if "temperature_paper" not in points:
-        if "pixel" not in points:
-            return None
         # the paper's temperatures alone: points closer than a pixel share its noise
-        pixel = points["pixel"].transpose("time", "point", "axis").values if window is None else window.pixel
-        ext = extrapolated(points) if window is None else window.extrapolated
         return (lambda rng, b: footprint_noise(rng, pixel, 1, (b,), ext)), None
     side = int(points.attrs.get("footprint_px", 1))
     if window is None:
-        pixel = points["pixel"].transpose("time", "point", "axis").values
         factor = points["temperature_footprint_noise_factor"].values if "temperature_footprint_noise_factor" in \
             points else None
     else:
-        pixel, factor = window.pixel, window.noise_factor
+        factor = window.noise_factor
     factor = 1.0 if factor is None else np.nan_to_num(np.asarray(factor, dtype=float), nan=1.0)
-    ext = extrapolated(points) if window is None else window.extrapolated
     return (lambda rng, b: footprint_noise(rng, pixel, side, (b,), ext) * factor), sigma * float(
         points.attrs.get("ir_noise_gain_temperature_paper", np.nan))
 
@@ -178,15 +176,15 @@ def footprint_probes(points, window, sigma):
 def window_extras(points, w) -> dict:
     """The :class:`~irdic.stages.uncertainty.Window` fields of the noise probes at times ``w``: the footprint's,
     or the pixel positions and extrapolated points alone without it (none without pixel positions)."""
-    if "temperature_paper" not in points:
-        return {} if "pixel" not in points else dict(
-            extrapolated=extrapolated(points.isel(time=w)),
-            pixel=points["pixel"].isel(time=w).transpose("time", "point", "axis").values)
-    factor = points.get("temperature_footprint_noise_factor")
-    return dict(theta_paper=points["temperature_paper"].isel(time=w).values.astype(float),
-                extrapolated=extrapolated(points.isel(time=w)),
-                pixel=points["pixel"].isel(time=w).transpose("time", "point", "axis").values,
-                noise_factor=None if factor is None else factor.isel(time=w).values)
+    if "pixel" not in points:
+        return {}
+    at = points.isel(time=w)
+    out = dict(extrapolated=extrapolated(at), pixel=at["pixel"].transpose("time", "point", "axis").values)
+    if "temperature_paper" in points:
+        factor = at.get("temperature_footprint_noise_factor")
+        out.update(theta_paper=at["temperature_paper"].values.astype(float),
+                   noise_factor=None if factor is None else factor.values)
+    return out
 
 
 def extrapolated(points):
