@@ -150,7 +150,10 @@ COORD_ATTRS: dict[str, dict[str, str]] = {
 #: export, DIC project); per-file values (frame or stage index, stage name and date, counts) are not kept
 SERIES_ATTRS: dict[str, tuple[str, ...]] = {
     "ir": ("sensor_width", "sensor_height", "emissivity", "distance", "transmission", "env_temp", "path_temp",
-           "recording_file", "irbis_version", "source_unit", "camera", "lens"),
+           "recording_file", "irbis_version", "source_unit", "camera", "lens",
+           # FLIR object parameters (after the configuration's overrides) and Planck constants
+           "reflected_temp", "relative_humidity", "ir_window_temp", "ir_window_transmission",
+           "planck_r1", "planck_r2", "planck_b", "planck_f", "planck_o"),
     "dic": ("point_id_source", "point_key", "reference_stage_index", "rbm_compensation"),
 }
 

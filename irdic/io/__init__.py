@@ -15,7 +15,7 @@ Public entry points (other tools and the tests rely on these names):
 - :func:`read_markers` -> :class:`xarray.Dataset` ``x(marker, component)`` (mm)
   of the calibration target's marker centres, coordinate ``marker`` = IDs.
 
-Each format lives in its own module (``irbis``, ``irb``, ``stack``,
+Each format lives in its own module (``irbis``, ``irb``, ``flir``, ``stack``,
 ``nodemap``, ``dice``, ``vic``, ``table``, ``markers``); this module only
 detects the format and dispatches.
 """
@@ -31,7 +31,7 @@ from ._common import head_bytes
 __all__ = ["read_ir", "read_dic", "read_markers", "detect_ir_format", "detect_dic_format",
            "IR_FORMATS", "DIC_FORMATS", "COMPONENTS"]
 
-IR_FORMATS = ("irbis", "irb", "tiff", "npy")
+IR_FORMATS = ("irbis", "irb", "flir", "tiff", "npy")
 DIC_FORMATS = ("nodemap", "dice", "vic", "table")
 #: labels of the ``component`` dimension of DIC coordinates (``x``, ``x_ref``, marker centres)
 COMPONENTS = ("x", "y", "z")
@@ -46,6 +46,15 @@ def detect_ir_format(path: str | os.PathLike) -> str:
         return "irb"
     if head.startswith(b"\x93NUMPY"):
         return "npy"
+    if head[:4] in (b"FFF\x00", b"AFF\x00"):
+        return "flir"
+    if head.startswith(b"\xff\xd8"):
+        from .flir import is_radiometric_jpeg
+
+        if is_radiometric_jpeg(p):
+            return "flir"
+        raise FormatError("a JPEG without FLIR radiometric data (no APP1 'FLIR' segment): a plain picture holds "
+                          "colours, not temperatures; save radiometric JPEGs or record a FLIR .seq", p)
     if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
         return "tiff"
     text = head.lstrip(b"\xef\xbb\xbf").lstrip()
@@ -53,7 +62,8 @@ def detect_ir_format(path: str | os.PathLike) -> str:
         return "irbis"
     raise FormatError(
         f"cannot tell the IR format (suffix {suffix or 'none'!r}); expected an IRBIS text export "
-        "(starting with [Settings]), an InfraTec .irb file, a TIFF stack or a .npy array, "
+        "(starting with [Settings]), an InfraTec .irb file, a FLIR .seq/.csq/.fff file or "
+        "radiometric JPEG, a TIFF stack or a .npy array, "
         "or set the format explicitly",
         p,
     )
@@ -88,11 +98,13 @@ def read_ir(path: str | os.PathLike, format: str = "auto", **kwargs):
     ----------
     path : path-like
         One file: an IRBIS text export (one frame), an ``.irb`` image or
-        sequence, a multi-page TIFF or a ``.npy`` stack of temperatures.
-    format : {"auto", "irbis", "irb", "tiff", "npy"}
+        sequence, a FLIR ``.seq``/``.csq``/``.fff`` file or radiometric JPEG,
+        a multi-page TIFF or a ``.npy`` stack of temperatures.
+    format : {"auto", "irbis", "irb", "flir", "tiff", "npy"}
         File format; ``"auto"`` detects it from the content.
     **kwargs
-        Passed to the format's reader.
+        Passed to the format's reader (``emissivity`` and
+        ``reflected_temperature`` for ``"flir"``).
 
     Returns
     -------
@@ -104,6 +116,8 @@ def read_ir(path: str | os.PathLike, format: str = "auto", **kwargs):
         from .irbis import read_irbis as reader
     elif fmt == "irb":
         from .irb import read_irb as reader
+    elif fmt == "flir":
+        from .flir import read_flir as reader
     elif fmt == "tiff":
         from .stack import read_tiff as reader
     elif fmt == "npy":

@@ -21,7 +21,7 @@ import numpy as np
 import xarray as xr
 
 from .. import io as _io
-from ..errors import DataError, IrdicWarning
+from ..errors import ConfigError, DataError, IrdicWarning
 from ..logs import Progress
 from ..store import FrameStore, provenance
 from ..vocabulary import series_attrs
@@ -71,26 +71,47 @@ def _frames_of(f: Path, da: xr.DataArray) -> Iterator[tuple[str, xr.DataArray]]:
         yield f.name, da
 
 
-def _iter_ir_frames(files: Sequence[Path], fmt: str, threads: int = 1) -> Iterator[tuple[str, xr.DataArray]]:
+def _streamed(ffmt: str):
+    """``(headers, frames)`` of a format read frame by frame (many frames per file), None for the others.
+
+    ``headers(f, overrides)`` yields ``(time stamp or None, frame number)`` per frame without decoding
+    pixels; ``frames(f, overrides)`` yields the frames as DataArrays.
+    """
+    if ffmt == "irb":
+        from ..io import irb
+
+        return (lambda f, _o: ((irb.unix_time(h), int(h["frame_index"])) for h in irb.iter_irb_headers(f)),
+                lambda f, _o: irb.iter_irb_dataarrays(f))
+    if ffmt == "flir":
+        from ..io import flir
+
+        def headers(f, _o):
+            heads = list(flir.iter_flir_headers(f))
+            flir.check_series(heads, f)
+            return ((h["seconds"], h["frame"]) for h in heads)
+
+        return headers, flir.iter_flir_dataarrays
+    return None
+
+
+def _iter_ir_frames(files: Sequence[Path], formats: Sequence[str], threads: int = 1,
+                    overrides: Mapping | None = None) -> Iterator[tuple[str, xr.DataArray]]:
     """Yield (label, frame DataArray with dims (v, u)) for every frame of the series, in file order.
 
     ``threads > 1``: up to ``2 threads`` files are read ahead in a thread
-    pool (file parsers release the GIL in numpy and I/O). ``.irb`` files
-    (many frames each) stay streamed frame by frame in this thread.
+    pool (file parsers release the GIL in numpy and I/O). Files of many
+    frames each (``.irb``, FLIR) stay streamed frame by frame in this thread.
     """
     from collections import deque
     from concurrent.futures import ThreadPoolExecutor
 
-    formats = [_io.detect_ir_format(f) if fmt == "auto" else fmt for f in files]
+    def streamed(f, ffmt):
+        for i, frame in enumerate(_streamed(ffmt)[1](f, overrides)):
+            yield f"{f.name}[{i}]", frame
+
     if threads <= 1:
         for f, ffmt in zip(files, formats):
-            if ffmt == "irb":
-                from ..io import irb
-
-                for i, frame in enumerate(irb.iter_irb_dataarrays(f)):
-                    yield f"{f.name}[{i}]", frame
-                continue
-            yield from _frames_of(f, _read_file(f, ffmt))
+            yield from streamed(f, ffmt) if _streamed(ffmt) else _frames_of(f, _read_file(f, ffmt))
         return
     with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="ingest-ir") as pool:
         ahead: deque = deque()
@@ -98,38 +119,33 @@ def _iter_ir_frames(files: Sequence[Path], fmt: str, threads: int = 1) -> Iterat
         try:
             for f, ffmt in zip(files, formats):
                 while nxt < len(files) and len(ahead) < 2 * threads:
-                    if formats[nxt] != "irb":
+                    if not _streamed(formats[nxt]):
                         ahead.append((nxt, pool.submit(_read_file, files[nxt], formats[nxt])))
                     nxt += 1
-                if ffmt == "irb":
-                    from ..io import irb
-
-                    for i, frame in enumerate(irb.iter_irb_dataarrays(f)):
-                        yield f"{f.name}[{i}]", frame
+                if _streamed(ffmt):
+                    yield from streamed(f, ffmt)
                     continue
-                _, fut = ahead.popleft()  # the pool holds the non-.irb files in file order: this is file k
+                _, fut = ahead.popleft()  # the pool holds the other files in file order: this is file k
                 yield from _frames_of(f, fut.result())
         finally:
             for _, fut in ahead:
                 fut.cancel()
 
 
-def _count_ir_frames(files: Sequence[Path], fmt: str) -> tuple[int, list | None]:
-    """Number of frames, and ``(label, time, frame number)`` of each when every file is ``.irb``.
+def _count_ir_frames(files: Sequence[Path], formats: Sequence[str], overrides: Mapping | None = None
+                     ) -> tuple[int, list | None]:
+    """Number of frames, and ``(label, time, frame number)`` of each when every file is streamed.
 
-    ``.irb`` frames are counted and timed from their image headers, without
-    decoding pixels.
+    ``.irb`` and FLIR frames are counted and timed from their headers,
+    without decoding pixels.
     """
     n = 0
     stamps: list | None = []
-    for f in files:
-        ffmt = _io.detect_ir_format(f) if fmt == "auto" else fmt
-        if ffmt == "irb":
-            from ..io import irb
-
-            for i, info in enumerate(irb.iter_irb_headers(f)):
+    for f, ffmt in zip(files, formats):
+        if _streamed(ffmt):
+            for i, (t, number) in enumerate(_streamed(ffmt)[0](f, overrides)):
                 if stamps is not None:
-                    stamps.append((f"{f.name}[{i}]", irb.unix_time(info), int(info["frame_index"])))
+                    stamps.append((f"{f.name}[{i}]", t, number))
                 n += 1
             continue
         stamps = None
@@ -139,6 +155,19 @@ def _count_ir_frames(files: Sequence[Path], fmt: str) -> tuple[int, list | None]
             da = _io.read_ir(f, format=ffmt)
             n += da.sizes.get("time", 1)
     return n, stamps
+
+
+def _overrides(p: dict, files: Sequence[Path], formats: Sequence[str]) -> dict:
+    """Pop the FLIR object-parameter overrides from ``p``; ConfigError when set for files of another format."""
+    out = {k: p.pop(k) for k in ("emissivity", "reflected_temperature")}
+    given = [k for k, v in out.items() if v is not None]
+    other = next((f for f, ffmt in zip(files, formats) if ffmt != "flir"), None)
+    if given and other is not None:
+        raise ConfigError(
+            f"ir.{given[0]} applies to FLIR radiometric files only (counts converted by irdic), but {other} is "
+            f"{_io.detect_ir_format(other) if other.exists() else 'not FLIR'}: its temperatures were computed by "
+            "the camera software; correct the emissivity there and export again, or remove the setting")
+    return out
 
 
 def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str | os.PathLike, **params) -> Path:
@@ -152,7 +181,8 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         The store to write (replaced atomically).
     **params
         ``format`` (IR format or ``"auto"``, see :func:`irdic.io.read_ir`),
-        ``time_source``, ``frame_rate`` (Hz), ``time_origin``,
+        ``emissivity``/``reflected_temperature`` (°C) replacing a FLIR
+        file's object parameters (None keeps them), ``time_source``, ``frame_rate`` (Hz), ``time_origin``,
         ``time_offset`` (s) as in ``experiments.<name>.ir`` of the
         configuration (see :func:`irdic.stages.inputs.frame_times`); absent
         ones take the schema's defaults.
@@ -186,19 +216,21 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
     p = settings("ir_source", params, drop=("path",))
     fmt = p.pop("format")
     files = as_files(source, "IR exports")
+    formats = [_io.detect_ir_format(f) if fmt == "auto" else fmt for f in files]
+    overrides = _overrides(p, files, formats)
     with _untimed_stacks():
-        n, stamps = _count_ir_frames(files, fmt)
+        n, stamps = _count_ir_frames(files, formats, overrides)
         log.info("ingest IR: %d frames from %d files", n, len(files))
         if stamps:
             # the time axis from the headers: duplicate or decreasing time stamps
             # are refused before hours of frames are decoded and written
             labels0, times0, numbers0 = zip(*stamps)
             frame_times(times0, numbers0, labels=labels0, what="IR frame", **p)
-        it = _iter_ir_frames(files, fmt, thread_budget())
+        it = _iter_ir_frames(files, formats, thread_budget(), overrides)
         label0, first = next(it)
         # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
         attrs = series_attrs("ir", first.attrs)
-        attrs.update(provenance("ingest-ir", dict(format=fmt, **p), [str(f) for f in files[:1000]]))
+        attrs.update(provenance("ingest-ir", dict(format=fmt, **overrides, **p), [str(f) for f in files[:1000]]))
         attrs["n_source_files"] = len(files)
         with FrameStore(
             out, "temperature", n, ("v", "u"), {"v": first["v"].values, "u": first["u"].values},

@@ -6,10 +6,11 @@ against known values.
 """
 
 from .dice import write_dice
+from .flir import write_flir
 from .irb import write_irb
 from .irbis import write_irbis
 from .markers import write_markers
 from .nodemap import write_nodemap
 from .vic import write_vic
 
-__all__ = ["write_dice", "write_irb", "write_irbis", "write_markers", "write_nodemap", "write_vic"]
+__all__ = ["write_dice", "write_flir", "write_irb", "write_irbis", "write_markers", "write_nodemap", "write_vic"]

@@ -1,0 +1,457 @@
+"""FLIR radiometric files: ``.seq``, ``.csq``, single ``.fff`` frames and radiometric JPEGs.
+
+Every one is built from FFF blocks (one frame each):
+
+- a 64-byte header: magic ``FFF\\0``, creator string[16], u32 version
+  (100..199; read little-endian first, big-endian when that is out of
+  range), u32 offset of the record directory, u32 number of entries;
+- the directory: 32-byte entries (header byte order) of u16 type, u16
+  subtype, u32 version, u32 index, u32 offset (from the block start), u32
+  length, three more u32; type 0 entries are unused, and the directory order
+  is not the order of the records in the file;
+- records: type 0x01 the raw image (32-byte header of u16 words, [1] width,
+  [2] height, word 0 = 2 in the record's byte order; the image at +32,
+  encoded by the entry's subtype: 2 uncompressed u16, 3 a 16-bit PNG, 4
+  JPEG-LS), type 0x20 the camera info (:mod:`irdic.io.flir_planck`).
+
+``.seq`` and ``.csq`` files are such blocks end to end, with no index and no
+fixed stride; a block ends at the largest ``offset + length`` of its
+directory and the next one starts there. Frames are found by following that
+chain: the 4 bytes ``FFF\\0`` also occur inside pixel data, so the file is
+never searched for them. A radiometric JPEG carries one FFF block split over
+APP1 segments whose payload starts ``FLIR\\0`` (byte 6 = chunk index,
+byte 7 = last index, data from byte 8 on).
+
+PNG samples are usually stored little-endian although PNG is big-endian: the
+byte order is chosen per image as the one that puts more pixels inside the
+raw range the camera displayed (RawValueMedian +- RawValueRange), or, without
+that range, the smoother one. Rows run top to bottom.
+
+Frames are streamed: memory is one frame whatever the length of the record.
+Times are the Unix times of each frame's camera info.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import struct
+import warnings
+from typing import Iterator, Mapping
+
+import numpy as np
+import xarray as xr
+
+from ..errors import DataError, FormatError, IrdicWarning
+from ._common import check_file
+from .flir_planck import camera_info, counts_table, object_parameters, parameter_attrs
+from .stack import check_temperatures, temperature_dataarray
+
+__all__ = ["read_flir", "iter_flir_frames", "iter_flir_headers", "iter_flir_dataarrays", "is_radiometric_jpeg",
+           "MAGIC", "HEADER_SIZE", "ENTRY_SIZE", "REC_RAW", "REC_CAMERA", "RAW_HEADER_SIZE"]
+
+MAGIC = b"FFF\x00"
+HEADER_SIZE = 64
+ENTRY_SIZE = 32
+RAW_HEADER_SIZE = 32
+REC_RAW, REC_CAMERA = 0x01, 0x20
+RAW_BE, RAW_LE, RAW_PNG, RAW_JPEGLS = 1, 2, 3, 4
+MAX_ENTRIES = 4096
+MAX_SIDE = 16384
+_JPEG_SEGMENT_LIMIT = 1 << 16  # JPEG segments read before the image data when looking for FLIR APP1
+
+
+# ----------------------------------------------------------------------------
+# the FFF chain
+# ----------------------------------------------------------------------------
+def _header(head: bytes, where: str, path) -> tuple[str, int, int]:
+    """``(byte order, directory offset, entries)`` of a 64-byte FFF header."""
+    if len(head) < HEADER_SIZE or head[:4] not in (MAGIC, b"AFF\x00"):
+        raise FormatError(f"{where}: no FFF header (found {head[:4]!r}, expected {MAGIC!r}); the chain of "
+                          "frames is broken (damaged or not a FLIR file)", path)
+    for bo in "<>":
+        version, dir_offset, n = struct.unpack_from(bo + "III", head, 0x14)
+        if 100 <= version < 200:
+            break
+    else:
+        raise FormatError(f"{where}: FFF version {struct.unpack_from('<I', head, 0x14)[0]} is neither "
+                          "100..199 little- nor big-endian (damaged header)", path)
+    if dir_offset < HEADER_SIZE or not 0 < n <= MAX_ENTRIES:
+        raise FormatError(f"{where}: FFF record directory at +{dir_offset} with {n} entries is not plausible "
+                          "(damaged header)", path)
+    return bo, dir_offset, n
+
+
+def _directory(raw: bytes, bo: str) -> dict[int, tuple[int, int, int]]:
+    """``{record type: (subtype, offset, length)}`` of the used entries (the first of each type)."""
+    out: dict[int, tuple[int, int, int]] = {}
+    for k in range(len(raw) // ENTRY_SIZE):
+        rtype, sub, _ver, _idx, off, length = struct.unpack_from(bo + "HHIIII", raw, k * ENTRY_SIZE)
+        if rtype and rtype not in out:
+            out[rtype] = (sub, off, length)
+    return out
+
+
+def _walk(fh, path, size: int) -> Iterator[dict]:
+    """The blocks of a file in chain order: ``{frame, offset, length, records}``.
+
+    ``length`` may run past the end of the file for the last block only.
+    """
+    offset, frame = 0, 0
+    while offset < size:
+        where = f"frame {frame} (byte {offset})"
+        fh.seek(offset)
+        head = fh.read(HEADER_SIZE)
+        if frame > 0 and head[:4] not in (MAGIC, b"AFF\x00"):
+            if size - offset >= HEADER_SIZE:  # less is padding (radiometric JPEGs end with a byte or two)
+                warnings.warn(f"{path}: {size - offset} bytes after frame {frame - 1} are not an FFF frame; "
+                              "ignored", IrdicWarning, stacklevel=3)
+            return
+        bo, dir_offset, n = _header(head, where, path)
+        fh.seek(offset + dir_offset)
+        raw = fh.read(ENTRY_SIZE * n)
+        if len(raw) < ENTRY_SIZE * n:
+            raise FormatError(f"{where}: the record directory runs past the end of the file (truncated)", path)
+        records = _directory(raw, bo)
+        length = max([dir_offset + ENTRY_SIZE * n] + [o + ln for _s, o, ln in records.values()])
+        if REC_RAW not in records:
+            raise FormatError(f"{where}: the FFF block has no raw image record (type 1)", path)
+        yield {"frame": frame, "offset": offset, "length": length, "records": records}
+        offset += length
+        frame += 1
+
+
+def _read_record(fh, block: dict, rtype: int, size: int) -> tuple[int, bytes, int]:
+    """``(subtype, bytes, declared length)`` of a record; the bytes may be short at the end of the file."""
+    sub, off, length = block["records"][rtype]
+    fh.seek(block["offset"] + off)
+    return sub, fh.read(max(0, min(length, size - block["offset"] - off))), length
+
+
+# ----------------------------------------------------------------------------
+# radiometric JPEG
+# ----------------------------------------------------------------------------
+def _jpeg_flir_chunks(fh, path, strict: bool) -> list[bytes]:
+    """The FLIR APP1 payloads of a JPEG, in chunk order (empty when it has none)."""
+    fh.seek(0)
+    if fh.read(2) != b"\xff\xd8":
+        return []
+    chunks: dict[int, bytes] = {}
+    last = None
+    while True:
+        marker = fh.read(4)
+        if len(marker) < 4 or marker[0] != 0xFF or marker[1] in (0xD9, 0xDA):
+            break  # end of the header segments (start of scan) or a damaged file
+        (seg_len,) = struct.unpack(">H", marker[2:])
+        payload = fh.read(max(0, seg_len - 2))
+        if marker[1] == 0xE1 and payload[:5] == b"FLIR\x00" and len(payload) >= 8:
+            if strict and payload[6] in chunks:
+                raise FormatError(f"the FLIR APP1 segment {payload[6]} occurs twice", path)
+            chunks[payload[6]] = payload[8:]
+            last = payload[7]
+    if not chunks:
+        return []
+    missing = sorted(set(range(last + 1)) - set(chunks))
+    if strict and missing:
+        raise FormatError(f"radiometric JPEG: FLIR APP1 segment(s) {missing} of 0..{last} are missing "
+                          "(truncated or edited picture)", path)
+    return [chunks[k] for k in sorted(chunks)]
+
+
+def is_radiometric_jpeg(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a JPEG with FLIR radiometric data (APP1 ``FLIR`` segments)."""
+    with open(check_file(path), "rb") as fh:
+        return bool(_jpeg_flir_chunks(fh, path, strict=False))
+
+
+def _open_blocks(p) -> tuple[object, int]:
+    """A binary file object over the FFF chain of ``p`` (the file, or the FFF block of a JPEG) and its size."""
+    fh = open(p, "rb")
+    if fh.read(2) != b"\xff\xd8":
+        return fh, p.stat().st_size
+    try:
+        chunks = _jpeg_flir_chunks(fh, p, strict=True)
+    finally:
+        fh.close()
+    if not chunks:
+        raise FormatError("a JPEG without FLIR radiometric data (no APP1 'FLIR' segment): a plain picture "
+                          "holds colours, not temperatures; save radiometric JPEGs or record a .seq", p)
+    data = b"".join(chunks)
+    return io.BytesIO(data), len(data)
+
+
+# ----------------------------------------------------------------------------
+# frames
+# ----------------------------------------------------------------------------
+def _truncated_before_image(fh, block: dict, size: int, path) -> bool:
+    """Whether the block is the last, cut before its raw image header ends (warns: the frame is left out)."""
+    if block["offset"] + block["length"] <= size:
+        return False
+    ends = [block["offset"] + off + (ln if rtype != REC_RAW else RAW_HEADER_SIZE)
+            for rtype, (_s, off, ln) in block["records"].items() if rtype in (REC_RAW, REC_CAMERA)]
+    if max(ends) <= size:
+        return False
+    warnings.warn(f"{path}: frame {block['frame']} is cut off before its raw image (truncated file); "
+                  "left out", IrdicWarning, stacklevel=4)
+    return True
+
+
+def _camera(fh, block: dict, size: int, path) -> dict:
+    where = f"frame {block['frame']}"
+    if REC_CAMERA not in block["records"]:
+        raise FormatError(f"{where}: the FFF block has no camera-info record (type 0x20): no Planck constants "
+                          "to convert counts to temperatures", path)
+    _sub, raw, _length = _read_record(fh, block, REC_CAMERA, size)
+    return camera_info(raw, where, path)
+
+
+def _raw_shape(raw: bytes, where: str, path) -> tuple[str, int, int]:
+    if len(raw) < RAW_HEADER_SIZE:
+        raise FormatError(f"{where}: raw image record of {len(raw)} bytes (truncated)", path)
+    bo = "<" if struct.unpack_from("<H", raw)[0] == 2 else ">" if struct.unpack_from(">H", raw)[0] == 2 else ""
+    if not bo:
+        raise FormatError(f"{where}: raw image record has no byte-order mark (first u16 = 2)", path)
+    _, width, height = struct.unpack_from(bo + "HHH", raw)
+    if not (0 < width <= MAX_SIDE and 0 < height <= MAX_SIDE):
+        raise FormatError(f"{where}: raw image size {width} x {height} px is not plausible", path)
+    return bo, width, height
+
+
+def _in_range(img: np.ndarray, median: int, rng: int) -> float:
+    return float(np.count_nonzero(np.abs(img.astype(np.int32) - median) <= rng)) / img.size
+
+
+def _roughness(img: np.ndarray) -> float:
+    x = img.astype(np.float64)
+    return float(np.abs(np.diff(x, axis=-1)).mean()) if x.shape[-1] > 1 else 0.0
+
+
+def _png_order(img: np.ndarray, cam: dict) -> np.ndarray:
+    """The PNG's samples in the byte order that makes them counts (see the module notes)."""
+    swapped = img.byteswap()
+    if cam["range"] > 0:
+        keep = _in_range(img, cam["median"], cam["range"]) > _in_range(swapped, cam["median"], cam["range"])
+    else:
+        keep = _roughness(img) < _roughness(swapped)
+    return img if keep else swapped
+
+
+def _decode(sub: int, data: bytes, bo: str, w: int, h: int, cam: dict, where: str, path) -> np.ndarray:
+    """Counts (uint16, shape (h, w)) of a raw record's image; incomplete uncompressed rows are masked later."""
+    if sub in (RAW_LE, RAW_BE):
+        # subtype 1 is big-endian; subtype 2 follows its record's byte-order mark (little-endian in every file seen)
+        dtype = np.dtype(np.uint16).newbyteorder(">" if sub == RAW_BE else bo)
+        n = min(len(data) // 2, w * h)
+        out = np.zeros(w * h, np.uint16)
+        out[:n] = np.frombuffer(data, dtype, count=n)
+        return out.reshape(h, w)
+    import imagecodecs
+
+    if sub not in (RAW_PNG, RAW_JPEGLS):
+        raise FormatError(f"{where}: raw image encoding (subtype) {sub} is not one irdic knows (2 uncompressed, "
+                          "3 PNG, 4 JPEG-LS); export the record as an uncompressed .seq", path)
+    try:
+        img = imagecodecs.png_decode(data) if sub == RAW_PNG else imagecodecs.jpegls_decode(data)
+    except Exception as exc:  # the codecs raise their own error types
+        raise FormatError(f"{where}: the {'PNG' if sub == RAW_PNG else 'JPEG-LS'} raw image cannot be decoded "
+                          f"({exc})", path) from None
+    if img.dtype != np.uint16 or img.shape != (h, w):
+        raise FormatError(f"{where}: the raw image decodes to {img.dtype} {img.shape}, the record header says "
+                          f"{w} x {h} px of 16 bits", path)
+    return _png_order(img, cam) if sub == RAW_PNG else img
+
+
+def _frame_counts(fh, block: dict, size: int, cam: dict, path) -> tuple[np.ndarray, int]:
+    """Counts of one frame and the number of valid pixels (all unless the file ends inside them)."""
+    where = f"frame {block['frame']}"
+    sub, raw, length = _read_record(fh, block, REC_RAW, size)
+    bo, w, h = _raw_shape(raw, where, path)
+    data = raw[RAW_HEADER_SIZE:]
+    counts = _decode(sub, data, bo, w, h, cam, where, path)
+    valid = w * h
+    if len(raw) < length:
+        if sub in (RAW_LE, RAW_BE):
+            valid = min(valid, len(data) // 2)
+        warnings.warn(f"{path}: frame {block['frame']} ends {length - len(raw)} bytes short of its raw image "
+                      "record (truncated file)" + (f"; {w * h - valid} missing pixels are NaN" if valid < w * h
+                                                    else "; the image itself is complete"),
+                      IrdicWarning, stacklevel=4)
+    return counts, valid
+
+
+def iter_flir_headers(path: str | os.PathLike) -> Iterator[dict]:
+    """Stream the frame headers of a FLIR file without decoding pixels.
+
+    Yields
+    ------
+    dict
+        ``frame`` (position in the chain), ``offset`` (byte), ``width``,
+        ``height``, ``seconds`` (Unix time, s, or None), ``tz_minutes``,
+        ``model``, ``median``/``range`` (counts), ``params`` (camera info,
+        see :func:`irdic.io.flir_planck.camera_info`).
+    """
+    p = check_file(path)
+    fh, size = _open_blocks(p)
+    with fh:
+        for block in _walk(fh, p, size):
+            if _truncated_before_image(fh, block, size, p):
+                return
+            cam = _camera(fh, block, size, p)
+            fh.seek(block["offset"] + block["records"][REC_RAW][1])
+            _bo, w, h = _raw_shape(fh.read(RAW_HEADER_SIZE), f"frame {block['frame']}", p)
+            yield {"frame": block["frame"], "offset": block["offset"], "width": w, "height": h, **cam}
+
+
+def iter_flir_frames(path: str | os.PathLike, overrides: Mapping[str, float] | None = None
+                     ) -> Iterator[tuple[dict, np.ndarray]]:
+    """Stream the frames of a FLIR file one at a time.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.seq``, ``.csq``, ``.fff`` or radiometric JPEG.
+    overrides : mapping, optional
+        ``emissivity`` and/or ``reflected_temperature`` (°C) replacing the
+        file's object parameters.
+
+    Yields
+    ------
+    meta : dict
+        As :func:`iter_flir_headers`, ``params`` with the overrides applied.
+    frame : ndarray of float32, shape (height, width)
+        Temperatures in °C (NaN for counts too cold to have one and for
+        pixels missing from a truncated last frame), top row first.
+
+    Raises
+    ------
+    FormatError
+        Broken chain, damaged header or record, an unknown raw encoding,
+        camera info that cannot give temperatures.
+
+    Warns
+    -----
+    IrdicWarning
+        A truncated last frame (decoded as far as it goes), bytes after the
+        last frame that are not one.
+    """
+    p = check_file(path)
+    fh, size = _open_blocks(p)
+    key = table = None
+    with fh:
+        for block in _walk(fh, p, size):
+            if _truncated_before_image(fh, block, size, p):
+                return
+            cam = _camera(fh, block, size, p)
+            params = object_parameters(cam["params"], overrides, f"frame {block['frame']}", p)
+            counts, valid = _frame_counts(fh, block, size, cam, p)
+            pkey = tuple(sorted(params.items()))
+            if pkey != key:  # one table per parameter set: the parameters rarely change within a record
+                table, key = counts_table(params), pkey
+            frame = table.take(counts)
+            if valid < frame.size:
+                frame.reshape(-1)[valid:] = np.nan
+            h, w = frame.shape
+            yield {"frame": block["frame"], "offset": block["offset"], "width": w, "height": h,
+                   **cam, "params": params}, frame
+
+
+def _attrs(info: dict, path) -> dict:
+    attrs = {"format": "flir", "source": str(path), **parameter_attrs(info["params"]),
+             "sensor_width": info["width"], "sensor_height": info["height"]}
+    if info["model"]:
+        attrs["camera"] = info["model"]
+    return attrs
+
+
+def iter_flir_dataarrays(path: str | os.PathLike, overrides: Mapping[str, float] | None = None
+                         ) -> Iterator[xr.DataArray]:
+    """Stream the frames of a FLIR file as DataArrays (for series ingest).
+
+    Yields
+    ------
+    xarray.DataArray
+        float32 °C, dims ``("v", "u")``; scalar coordinate ``time`` = the
+        frame's Unix time (s, UTC), absent when the frame has none;
+        ``attrs`` as :func:`read_flir` plus ``frame_index``.
+    """
+    p = check_file(path)
+    for info, frame in iter_flir_frames(p, overrides):
+        check_temperatures(frame, p, allow_nan=True)
+        attrs = _attrs(info, p)
+        attrs["frame_index"] = info["frame"]
+        yield temperature_dataarray(frame, time=info["seconds"], attrs=attrs)
+
+
+def check_series(heads: list[dict], path) -> None:
+    """DataError when frames change size; warnings when camera parameters change or times do not increase."""
+    first = heads[0]
+    for info in heads[1:]:
+        k = info["frame"]
+        if (info["width"], info["height"]) != (first["width"], first["height"]):
+            raise DataError(f"{path}: frame {k} is {info['width']} x {info['height']} px, frame 0 is "
+                            f"{first['width']} x {first['height']} px; a record needs one frame size")
+    changed = next((info for info in heads[1:] if info["params"] != first["params"]), None)
+    if changed is not None:
+        names = sorted(n for n, v in changed["params"].items() if first["params"][n] != v)
+        warnings.warn(f"{path}: frame {changed['frame']} changes the camera parameters ({', '.join(names)}) "
+                      "within the record; each frame is converted with its own", IrdicWarning, stacklevel=3)
+    t = [info["seconds"] for info in heads]
+    if None not in t:
+        bad = next((k for k in range(1, len(t)) if t[k] <= t[k - 1]), None)
+        if bad is not None:
+            warnings.warn(f"{path}: frame times do not increase (frame {bad} at {t[bad] - t[0]:.3f} s after frame "
+                          f"{bad - 1} at {t[bad - 1] - t[0]:.3f} s)", IrdicWarning, stacklevel=3)
+
+
+def read_flir(path: str | os.PathLike, *, emissivity: float | None = None,
+              reflected_temperature: float | None = None) -> xr.DataArray:
+    """Read a FLIR ``.seq``, ``.csq``, ``.fff`` or radiometric JPEG.
+
+    Parameters
+    ----------
+    path : path-like
+    emissivity : float, optional
+        Replaces the file's emissivity (0..1].
+    reflected_temperature : float, optional
+        Replaces the file's reflected apparent temperature (°C).
+
+    Returns
+    -------
+    xarray.DataArray
+        float32 °C. One frame: dims ``("v", "u")`` with scalar ``time``
+        (Unix s) when the frame has one. Several: dims ``("time", "v", "u")``
+        with ``time`` in s relative to the first frame and ``frame_index``.
+        ``attrs``: ``format="flir"``, ``source``, ``camera``, the object
+        parameters (``emissivity``, ``distance`` m, ``reflected_temp``,
+        ``env_temp`` (atmosphere), ``ir_window_temp`` °C,
+        ``relative_humidity``, ``ir_window_transmission``) and the Planck
+        constants (``planck_r1`` ... ``planck_o``) of the first frame, after
+        the overrides.
+
+    Raises
+    ------
+    FormatError, DataError
+        See :func:`iter_flir_frames`; frames of different sizes.
+    """
+    p = check_file(path)
+    overrides = {"emissivity": emissivity, "reflected_temperature": reflected_temperature}
+    heads = list(iter_flir_headers(p))  # sizes and times first: nothing is decoded for a record that cannot be read
+    check_series(heads, p)
+    n = len(heads)
+    stack = np.empty((n, heads[0]["height"], heads[0]["width"]), np.float32)
+    first = None
+    for k, (info, frame) in enumerate(iter_flir_frames(p, overrides)):
+        if k >= n or info["offset"] != heads[k]["offset"]:
+            raise DataError(f"{p}: the file changed while it was read")
+        stack[k] = frame
+        first = first or info
+    check_temperatures(stack, p, allow_nan=True)
+    attrs = _attrs(first, p)
+    if n == 1:
+        attrs["frame_index"] = 0
+        return temperature_dataarray(stack[0], time=first["seconds"], attrs=attrs)
+    attrs["n_frames"] = n
+    t = [info["seconds"] for info in heads]
+    # the stamps have millisecond resolution: relative times rounded to it drop float64 noise of Unix seconds
+    time = np.arange(n, dtype=np.float64) if None in t else np.round(np.asarray(t) - t[0], 3)
+    return temperature_dataarray(stack, time=time, extra_coords={"frame_index": np.arange(n)}, attrs=attrs)

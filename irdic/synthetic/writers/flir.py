@@ -1,0 +1,174 @@
+"""Writer of FLIR FFF frames: ``.seq`` chains, single ``.fff`` frames and radiometric JPEGs.
+
+The layout is the one :mod:`irdic.io.flir` documents (its constants are
+imported from there). Temperatures become counts through the inverse of the
+reader's Planck model with the same object parameters, rounded to the
+nearest count: a round trip returns each temperature to within half a count
+(about 0.01 K near room temperature with the default constants).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ...errors import ConfigError
+from ...io.flir import ENTRY_SIZE, HEADER_SIZE, MAGIC, RAW_HEADER_SIZE, RAW_JPEGLS, RAW_LE, RAW_PNG, REC_CAMERA, \
+    REC_RAW
+from ...io.flir_planck import celsius_to_counts
+
+__all__ = ["write_flir", "flir_parameters", "counts_of", "DEFAULT_PARAMETERS"]
+
+#: object parameters and constants of a FLIR SC660 (kelvin; the reader's ``params`` keys)
+DEFAULT_PARAMETERS = {
+    "emissivity": 0.95, "distance": 1.0, "reflected_k": 293.15, "atmosphere_k": 293.15, "window_k": 293.15,
+    "window_transmission": 1.0, "humidity": 0.5, "r1": 21106.77, "b": 1501.0, "f": 1.0,
+    "alpha1": 0.006569, "alpha2": 0.01262, "beta1": -0.002276, "beta2": -0.00667, "x": 1.9,
+    "r2": 0.012545258, "o": -7340.0,
+}
+_OFFSETS = {"emissivity": 0x20, "distance": 0x24, "reflected_k": 0x28, "atmosphere_k": 0x2c, "window_k": 0x30,
+            "window_transmission": 0x34, "humidity": 0x3c, "r1": 0x58, "b": 0x5c, "f": 0x60, "alpha1": 0x70,
+            "alpha2": 0x74, "beta1": 0x78, "beta2": 0x7c, "x": 0x80, "r2": 0x30c}
+CAMERA_INFO_LENGTH = 2476
+_ENCODINGS = {"raw": RAW_LE, "png": RAW_PNG, "jpegls": RAW_JPEGLS}
+
+
+def flir_parameters(params: Mapping[str, float] | None = None) -> dict:
+    """:data:`DEFAULT_PARAMETERS` updated by ``params``, as the float32 values a file holds (``o`` an integer)."""
+    p = dict(DEFAULT_PARAMETERS, **(params or {}))
+    unknown = sorted(set(p) - set(DEFAULT_PARAMETERS))
+    if unknown:
+        raise ConfigError(f"unknown FLIR parameter(s) {', '.join(unknown)}; expected {', '.join(DEFAULT_PARAMETERS)}")
+    out = {k: float(np.float32(v)) for k, v in p.items()}
+    out["o"] = float(int(round(p["o"])))
+    return out
+
+
+def _camera_record(p: dict, bo: str, seconds: float, model: str, median: int, rng: int) -> bytes:
+    rec = bytearray(CAMERA_INFO_LENGTH)
+    struct.pack_into(bo + "H", rec, 0, 2)
+    for k, off in _OFFSETS.items():
+        struct.pack_into(bo + "f", rec, off, p[k])
+    struct.pack_into(bo + "i", rec, 0x308, int(p["o"]))
+    struct.pack_into(bo + "HH", rec, 0x338, median, rng)
+    whole = int(np.floor(seconds))
+    ms = int(round((seconds - whole) * 1000))
+    if ms == 1000:
+        whole, ms = whole + 1, 0
+    struct.pack_into(bo + "IIh", rec, 0x384, whole, ms, 0)
+    name = model.encode("latin-1")[:31]
+    rec[0xd4:0xd4 + len(name)] = name
+    return bytes(rec)
+
+
+def _raw_record(counts: np.ndarray, bo: str, encoding: str, png_swap: bool) -> bytes:
+    h, w = counts.shape
+    head = bytearray(RAW_HEADER_SIZE)
+    struct.pack_into(bo + "HHH", head, 0, 2, w, h)
+    struct.pack_into(bo + "H", head, 12, w - 1)
+    struct.pack_into(bo + "H", head, 16, h - 1)
+    if encoding == "raw":
+        return bytes(head) + counts.astype(bo + "u2").tobytes()
+    import imagecodecs
+
+    if encoding == "png":
+        # cameras store the samples little-endian inside a big-endian format: pre-swap so the PNG bytes are LE
+        return bytes(head) + imagecodecs.png_encode(counts.byteswap() if png_swap else counts)
+    return bytes(head) + imagecodecs.jpegls_encode(counts)
+
+
+def _block(counts: np.ndarray, p: dict, seconds: float, *, header_order: str, record_order: str,
+           encoding: str, png_swap: bool, model: str, pad: int, subtype: int | None) -> bytes:
+    """One FFF block: header, a 2-entry directory (raw image first), camera info, raw image."""
+    median = int(np.median(counts))
+    rng = int(np.abs(counts.astype(np.int64) - median).max()) + 1
+    cam = _camera_record(p, record_order, seconds, model, median, min(rng, 65535))
+    raw = _raw_record(counts, record_order, encoding, png_swap)
+    cam_off = HEADER_SIZE + 2 * ENTRY_SIZE + pad
+    raw_off = cam_off + len(cam)
+    head = bytearray(HEADER_SIZE)
+    head[:4] = MAGIC
+    head[4:4 + 10] = b"ResearchIR"
+    struct.pack_into(header_order + "III", head, 0x14, 100, HEADER_SIZE, 2)
+    sub = _ENCODINGS[encoding] if subtype is None else subtype
+    entries = struct.pack(header_order + "HHIIIIIII", REC_RAW, sub, 100, 2, raw_off, len(raw), 0, 0, 0) \
+        + struct.pack(header_order + "HHIIIIIII", REC_CAMERA, 0, 105, 1, cam_off, len(cam), 0, 0, 0)
+    return bytes(head) + entries + bytes(pad) + cam + raw
+
+
+def _jpeg(block: bytes) -> bytes:
+    """A radiometric JPEG: a small grey picture with ``block`` in APP1 ``FLIR`` segments after SOI."""
+    import imagecodecs
+
+    picture = imagecodecs.jpeg8_encode(np.full((8, 8), 128, np.uint8))
+    size = 65000
+    chunks = [block[k:k + size] for k in range(0, len(block), size)]
+    app1 = b"".join(b"\xff\xe1" + struct.pack(">H", 2 + 8 + len(c)) + b"FLIR\x00\x01" + bytes([k, len(chunks) - 1])
+                    + c for k, c in enumerate(chunks))
+    return picture[:2] + app1 + picture[2:]
+
+
+def write_flir(path: str | os.PathLike, temperatures=None, *, counts=None, times: Sequence[float] | None = None,
+               params: Mapping[str, float] | Sequence[Mapping[str, float]] | None = None,
+               header_order: str = "<", record_order: str = "<", encoding: str = "raw", png_swap: bool = True,
+               jpeg: bool = False, model: str = "irdic synthetic", subtype: int | None = None) -> Path:
+    """Write frames as a FLIR ``.seq`` (FFF blocks end to end), one ``.fff`` frame or a radiometric JPEG.
+
+    Parameters
+    ----------
+    path : path-like
+    temperatures : array-like, shape (V, U) or (T, V, U), or a sequence of 2-D arrays
+        °C, converted to the nearest count; or give ``counts``.
+    counts : array-like of the same shapes, optional
+        Raw counts (0..65535) written as they are.
+    times : sequence of float, optional
+        Unix time of each frame (s, millisecond resolution); default 1.6e9 + k / 30.
+    params : mapping or sequence of mappings, optional
+        Object parameters and constants (keys of :data:`DEFAULT_PARAMETERS`, kelvin), per file or per frame.
+    header_order, record_order : {"<", ">"}
+        Byte order of the FFF headers and of the records.
+    encoding : {"raw", "png", "jpegls"}
+        Raw image encoding (directory subtype 2, 3 or 4); ``png_swap`` stores the PNG samples little-endian
+        as the cameras do.
+    jpeg : bool
+        Write a radiometric JPEG (one frame only).
+    subtype : int, optional
+        Directory subtype to declare instead of the encoding's (for tests of unknown encodings).
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    if (temperatures is None) == (counts is None):
+        raise ConfigError("write_flir needs either temperatures or counts")
+    frames = temperatures if counts is None else counts
+    frames = [np.asarray(f) for f in (frames if isinstance(frames, (list, tuple)) or np.ndim(frames) == 3
+                                       else [frames])]
+    if encoding not in _ENCODINGS or header_order not in "<>" or record_order not in "<>":
+        raise ConfigError(f"write_flir: encoding {encoding!r} / byte orders {header_order!r}, {record_order!r}")
+    if jpeg and len(frames) != 1:
+        raise ConfigError(f"a radiometric JPEG holds one frame, got {len(frames)}")
+    per_frame = list(params) if isinstance(params, (list, tuple)) else [params] * len(frames)
+    times = list(times) if times is not None else [1.6e9 + k / 30.0 for k in range(len(frames))]
+    out = bytearray()
+    for k, (f, prm) in enumerate(zip(frames, per_frame)):
+        p = flir_parameters(prm)
+        if counts is None:
+            f = np.clip(np.rint(celsius_to_counts(f, p)), 0, 65535)
+        c = np.asarray(f).astype(np.uint16)
+        # the first frame of a ResearchIR file has its records further down than the others
+        out += _block(c, p, times[k], header_order=header_order, record_order=record_order, encoding=encoding,
+                      png_swap=png_swap, model=model, pad=128 if k == 0 else 0, subtype=subtype)
+    path = Path(path)
+    path.write_bytes(_jpeg(bytes(out)) if jpeg else bytes(out))
+    return path
+
+
+def counts_of(temperatures, params: Mapping[str, float] | None = None) -> np.ndarray:
+    """The counts :func:`write_flir` writes for ``temperatures`` (°C) under ``params`` (float64 °C -> uint16)."""
+    return np.clip(np.rint(celsius_to_counts(temperatures, flir_parameters(params))), 0, 65535).astype(np.uint16)
+
