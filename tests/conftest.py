@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLES = ROOT.parent / "shared" / "samples"
+# IRDIC_SAMPLES points elsewhere (a checkout whose parent folder has no shared/samples)
+SAMPLES = Path(os.environ.get("IRDIC_SAMPLES", ROOT.parent / "shared" / "samples"))
 
 
 @pytest.fixture(scope="session")

@@ -107,10 +107,16 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
                 warnings.warn(f"{path}: {size - offset} bytes after frame {frame - 1} are not an FFF frame; "
                               "ignored", IrdicWarning, stacklevel=3)
             return
+        if frame > 0 and len(head) < HEADER_SIZE:
+            _cut(path, frame, "inside its header")
+            return
         bo, dir_offset, n = _header(head, where, path)
         fh.seek(offset + dir_offset)
         raw = fh.read(ENTRY_SIZE * n)
         if len(raw) < ENTRY_SIZE * n:
+            if frame > 0:
+                _cut(path, frame, "inside its record directory")
+                return
             raise FormatError(f"{where}: the record directory runs past the end of the file (truncated)", path)
         records = _directory(raw, bo)
         length = max([dir_offset + ENTRY_SIZE * n] + [o + ln for _s, o, ln in records.values()])
@@ -119,6 +125,11 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
         yield {"frame": frame, "offset": offset, "length": length, "records": records}
         offset += length
         frame += 1
+
+
+def _cut(path, frame: int, where: str) -> None:
+    warnings.warn(f"{path}: frame {frame} is cut off by the end of the file ({where}); left out", IrdicWarning,
+                  stacklevel=4)
 
 
 def _read_record(fh, block: dict, rtype: int, size: int) -> tuple[int, bytes, int]:
@@ -183,17 +194,23 @@ def _open_blocks(p) -> tuple[object, int]:
 # ----------------------------------------------------------------------------
 # frames
 # ----------------------------------------------------------------------------
-def _truncated_before_image(fh, block: dict, size: int, path) -> bool:
-    """Whether the block is the last, cut before its raw image header ends (warns: the frame is left out)."""
+def _usable_camera(fh, block: dict, size: int, path) -> dict | None:
+    """The camera info of a block; None for a last block cut off too early to give a frame (warns).
+
+    A last block that runs past the end of the file is used when its camera
+    info and its image are there (a ``.csq`` misses only padding) or, for
+    uncompressed images, at least half of the pixels are.
+    """
     if block["offset"] + block["length"] <= size:
-        return False
-    ends = [block["offset"] + off + (ln if rtype != REC_RAW else RAW_HEADER_SIZE)
-            for rtype, (_s, off, ln) in block["records"].items() if rtype in (REC_RAW, REC_CAMERA)]
-    if max(ends) <= size:
-        return False
-    warnings.warn(f"{path}: frame {block['frame']} is cut off before its raw image (truncated file); "
-                  "left out", IrdicWarning, stacklevel=4)
-    return True
+        return _camera(fh, block, size, path)
+    try:
+        cam = _camera(fh, block, size, path)
+        _frame_counts(fh, block, size, cam, path, warn=False)
+    except FormatError as exc:
+        warnings.warn(f"{path}: frame {block['frame']} is cut off by the end of the file ({exc.args[0]}); "
+                      "left out", IrdicWarning, stacklevel=4)
+        return None
+    return cam
 
 
 def _camera(fh, block: dict, size: int, path) -> dict:
@@ -236,6 +253,22 @@ def _png_order(img: np.ndarray, cam: dict) -> np.ndarray:
     return img if keep else swapped
 
 
+def _codestream_size(data: bytes, sub: int) -> tuple[int, int] | None:
+    """``(width, height)`` a PNG (IHDR) or JPEG-LS (SOF55) stream declares, None when it declares none."""
+    if sub == RAW_PNG:
+        if data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR" or len(data) < 24:
+            return None
+        return struct.unpack_from(">II", data, 16)
+    pos = 2 if data[:2] == b"\xff\xd8" else len(data)
+    while pos + 9 <= len(data) and data[pos] == 0xFF:
+        marker, seg = data[pos + 1], struct.unpack_from(">H", data, pos + 2)[0]
+        if marker == 0xF7:
+            h, w = struct.unpack_from(">HH", data, pos + 5)
+            return w, h
+        pos += 2 + seg
+    return None
+
+
 def _decode(sub: int, data: bytes, bo: str, w: int, h: int, cam: dict, where: str, path) -> np.ndarray:
     """Counts (uint16, shape (h, w)) of a raw record's image; incomplete uncompressed rows are masked later."""
     if sub in (RAW_LE, RAW_BE):
@@ -250,26 +283,36 @@ def _decode(sub: int, data: bytes, bo: str, w: int, h: int, cam: dict, where: st
     if sub not in (RAW_PNG, RAW_JPEGLS):
         raise FormatError(f"{where}: raw image encoding (subtype) {sub} is not one irdic knows (2 uncompressed, "
                           "3 PNG, 4 JPEG-LS); export the record as an uncompressed .seq", path)
+    what = "PNG" if sub == RAW_PNG else "JPEG-LS"
+    declared = _codestream_size(data, sub)
+    if declared != (w, h):  # checked before decoding: a damaged stream must not allocate a huge image
+        raise FormatError(f"{where}: the {what} raw image " + ("has no readable size header" if declared is None
+                          else f"is {declared[0]} x {declared[1]} px") + f", the record header says {w} x {h} px",
+                          path)
     try:
         img = imagecodecs.png_decode(data) if sub == RAW_PNG else imagecodecs.jpegls_decode(data)
     except Exception as exc:  # the codecs raise their own error types
-        raise FormatError(f"{where}: the {'PNG' if sub == RAW_PNG else 'JPEG-LS'} raw image cannot be decoded "
-                          f"({exc})", path) from None
+        raise FormatError(f"{where}: the {what} raw image cannot be decoded ({exc})", path) from None
     if img.dtype != np.uint16 or img.shape != (h, w):
         raise FormatError(f"{where}: the raw image decodes to {img.dtype} {img.shape}, the record header says "
                           f"{w} x {h} px of 16 bits", path)
     return _png_order(img, cam) if sub == RAW_PNG else img
 
 
-def _frame_counts(fh, block: dict, size: int, cam: dict, path) -> tuple[np.ndarray, int]:
+def _frame_counts(fh, block: dict, size: int, cam: dict, path, warn: bool = True) -> tuple[np.ndarray, int]:
     """Counts of one frame and the number of valid pixels (all unless the file ends inside them)."""
     where = f"frame {block['frame']}"
     sub, raw, length = _read_record(fh, block, REC_RAW, size)
     bo, w, h = _raw_shape(raw, where, path)
     data = raw[RAW_HEADER_SIZE:]
+    if sub in (RAW_LE, RAW_BE) and (length < RAW_HEADER_SIZE + 2 * w * h or len(data) < w * h):
+        raise FormatError(f"{where}: {w} x {h} uncompressed pixels need {RAW_HEADER_SIZE + 2 * w * h} bytes, the raw "
+                          f"image record " + (f"declares {length}" if length < RAW_HEADER_SIZE + 2 * w * h else
+                                               f"holds only {len(raw)} before the file ends")
+                          + " (damaged or truncated)", path)
     counts = _decode(sub, data, bo, w, h, cam, where, path)
     valid = w * h
-    if len(raw) < length:
+    if len(raw) < length and warn:
         if sub in (RAW_LE, RAW_BE):
             valid = min(valid, len(data) // 2)
         warnings.warn(f"{path}: frame {block['frame']} ends {length - len(raw)} bytes short of its raw image "
@@ -294,9 +337,9 @@ def iter_flir_headers(path: str | os.PathLike) -> Iterator[dict]:
     fh, size = _open_blocks(p)
     with fh:
         for block in _walk(fh, p, size):
-            if _truncated_before_image(fh, block, size, p):
+            cam = _usable_camera(fh, block, size, p)
+            if cam is None:
                 return
-            cam = _camera(fh, block, size, p)
             fh.seek(block["offset"] + block["records"][REC_RAW][1])
             _bo, w, h = _raw_shape(fh.read(RAW_HEADER_SIZE), f"frame {block['frame']}", p)
             yield {"frame": block["frame"], "offset": block["offset"], "width": w, "height": h, **cam}
@@ -339,9 +382,9 @@ def iter_flir_frames(path: str | os.PathLike, overrides: Mapping[str, float] | N
     key = table = None
     with fh:
         for block in _walk(fh, p, size):
-            if _truncated_before_image(fh, block, size, p):
+            cam = _usable_camera(fh, block, size, p)
+            if cam is None:
                 return
-            cam = _camera(fh, block, size, p)
             params = object_parameters(cam["params"], overrides, f"frame {block['frame']}", p)
             counts, valid = _frame_counts(fh, block, size, cam, p)
             pkey = tuple(sorted(params.items()))
@@ -383,7 +426,17 @@ def iter_flir_dataarrays(path: str | os.PathLike, overrides: Mapping[str, float]
 
 
 def check_series(heads: list[dict], path) -> None:
-    """DataError when frames change size; warnings when camera parameters change or times do not increase."""
+    """DataError when frames change size; warnings when camera parameters change or times do not increase.
+
+    Raises
+    ------
+    FormatError
+        No complete frame at all.
+    DataError
+        Frames of different sizes.
+    """
+    if not heads:
+        raise FormatError("holds no complete FLIR frame (truncated or empty FFF data)", path)
     first = heads[0]
     for info in heads[1:]:
         k = info["frame"]

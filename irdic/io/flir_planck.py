@@ -154,8 +154,16 @@ def object_parameters(params: Mapping[str, float], overrides: Mapping[str, float
                      if not 0 < out[k] <= 1]
         problems += [f"{k} = {out[k]:.6g} K is not positive" for k in ("reflected_k", "atmosphere_k", "window_k")
                      if out[k] <= 0]
-        if out["distance"] < 0 or out["humidity"] < 0:
-            problems.append(f"distance {out['distance']:.6g} m / humidity {out['humidity']:.6g} is negative")
+        problems += [f"{k} = {out[k]:.6g} K is not below 5000 K" for k in ("reflected_k", "atmosphere_k", "window_k")
+                     if out[k] >= 5000]
+        if not (0 <= out["distance"] < 1e6 and 0 <= out["humidity"] <= 2):
+            problems.append(f"distance {out['distance']:.6g} m or relative humidity {out['humidity']:.6g} is out of "
+                            "range")
+    if not problems:
+        gain, offset, tau = _path_terms(out)
+        if not (np.isfinite(gain) and np.isfinite(offset) and 0 < tau):
+            problems.append(f"the atmospheric transmission {tau:.6g} over half the {out['distance']:.6g} m path "
+                            "(from Alpha1/2, Beta1/2, X) is not a positive number")
     if problems:
         raise FormatError(f"{where}: camera info cannot give temperatures ({'; '.join(problems)}); "
                           "damaged file or a layout irdic does not know", path)
@@ -178,11 +186,12 @@ def parameter_attrs(p: Mapping[str, float]) -> dict:
 
 def planck_signal(t_kelvin, p: Mapping[str, float]):
     """Counts a blackbody at ``t_kelvin`` gives: ``R1 / (R2 (exp(B / T) - F)) - O``."""
-    return p["r1"] / (p["r2"] * (np.exp(p["b"] / np.asarray(t_kelvin, dtype=np.float64)) - p["f"])) - p["o"]
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # cold or damaged: inf/NaN, checked by callers
+        return p["r1"] / (p["r2"] * (np.exp(p["b"] / np.asarray(t_kelvin, dtype=np.float64)) - p["f"])) - p["o"]
 
 
-def _path_terms(p: Mapping[str, float]) -> tuple[float, float]:
-    """``(gain, offset)`` with ``W_obj = gain S - offset`` for measured counts ``S``.
+def _path_terms(p: Mapping[str, float]) -> tuple[float, float, float]:
+    """``(gain, offset, tau)`` with ``W_obj = gain S - offset`` for measured counts ``S``.
 
     Notes
     -----
@@ -196,17 +205,18 @@ def _path_terms(p: Mapping[str, float]) -> tuple[float, float]:
     ``raw2temp`` writes it.
     """
     t = p["atmosphere_k"] - KELVIN
-    h2o = p["humidity"] * math.exp(1.5587 + 0.06939 * t - 0.00027816 * t * t + 0.00000068455 * t ** 3)
-    s = math.sqrt(p["distance"] / 2.0)
-    x = p["x"]
-    tau = x * math.exp(-s * (p["alpha1"] + p["beta1"] * math.sqrt(h2o))) \
-        + (1 - x) * math.exp(-s * (p["alpha2"] + p["beta2"] * math.sqrt(h2o)))
-    e, tw = p["emissivity"], p["window_transmission"]
-    w_refl, w_atm, w_win = (float(planck_signal(p[k], p)) for k in ("reflected_k", "atmosphere_k", "window_k"))
-    gain = 1.0 / (e * tau * tw * tau)
-    offset = ((1 - e) / e * w_refl + (1 - tau) / (e * tau) * w_atm + (1 - tw) / (e * tau * tw) * w_win
-              + (1 - tau) / (e * tau * tw * tau) * w_atm)
-    return gain, offset
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # damaged parameters: checked by the caller
+        h2o = p["humidity"] * np.exp(1.5587 + 0.06939 * t - 0.00027816 * t * t + 0.00000068455 * t ** 3)
+        s = math.sqrt(p["distance"] / 2.0)
+        x = p["x"]
+        tau = float(x * np.exp(-s * (p["alpha1"] + p["beta1"] * np.sqrt(h2o)))
+                    + (1 - x) * np.exp(-s * (p["alpha2"] + p["beta2"] * np.sqrt(h2o))))
+        e, tw = p["emissivity"], p["window_transmission"]
+        w_refl, w_atm, w_win = (float(planck_signal(p[k], p)) for k in ("reflected_k", "atmosphere_k", "window_k"))
+        gain = 1.0 / (e * tau * tw * tau) if tau else math.inf
+        offset = ((1 - e) / e * w_refl + (1 - tau) / (e * tau) * w_atm + (1 - tw) / (e * tau * tw) * w_win
+                  + (1 - tau) / (e * tau * tw * tau) * w_atm) if tau else math.inf
+    return gain, offset, tau
 
 
 def counts_to_celsius(counts, p: Mapping[str, float]) -> np.ndarray:
@@ -215,7 +225,7 @@ def counts_to_celsius(counts, p: Mapping[str, float]) -> np.ndarray:
     ``T = B / ln(R1 / (R2 (W_obj + O)) + F) - 273.15``; counts so low that
     ``W_obj + O <= 0`` (or the logarithm is not positive) have no temperature.
     """
-    gain, offset = _path_terms(p)
+    gain, offset, _tau = _path_terms(p)
     w = gain * np.asarray(counts, dtype=np.float64) - offset
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t = p["b"] / np.log(p["r1"] / (p["r2"] * (w + p["o"])) + p["f"])
@@ -225,7 +235,7 @@ def counts_to_celsius(counts, p: Mapping[str, float]) -> np.ndarray:
 
 def celsius_to_counts(t_celsius, p: Mapping[str, float]) -> np.ndarray:
     """Raw counts (float64, not rounded) that :func:`counts_to_celsius` maps to ``t_celsius``."""
-    gain, offset = _path_terms(p)
+    gain, offset, _tau = _path_terms(p)
     return (planck_signal(np.asarray(t_celsius, dtype=np.float64) + KELVIN, p) + offset) / gain
 
 
