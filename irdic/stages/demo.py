@@ -86,7 +86,7 @@ def make_demo(outdir: str | os.PathLike, *, manifest: str | os.PathLike | None =
     ``outdir/manifest.yaml``) summarises what was written and is written
     last, so its presence means the demo is complete.
 
-    ``params``: ``scale``, ``ir_noise`` (K), ``dic_noise`` (mm), ``seed`` as
+    ``params``: ``scale``, ``ir_noise`` (K), ``dic_noise`` (mm), ``seed``, ``ir_format`` as
     in the ``demo`` section of the configuration; absent ones take the
     schema's defaults.
 
@@ -104,6 +104,7 @@ def make_demo(outdir: str | os.PathLike, *, manifest: str | os.PathLike | None =
     scale, ir_noise, dic_noise, seed = p["scale"], p["ir_noise"], p["dic_noise"], p["seed"]
     # every argument is checked before the disk is touched
     choice(scale, "scale", SCALES)
+    ir_format = choice(p["ir_format"], "ir_format", synthetic.demo.IR_FORMATS)
     ir_noise = positive(ir_noise, "ir_noise", allow_zero=True)
     dic_noise = positive(dic_noise, "dic_noise", allow_zero=True)
     seed = as_int(seed, "seed", minimum=0)
@@ -123,7 +124,8 @@ def make_demo(outdir: str | os.PathLike, *, manifest: str | os.PathLike | None =
         elif os.path.lexists(p):
             p.unlink()
     out.mkdir(parents=True, exist_ok=True)
-    written = synthetic.make_demo(out, scale=scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
+    written = synthetic.make_demo(out, scale=scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed,
+                                  ir_format=ir_format)
     tree = _demo_tree(out)
     try:
         in_out = man.resolve().relative_to(out.resolve()).as_posix()
@@ -135,7 +137,8 @@ def make_demo(outdir: str | os.PathLike, *, manifest: str | os.PathLike | None =
                    if p.is_file() and not any(part.endswith(".zarr") for part in p.parts)
                    and not p.name.startswith("."))
     _write_text_atomic(man, yaml.safe_dump({"scale": scale, "ir_noise": ir_noise, "dic_noise": dic_noise,
-                                            "seed": seed, "n_files": len(files), "contents": jsonable(written)},
+                                            "seed": seed, "ir_format": ir_format, "n_files": len(files),
+                                            "contents": jsonable(written)},
                                            sort_keys=False))
     log.info("demo written to %s (%d files)", out, len(files))
     return out

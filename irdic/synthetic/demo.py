@@ -8,6 +8,7 @@
     outdir/setup/truth.zarr           true camera and per-marker truth
     outdir/<exp>/dic/<exp>_0_<k>.txt  ZEISS/ARAMIS nodemap of DIC stage k (relative time in s)
     outdir/<exp>/ir/<exp>_<n:05d>.txt IRBIS text crop export of IR frame n (n = position in the recording)
+                                      (or outdir/<exp>/ir/<exp>.seq, one FLIR record, with ir_format="flir")
     outdir/<exp>/truth.zarr           every truth quantity on (time = DIC times, point)
     outdir/tube/machine.csv           the testing machine's record at 50 Hz on its own clock
 
@@ -67,6 +68,8 @@ MACHINE_RATE = 50.0
 #: machine.columns of the configuration for the tube's machine.csv
 MACHINE_COLUMNS = {"time": "Zeit [s]", "force": "Kraft [kN]", "displacement": "Weg [mm]",
                    "torque": "Drehmoment [N*m]", "angle": "Winkel [deg]"}
+#: formats the demo can write its IR frames in
+IR_FORMATS = ("irbis", "flir")
 _REC_START = {"halfshell": _dt.datetime(2024, 5, 13, 10, 15, 40), "tube": _dt.datetime(2024, 5, 14, 14, 2, 10)}
 _SETUP_TIME = _dt.datetime(2024, 5, 13, 9, 30, 5)
 _IR_STYLE = {"halfshell": {"sep": "\t", "decimal": ".", "trailing_sep": False},
@@ -125,8 +128,11 @@ def _write_seeds(path: Path, target, seed: int) -> None:
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
-def write_experiment(outdir, ex: Experiment, *, write_ir: bool = True) -> dict:
+def write_experiment(outdir, ex: Experiment, *, write_ir: bool = True, ir_format: str = "irbis") -> dict:
     """Write ``outdir/<ex.name>``: DIC nodemaps, IR exports and the truth store.
+
+    ``ir_format``: ``"irbis"`` (one IRBIS text crop export per frame) or
+    ``"flir"`` (one FLIR ``.seq``, see :func:`_write_flir_record`).
 
     Returns
     -------
@@ -151,7 +157,9 @@ def write_experiment(outdir, ex: Experiment, *, write_ir: bool = True) -> dict:
                           stage_date=start + _dt.timedelta(seconds=float(t)),
                           signals=_stage_signals(ex, k) if hasattr(ex.specimen, "axial_force") else None)
             dic_files.append(final / "dic" / p.name)
-        if write_ir:
+        if write_ir and ir_format == "flir":
+            ir_files.append(final / "ir" / _write_flir_record(tmp / "ir" / f"{name}.seq", ex, start).name)
+        elif write_ir:
             u0, v0, _, _ = ex.window
             for i, frame in enumerate(ex.ir_frames()):
                 n = int(ex.ir_frame_numbers[i])
@@ -171,6 +179,36 @@ def write_experiment(outdir, ex: Experiment, *, write_ir: bool = True) -> dict:
                               "dic_noise_mm": ex.dic_noise, "seed": ex.seed, "ir_ms_offset": IR_MS_OFFSET,
                               "specimen": ex.specimen.describe()})
     return {"dic": dic_files, "ir": ir_files, "truth": final / "truth.zarr"}
+
+
+#: object parameters of the demo's FLIR records (those of its IRBIS exports; kelvin as FLIR stores them)
+FLIR_PARAMETERS = {"emissivity": 0.96, "distance": 0.45, "reflected_k": 295.15, "atmosphere_k": 295.15,
+                   "window_k": 295.15}
+
+
+def _write_flir_record(path: Path, ex: Experiment, start: _dt.datetime) -> Path:
+    """The IR frames as one FLIR ``.seq`` of full-sensor frames.
+
+    A FLIR frame holds no crop position, so the crop window is put into a
+    full frame at its sensor position; the pixels around it are the room
+    (22 °C) with the frames' noise. Each frame's time stamp is the
+    recording start (UTC) + ``IR_MS_OFFSET`` + t, in whole milliseconds as
+    FLIR stores them.
+    """
+    from .writers import write_flir
+
+    u0, v0, w, h = ex.window
+    t0 = start.replace(tzinfo=_dt.timezone.utc).timestamp() + round(IR_MS_OFFSET) / 1000.0
+    times = [t0 + round(1000.0 * float(t)) / 1000.0 for t in ex.ir_times]
+
+    def frames():
+        for frame in ex.ir_frames():
+            rng = np.random.default_rng([ex.seed, 31, int(frame.attrs["frame_number"])])
+            full = 22.0 + rng.normal(0.0, ex.ir_noise, (ex.camera.height, ex.camera.width))
+            full[v0:v0 + h, u0:u0 + w] = frame.values
+            yield full
+
+    return write_flir(path, frames(), times=times, params=FLIR_PARAMETERS, model="FLIR A655sc (irdic demo)")
 
 
 def _stage_signals(ex: Experiment, k: int) -> list[tuple[str, str, float]]:
@@ -200,7 +238,7 @@ def _write_machine(path: Path, ex: Experiment) -> None:
 
 
 def make_demo(outdir, *, scale: str = "demo", ir_noise: float = 0.05, dic_noise: float = 0.005, seed: int = 0,
-              experiments=EXPERIMENTS, write_ir: bool = True) -> dict:
+              experiments=EXPERIMENTS, write_ir: bool = True, ir_format: str = "irbis") -> dict:
     """Write the synthetic demo experiment(s) as raw exports plus truth.
 
     Parameters
@@ -224,6 +262,9 @@ def make_demo(outdir, *, scale: str = "demo", ir_noise: float = 0.05, dic_noise:
         Which experiments to write.
     write_ir : bool
         Write the IR frame exports (False: only DIC and truth).
+    ir_format : {"irbis", "flir"}
+        IR exports as IRBIS text files (one per frame, crop window) or as
+        one FLIR ``.seq`` per experiment (full-sensor frames of raw counts).
 
     Returns
     -------
@@ -231,6 +272,7 @@ def make_demo(outdir, *, scale: str = "demo", ir_noise: float = 0.05, dic_noise:
         ``{"setup": {...}, "halfshell": {...}, "tube": {...}}`` of written paths.
     """
     choice(scale, "scale", SCALES)
+    choice(ir_format, "ir_format", IR_FORMATS)
     if isinstance(experiments, str):
         experiments = (experiments,)
     experiments = tuple(experiments)
@@ -249,7 +291,7 @@ def make_demo(outdir, *, scale: str = "demo", ir_noise: float = 0.05, dic_noise:
     for name in experiments:
         t1 = _time.perf_counter()
         ex = experiment(name, scale, ir_noise=ir_noise, dic_noise=dic_noise, seed=seed)
-        result[name] = write_experiment(out, ex, write_ir=write_ir)
+        result[name] = write_experiment(out, ex, write_ir=write_ir, ir_format=ir_format)
         log.info("demo %s (%s) written to %s (%.1f s)", name, scale, out / name, _time.perf_counter() - t1)
         nums = np.asarray(ex.ir_frame_numbers)
         for k in sorted(set(range(int(nums.min()), int(nums.max()) + 1)) - set(nums.tolist())):

@@ -403,3 +403,30 @@ def test_ingest_refuses_bad_series(tmp_path):
     irb = write_irb(tmp_path / "x.irb", t, [0.0, 0.1, 0.2])
     with pytest.raises(ConfigError, match=r"ir.emissivity applies to FLIR radiometric files only.*x.irb is irb"):
         ingest_ir(irb, tmp_path / "c.zarr", emissivity=0.9)
+
+
+@pytest.mark.slow
+def test_demo_written_as_flir_ingests_to_the_same_temperatures(tmp_path):
+    import xarray as xr
+
+    from irdic.io.flir_planck import celsius_to_counts
+    from irdic.stages.ingest_ir import ingest_ir
+    from irdic.synthetic.demo import FLIR_PARAMETERS, write_experiment
+    from irdic.synthetic.experiments import experiment
+
+    ex = experiment("tube", "tiny")
+    files = write_experiment(tmp_path / "flir", ex, ir_format="flir")
+    assert [f.name for f in files["ir"]] == ["tube.seq"]
+    write_experiment(tmp_path / "irbis", ex)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IrdicWarning)
+        a = xr.open_zarr(ingest_ir(tmp_path / "flir" / "tube" / "ir", tmp_path / "a.zarr"))
+        b = xr.open_zarr(ingest_ir(tmp_path / "irbis" / "tube" / "ir", tmp_path / "b.zarr"))
+    assert a.sizes["u"] == ex.camera.width and a.sizes["v"] == ex.camera.height  # full-sensor frames
+    np.testing.assert_allclose(a["time"].values, b["time"].values, atol=1e-9)
+    tb = b["temperature"].values
+    ta = a["temperature"].sel(u=b["u"], v=b["v"]).values  # the crop window at its sensor position
+    p = flir_parameters(FLIR_PARAMETERS)
+    half_count = 0.5 * 0.01 / (celsius_to_counts(tb + 0.01, p) - celsius_to_counts(tb, p))
+    assert (np.abs(ta - tb) <= half_count + 5e-4 + 1e-5).all()  # + the IRBIS export's 3 decimals
+    assert a.attrs["emissivity"] == 0.96 and a.attrs["distance"] == 0.45 and a.attrs["env_temp"] == 22.0

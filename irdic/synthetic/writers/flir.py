@@ -121,8 +121,9 @@ def write_flir(path: str | os.PathLike, temperatures=None, *, counts=None, times
     Parameters
     ----------
     path : path-like
-    temperatures : array-like, shape (V, U) or (T, V, U), or a sequence of 2-D arrays
-        °C, converted to the nearest count; or give ``counts``.
+    temperatures : array-like, shape (V, U) or (T, V, U), or an iterable of 2-D arrays
+        °C, converted to the nearest count; or give ``counts``. An iterable
+        (a generator) is written frame by frame.
     counts : array-like of the same shapes, optional
         Raw counts (0..65535) written as they are.
     times : sequence of float, optional
@@ -145,30 +146,39 @@ def write_flir(path: str | os.PathLike, temperatures=None, *, counts=None, times
     """
     if (temperatures is None) == (counts is None):
         raise ConfigError("write_flir needs either temperatures or counts")
-    frames = temperatures if counts is None else counts
-    frames = [np.asarray(f) for f in (frames if isinstance(frames, (list, tuple)) or np.ndim(frames) == 3
-                                       else [frames])]
     if encoding not in _ENCODINGS or header_order not in "<>" or record_order not in "<>":
         raise ConfigError(f"write_flir: encoding {encoding!r} / byte orders {header_order!r}, {record_order!r}")
-    if jpeg and len(frames) != 1:
-        raise ConfigError(f"a radiometric JPEG holds one frame, got {len(frames)}")
-    per_frame = list(params) if isinstance(params, (list, tuple)) else [params] * len(frames)
-    times = list(times) if times is not None else [1.6e9 + k / 30.0 for k in range(len(frames))]
-    out = bytearray()
-    for k, (f, prm) in enumerate(zip(frames, per_frame)):
-        p = flir_parameters(prm)
-        if counts is None:
-            f = np.clip(np.rint(celsius_to_counts(f, p)), 0, 65535)
-        c = np.asarray(f).astype(np.uint16)
-        # the first frame of a ResearchIR file has its records further down than the others
-        out += _block(c, p, times[k], header_order=header_order, record_order=record_order, encoding=encoding,
-                      png_swap=png_swap, model=model, pad=128 if k == 0 else 0, subtype=subtype)
+    frames = temperatures if counts is None else counts
+    if not isinstance(frames, (list, tuple)) and not hasattr(frames, "__next__"):  # an array, not frames one by one
+        frames = np.asarray(frames)
+        frames = [frames] if frames.ndim == 2 else frames
+    per_frame = params if isinstance(params, (list, tuple)) else None
     path = Path(path)
-    path.write_bytes(_jpeg(bytes(out)) if jpeg else bytes(out))
+    blocks = []
+    with open(path, "wb") as fh:
+        for k, f in enumerate(frames):  # one frame in memory at a time: a generator of frames streams
+            p = flir_parameters(per_frame[k] if per_frame is not None else params)
+            c = counts_of(f, p, converted=True) if counts is None else np.asarray(f).astype(np.uint16)
+            t = times[k] if times is not None else 1.6e9 + k / 30.0
+            # the first frame of a ResearchIR file has its records further down than the others
+            block = _block(c, p, t, header_order=header_order, record_order=record_order, encoding=encoding,
+                           png_swap=png_swap, model=model, pad=128 if k == 0 else 0, subtype=subtype)
+            if jpeg:
+                blocks.append(block)
+            else:
+                fh.write(block)
+        if jpeg:
+            if len(blocks) != 1:
+                raise ConfigError(f"a radiometric JPEG holds one frame, got {len(blocks)}")
+            fh.write(_jpeg(blocks[0]))
     return path
 
 
-def counts_of(temperatures, params: Mapping[str, float] | None = None) -> np.ndarray:
-    """The counts :func:`write_flir` writes for ``temperatures`` (°C) under ``params`` (float64 °C -> uint16)."""
-    return np.clip(np.rint(celsius_to_counts(temperatures, flir_parameters(params))), 0, 65535).astype(np.uint16)
+def counts_of(temperatures, params: Mapping[str, float] | None = None, *, converted: bool = False) -> np.ndarray:
+    """The counts :func:`write_flir` writes for ``temperatures`` (°C) under ``params`` (uint16).
 
+    ``converted``: ``params`` already went through :func:`flir_parameters`.
+    """
+    p = params if converted else flir_parameters(params)
+    return np.clip(np.rint(celsius_to_counts(np.asarray(temperatures, dtype=np.float64), p)), 0, 65535
+                   ).astype(np.uint16)
