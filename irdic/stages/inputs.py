@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import DataError, IrdicError
 from ..io._common import non_regular_kind as _non_regular_kind
 
 __all__ = ["list_inputs", "frame_times", "as_files", "log_gaps"]
@@ -26,6 +26,18 @@ __all__ = ["list_inputs", "frame_times", "as_files", "log_gaps"]
 log = logging.getLogger(__name__)
 
 _IGNORED_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".pdf", ".yaml", ".yml", ".json", ".md", ".log", ".zarr"}
+
+
+def _radiometric_jpeg(f: Path) -> bool:
+    """A FLIR radiometric JPEG among the pictures of a folder: an IR frame, not a picture to skip."""
+    if f.suffix.lower() not in (".jpg", ".jpeg") or not f.is_file():
+        return False
+    from ..io.flir import is_radiometric_jpeg
+
+    try:
+        return is_radiometric_jpeg(f)
+    except (OSError, IrdicError):
+        return False
 
 
 def _natural_key(p: Path):
@@ -46,7 +58,7 @@ def list_inputs(path: str | os.PathLike, *, what: str = "exports") -> list[Path]
 
     Files are returned in natural order (``frame_2`` before ``frame_10``);
     hidden files, sub-folders and pictures/notes next to the exports are
-    skipped.
+    skipped (JPEGs that hold FLIR radiometric data are IR frames and kept).
 
     Raises
     ------
@@ -58,7 +70,7 @@ def list_inputs(path: str | os.PathLike, *, what: str = "exports") -> list[Path]
     p = Path(path)
     if p.is_dir():
         candidates = [f for f in p.iterdir() if not f.name.startswith(".")
-                      and f.suffix.lower() not in _IGNORED_SUFFIXES]
+                      and (f.suffix.lower() not in _IGNORED_SUFFIXES or _radiometric_jpeg(f))]
     elif any(ch in str(path) for ch in "*?["):
         candidates = [Path(f) for f in glob.glob(str(path))]
     else:

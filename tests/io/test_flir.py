@@ -430,3 +430,21 @@ def test_demo_written_as_flir_ingests_to_the_same_temperatures(tmp_path):
     half_count = 0.5 * 0.01 / (celsius_to_counts(tb + 0.01, p) - celsius_to_counts(tb, p))
     assert (np.abs(ta - tb) <= half_count + 5e-4 + 1e-5).all()  # + the IRBIS export's 3 decimals
     assert a.attrs["emissivity"] == 0.96 and a.attrs["distance"] == 0.45 and a.attrs["env_temp"] == 22.0
+
+
+def test_folder_of_radiometric_jpegs_is_a_series(tmp_path):
+    import imagecodecs
+    import xarray as xr
+
+    from irdic.stages.ingest_ir import ingest_ir
+
+    t = _scene(3)
+    folder = tmp_path / "ir"
+    folder.mkdir()
+    for k in range(3):
+        write_flir(folder / f"FLIR_{k:04d}.jpg", t[k], jpeg=True, encoding="png", times=[1.7e9 + 2.0 * k])
+    (folder / "photo.jpg").write_bytes(imagecodecs.jpeg8_encode(np.zeros((8, 8), np.uint8)))  # a plain picture
+    with xr.open_zarr(ingest_ir(folder, tmp_path / "ir.zarr")) as ds:
+        assert ds.sizes["time"] == 3
+        np.testing.assert_allclose(ds["time"].values, [0.0, 2.0, 4.0])
+        assert np.abs(ds["temperature"].values - t).max() < 0.01
