@@ -20,7 +20,7 @@ number of frames; ``fromfile`` holds the whole record.
 
 Usage::
 
-    python benchmarks/bench_ingest_flir.py [--width 640 --height 480 --frames 250 1000]
+    python benchmarks/bench_ingest_flir.py [--width 640 --height 480 --frames 100 1000]
     python benchmarks/bench_ingest_flir.py --quick   # 320 x 240, 50 and 200 frames
 """
 
@@ -98,7 +98,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=480)
-    ap.add_argument("--frames", type=int, nargs="+", default=[250, 1000])
+    ap.add_argument("--frames", type=int, nargs="+", default=[100, 1000])
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--quick", action="store_true", help="320 x 240 px, 50 and 200 frames, one repeat")
     args = ap.parse_args()

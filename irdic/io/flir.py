@@ -275,6 +275,8 @@ def _decode(sub: int, data: bytes, bo: str, w: int, h: int, cam: dict, where: st
         # subtype 1 is big-endian; subtype 2 follows its record's byte-order mark (little-endian in every file seen)
         dtype = np.dtype(np.uint16).newbyteorder(">" if sub == RAW_BE else bo)
         n = min(len(data) // 2, w * h)
+        if n == w * h:  # the usual case: the counts as they lie in the record, no copy
+            return np.frombuffer(data, dtype, count=n).reshape(h, w)
         out = np.zeros(w * h, np.uint16)
         out[:n] = np.frombuffer(data, dtype, count=n)
         return out.reshape(h, w)
