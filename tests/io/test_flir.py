@@ -448,3 +448,21 @@ def test_folder_of_radiometric_jpegs_is_a_series(tmp_path):
         assert ds.sizes["time"] == 3
         np.testing.assert_allclose(ds["time"].values, [0.0, 2.0, 4.0])
         assert np.abs(ds["temperature"].values - t).max() < 0.01
+
+
+@pytest.mark.slow
+def test_radiometric_jpeg_as_calibration_target(tmp_path):
+    """A target image saved by a FLIR camera calibrates like the same image as floats."""
+    from irdic.calibration import calibrate_from_files
+    from irdic.store import open_store
+    from irdic.synthetic.camera import lab_camera
+    from irdic.synthetic.target import open_book_target
+    from irdic.synthetic.writers import write_markers
+
+    lab = open_book_target(lab_camera())
+    mpath = write_markers(tmp_path / "markers.txt", lab.markers.marker.values, lab.markers.x.values)
+    jpg = write_flir(tmp_path / "target.jpg", lab.image.values, jpeg=True, encoding="png")
+    ids, pix = lab.markers.marker.values, lab.truth.marker_pixel.values
+    seeds = {int(ids[i]): pix[i].tolist() for i in (3, 17, 30, 47, 66, 79)}
+    cal = open_store(calibrate_from_files(mpath, jpg, tmp_path / "cal.zarr", seeds=seeds, marker_radius_mm=1.6))
+    assert cal.attrs["n_used"] == 84 and float(cal.rms_px) <= 0.05
