@@ -82,14 +82,17 @@ def _header(head: bytes, where: str, path) -> tuple[str, int, int]:
     return bo, dir_offset, n
 
 
-def _directory(raw: bytes, bo: str) -> dict[int, tuple[int, int, int]]:
-    """``{record type: (subtype, offset, length)}`` of the used entries (the first of each type)."""
+def _directory(raw: bytes, bo: str) -> tuple[dict[int, tuple[int, int, int]], int]:
+    """``{record type: (subtype, offset, length)}`` of the used entries (the first of each type), and the
+    largest ``offset + length`` over all of them (the block's end)."""
     out: dict[int, tuple[int, int, int]] = {}
+    end = 0
     for k in range(len(raw) // ENTRY_SIZE):
         rtype, sub, _ver, _idx, off, length = struct.unpack_from(bo + "HHIIII", raw, k * ENTRY_SIZE)
-        if rtype and rtype not in out:
-            out[rtype] = (sub, off, length)
-    return out
+        if rtype:
+            out.setdefault(rtype, (sub, off, length))
+            end = max(end, off + length)
+    return out, end
 
 
 def _walk(fh, path, size: int) -> Iterator[dict]:
@@ -118,8 +121,8 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
                 _cut(path, frame, "inside its record directory")
                 return
             raise FormatError(f"{where}: the record directory runs past the end of the file (truncated)", path)
-        records = _directory(raw, bo)
-        length = max([dir_offset + ENTRY_SIZE * n] + [o + ln for _s, o, ln in records.values()])
+        records, end = _directory(raw, bo)
+        length = max(dir_offset + ENTRY_SIZE * n, end)
         if REC_RAW not in records:
             raise FormatError(f"{where}: the FFF block has no raw image record (type 1)", path)
         yield {"frame": frame, "offset": offset, "length": length, "records": records}

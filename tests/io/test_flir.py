@@ -244,6 +244,20 @@ def test_marker_inside_pixel_data(tmp_path):
     np.testing.assert_allclose(da.values, counts_to_celsius(c, flir_parameters()), atol=1e-4)
 
 
+def test_records_after_the_raw_image_are_part_of_the_frame(tmp_path):
+    """The next frame starts after the block's last record, whatever the directory order."""
+    t = _scene()
+    for encoding in ("raw", "jpegls"):
+        path = write_flir(tmp_path / f"a_{encoding}.seq", t, extra_records=2, encoding=encoding)
+        offsets = [h["offset"] for h in iter_flir_headers(path)]
+        assert len(offsets) == 3
+        if encoding == "raw":  # frames 1 and 2 are alike: the file ends one frame length after frame 2
+            assert path.stat().st_size == offsets[2] + offsets[2] - offsets[1]
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert np.abs(read_ir(path).values - t).max() < 0.01
+
+
 def test_truncated_last_frame(tmp_path):
     c = counts_of(_scene())
     raw = write_flir(tmp_path / "a.seq", counts=c).read_bytes()

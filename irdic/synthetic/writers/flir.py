@@ -82,22 +82,29 @@ def _raw_record(counts: np.ndarray, bo: str, encoding: str, png_swap: bool) -> b
 
 
 def _block(counts: np.ndarray, p: dict, seconds: float, *, header_order: str, record_order: str,
-           encoding: str, png_swap: bool, model: str, pad: int, subtype: int | None) -> bytes:
-    """One FFF block: header, a 2-entry directory (raw image first), camera info, raw image."""
+           encoding: str, png_swap: bool, model: str, pad: int, subtype: int | None, extra_records: int = 0) -> bytes:
+    """One FFF block: header, directory (raw image first), camera info, raw image, then ``extra_records``
+    palette records (type 0x22, listed after the others) and an unused entry when there are extras."""
     median = int(np.median(counts))
     rng = int(np.abs(counts.astype(np.int64) - median).max()) + 1
     cam = _camera_record(p, record_order, seconds, model, median, min(rng, 65535))
     raw = _raw_record(counts, record_order, encoding, png_swap)
-    cam_off = HEADER_SIZE + 2 * ENTRY_SIZE + pad
+    n = 2 + extra_records + (1 if extra_records else 0)
+    cam_off = HEADER_SIZE + n * ENTRY_SIZE + pad
     raw_off = cam_off + len(cam)
     head = bytearray(HEADER_SIZE)
     head[:4] = MAGIC
     head[4:4 + 10] = b"ResearchIR"
-    struct.pack_into(header_order + "III", head, 0x14, 100, HEADER_SIZE, 2)
+    struct.pack_into(header_order + "III", head, 0x14, 100, HEADER_SIZE, n)
     sub = _ENCODINGS[encoding] if subtype is None else subtype
-    entries = struct.pack(header_order + "HHIIIIIII", REC_RAW, sub, 100, 2, raw_off, len(raw), 0, 0, 0) \
-        + struct.pack(header_order + "HHIIIIIII", REC_CAMERA, 0, 105, 1, cam_off, len(cam), 0, 0, 0)
-    return bytes(head) + entries + bytes(pad) + cam + raw
+    entry = header_order + "HHIIIIIII"
+    entries = struct.pack(entry, REC_RAW, sub, 100, 2, raw_off, len(raw), 0, 0, 0) \
+        + struct.pack(entry, REC_CAMERA, 0, 105, 1, cam_off, len(cam), 0, 0, 0)
+    extra = bytes(range(64)) * extra_records
+    for k in range(extra_records):
+        entries += struct.pack(entry, 0x22, 1, 100, 3 + k, raw_off + len(raw) + 64 * k, 64, 0, 0, 0)
+    entries += bytes(ENTRY_SIZE) if extra_records else b""
+    return bytes(head) + entries + bytes(pad) + cam + raw + extra
 
 
 def _jpeg(block: bytes) -> bytes:
@@ -115,7 +122,8 @@ def _jpeg(block: bytes) -> bytes:
 def write_flir(path: str | os.PathLike, temperatures=None, *, counts=None, times: Sequence[float] | None = None,
                params: Mapping[str, float] | Sequence[Mapping[str, float]] | None = None,
                header_order: str = "<", record_order: str = "<", encoding: str = "raw", png_swap: bool = True,
-               jpeg: bool = False, model: str = "irdic synthetic", subtype: int | None = None) -> Path:
+               jpeg: bool = False, model: str = "irdic synthetic", subtype: int | None = None,
+               extra_records: int = 0) -> Path:
     """Write frames as a FLIR ``.seq`` (FFF blocks end to end), one ``.fff`` frame or a radiometric JPEG.
 
     Parameters
@@ -139,6 +147,9 @@ def write_flir(path: str | os.PathLike, temperatures=None, *, counts=None, times
         Write a radiometric JPEG (one frame only).
     subtype : int, optional
         Directory subtype to declare instead of the encoding's (for tests of unknown encodings).
+    extra_records : int
+        Palette records (type 0x22) after the raw image in each frame, so that the raw image is neither the
+        last record nor the last used directory entry.
 
     Returns
     -------
@@ -162,7 +173,8 @@ def write_flir(path: str | os.PathLike, temperatures=None, *, counts=None, times
             t = times[k] if times is not None else 1.6e9 + k / 30.0
             # the first frame of a ResearchIR file has its records further down than the others
             block = _block(c, p, t, header_order=header_order, record_order=record_order, encoding=encoding,
-                           png_swap=png_swap, model=model, pad=128 if k == 0 else 0, subtype=subtype)
+                           png_swap=png_swap, model=model, pad=128 if k == 0 else 0, subtype=subtype,
+                           extra_records=extra_records)
             if jpeg:
                 blocks.append(block)
             else:
