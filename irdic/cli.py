@@ -143,6 +143,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--ir-noise", type=float, help="K")
     s.add_argument("--dic-noise", type=float, help="mm")
     s.add_argument("--seed", type=int)
+    s.add_argument("--ir-format", choices=["irbis", "flir"], help="default: the schema's demo.ir_format")
 
     for kind in ("ir", "dic"):
         s = add_parser(f"ingest-{kind}", f"{kind.upper()} exports -> {kind}.zarr")
@@ -153,6 +154,10 @@ def _parser() -> argparse.ArgumentParser:
         s.add_argument("--time-source", choices=["file", "frame_rate"])
         s.add_argument("--time-origin", choices=["first", "file"])
         s.add_argument("--time-offset", type=float, help="s")
+        if kind == "ir":
+            s.add_argument("--emissivity", type=float, help="FLIR files: replaces the camera's emissivity")
+            s.add_argument("--reflected-temperature", type=float,
+                           help="FLIR files: replaces the camera's reflected apparent temperature (°C)")
 
     _stage_parsers(add_parser)
     _output_parsers(add_parser)
@@ -342,7 +347,7 @@ def _dispatch(args) -> None:
     if args.command == "demo":
         from .stages import demo
 
-        params = _section(args, _given(args, "scale", "ir_noise", "dic_noise", "seed"))
+        params = _section(args, _given(args, "scale", "ir_noise", "dic_noise", "seed", "ir_format"))
         params.pop("enabled", None)
         params.pop("outdir", None)
         demo.run({}, {"manifest": Path(args.outdir) / "manifest.yaml"}, threads=args.threads, **params)
@@ -354,8 +359,10 @@ def _dispatch(args) -> None:
         from .stages import ingest_dic, ingest_ir
 
         stage = ingest_ir if args.command == "ingest-ir" else ingest_dic
+        flags = ("format", "frame_rate", "time_source", "time_origin", "time_offset") + \
+            (("emissivity", "reflected_temperature") if args.command == "ingest-ir" else ())
         stage.run({"source": args.source}, {"store": args.out}, threads=args.threads,
-                  **_section(args, _given(args, "format", "frame_rate", "time_source", "time_origin", "time_offset")))
+                  **_section(args, _given(args, *flags)))
     elif args.command == "calibrate":
         from .stages import calibrate
 

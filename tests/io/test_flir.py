@@ -480,3 +480,17 @@ def test_radiometric_jpeg_as_calibration_target(tmp_path):
     seeds = {int(ids[i]): pix[i].tolist() for i in (3, 17, 30, 47, 66, 79)}
     cal = open_store(calibrate_from_files(mpath, jpg, tmp_path / "cal.zarr", seeds=seeds, marker_radius_mm=1.6))
     assert cal.attrs["n_used"] == 84 and float(cal.rms_px) <= 0.05
+
+
+def test_cli_ingest_with_overrides(tmp_path, capsys):
+    import xarray as xr
+
+    from irdic.cli import main
+
+    path = write_flir(tmp_path / "a.seq", _scene(2))
+    assert main(["ingest-ir", str(path), str(tmp_path / "ir.zarr"), "--emissivity", "0.9",
+                 "--reflected-temperature", "25"]) == 0
+    with xr.open_zarr(tmp_path / "ir.zarr") as ds:
+        assert ds.attrs["emissivity"] == 0.9 and ds.attrs["reflected_temp"] == 25.0
+    assert main(["ingest-ir", str(path), str(tmp_path / "ir2.zarr"), "--emissivity", "1.9"]) == 2
+    assert "ir.emissivity: 1.9 is greater than the maximum of 1" in capsys.readouterr().err
