@@ -125,7 +125,10 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
         length = max(dir_offset + ENTRY_SIZE * n, end)
         if REC_RAW not in records:
             raise FormatError(f"{where}: the FFF block has no raw image record (type 1)", path)
-        yield {"frame": frame, "offset": offset, "length": length, "records": records}
+        # a file of one frame (a .fff, a radiometric JPEG) has no frame number: its position says nothing
+        single = frame == 0 and size - (offset + length) < HEADER_SIZE
+        yield {"frame": frame, "offset": offset, "length": length, "records": records,
+               "frame_index": None if single else frame}
         offset += length
         frame += 1
 
@@ -333,7 +336,8 @@ def iter_flir_headers(path: str | os.PathLike) -> Iterator[dict]:
     Yields
     ------
     dict
-        ``frame`` (position in the chain), ``offset`` (byte), ``width``,
+        ``frame`` (position in the chain), ``frame_index`` (the same, None
+        in a file of one frame), ``offset`` (byte), ``width``,
         ``height``, ``seconds`` (Unix time, s, or None), ``tz_minutes``,
         ``model``, ``median``/``range`` (counts), ``params`` (camera info,
         see :func:`irdic.io.flir_planck.camera_info`).
@@ -347,7 +351,8 @@ def iter_flir_headers(path: str | os.PathLike) -> Iterator[dict]:
                 return
             fh.seek(block["offset"] + block["records"][REC_RAW][1])
             _bo, w, h = _raw_shape(fh.read(RAW_HEADER_SIZE), f"frame {block['frame']}", p)
-            yield {"frame": block["frame"], "offset": block["offset"], "width": w, "height": h, **cam}
+            yield {"frame": block["frame"], "frame_index": block["frame_index"], "offset": block["offset"],
+                   "width": w, "height": h, **cam}
 
 
 def iter_flir_frames(path: str | os.PathLike, overrides: Mapping[str, float] | None = None
@@ -399,7 +404,8 @@ def iter_flir_frames(path: str | os.PathLike, overrides: Mapping[str, float] | N
             if valid < frame.size:
                 frame.reshape(-1)[valid:] = np.nan
             h, w = frame.shape
-            yield {"frame": block["frame"], "offset": block["offset"], "width": w, "height": h,
+            yield {"frame": block["frame"], "frame_index": block["frame_index"], "offset": block["offset"],
+                   "width": w, "height": h,
                    **cam, "params": params}, frame
 
 
@@ -420,13 +426,15 @@ def iter_flir_dataarrays(path: str | os.PathLike, overrides: Mapping[str, float]
     xarray.DataArray
         float32 °C, dims ``("v", "u")``; scalar coordinate ``time`` = the
         frame's Unix time (s, UTC), absent when the frame has none;
-        ``attrs`` as :func:`read_flir` plus ``frame_index``.
+        ``attrs`` as :func:`read_flir` plus ``frame_index`` (the position in
+        a file of several frames; absent for a file of one).
     """
     p = check_file(path)
     for info, frame in iter_flir_frames(p, overrides):
         # no check_temperatures scan: the counts table holds only NaN and finite values above 0 K
         attrs = _attrs(info, p)
-        attrs["frame_index"] = info["frame"]
+        if info["frame_index"] is not None:
+            attrs["frame_index"] = info["frame_index"]
         yield temperature_dataarray(frame, time=info["seconds"], attrs=attrs)
 
 
@@ -506,7 +514,6 @@ def read_flir(path: str | os.PathLike, *, emissivity: float | None = None,
     check_temperatures(stack, p, allow_nan=True)
     attrs = _attrs(first, p)
     if n == 1:
-        attrs["frame_index"] = 0
         return temperature_dataarray(stack[0], time=first["seconds"], attrs=attrs)
     attrs["n_frames"] = n
     t = [info["seconds"] for info in heads]

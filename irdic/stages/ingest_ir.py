@@ -88,7 +88,7 @@ def _streamed(ffmt: str):
         def headers(f, _o):
             heads = list(flir.iter_flir_headers(f))
             flir.check_series(heads, f)
-            return ((h["seconds"], h["frame"]) for h in heads)
+            return ((h["seconds"], h["frame_index"]) for h in heads)
 
         return headers, flir.iter_flir_dataarrays
     return None

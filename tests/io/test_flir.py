@@ -462,6 +462,10 @@ def test_folder_of_radiometric_jpegs_is_a_series(tmp_path):
         assert ds.sizes["time"] == 3
         np.testing.assert_allclose(ds["time"].values, [0.0, 2.0, 4.0])
         assert np.abs(ds["temperature"].values - t).max() < 0.01
+        assert list(ds["frame_index"].values) == [-1, -1, -1]  # one frame per file: no frame number
+    # pictures have no frame numbers: a frame rate numbers them by their position
+    with xr.open_zarr(ingest_ir(folder, tmp_path / "ir2.zarr", time_source="frame_rate", frame_rate=4.0)) as ds:
+        np.testing.assert_allclose(ds["time"].values, [0.0, 0.25, 0.5])
 
 
 @pytest.mark.slow
