@@ -34,8 +34,8 @@ import numpy as np
 
 from ..errors import ConfigError, FormatError
 
-__all__ = ["camera_info", "object_parameters", "counts_table", "counts_to_celsius", "celsius_to_counts",
-           "planck_signal", "OVERRIDES", "PARAMETER_ATTRS", "CAMERA_INFO_SIZE", "KELVIN"]
+__all__ = ["camera_info", "object_parameters", "parameter_attrs", "counts_table", "counts_to_celsius",
+           "celsius_to_counts", "planck_signal", "OVERRIDES", "PARAMETER_ATTRS", "CAMERA_INFO_SIZE", "KELVIN"]
 
 KELVIN = 273.15
 #: smallest camera-info record that holds every field read here (the time stamp ends at 0x38e)

@@ -13,7 +13,7 @@ import pytest
 
 from irdic.errors import ConfigError, DataError, FormatError, IrdicWarning
 from irdic.io import detect_ir_format, read_ir
-from irdic.io.flir import iter_flir_dataarrays, iter_flir_headers, read_flir
+from irdic.io.flir import iter_flir_dataarrays, iter_flir_headers
 from irdic.io.flir_planck import counts_to_celsius
 from irdic.synthetic.writers import write_flir
 from irdic.synthetic.writers.flir import counts_of, flir_parameters
