@@ -68,12 +68,12 @@ def test_editing_validation_changes_the_couple_hash(pkg):
 
 def test_an_edit_reruns_exactly_the_stages_that_import_it(pkg):
     before = {stage: ch.code_hash(stage) for stage in ch.STAGES}
-    _edit(pkg / "stages" / "visibility.py")
+    _edit(pkg / "footprint" / "visibility.py")
     changed = {s for s in before if before[s] != ch.code_hash(s)}
     assert changed == {"couple"}
     # the fields stage's noise probes extrapolate as the couple stage does: both re-run
     mid = {stage: ch.code_hash(stage) for stage in ch.STAGES}
-    _edit(pkg / "stages" / "extrapolation.py")
+    _edit(pkg / "footprint" / "extrapolation.py")
     assert {s for s in mid if mid[s] != ch.code_hash(s)} == {"couple", "fields"}
     after = {stage: ch.code_hash(stage) for stage in ch.STAGES}
     _edit(pkg / "io" / "irbis.py")

@@ -4,7 +4,7 @@ For every DIC time the valid DIC points are projected into the IR image with
 the calibrated camera; points behind the camera, outside the IR frame or on
 surface facing away from it are flagged not visible. Only pixels on the
 specimen feed the interpolant: a mask per time from the projected point cloud
-(:mod:`irdic.stages.visibility`, eroded by ``mask_erosion_px``), also
+(:mod:`irdic.footprint.visibility`, eroded by ``mask_erosion_px``), also
 intersected with the masks of the neighbouring DIC times so that pixels the
 moving edge crosses are left out. The pixel temperatures are interpolated in
 space and time (:func:`irdic.rbf.evaluate_series`, IMQ with the paper's
@@ -15,7 +15,7 @@ Points that project just outside the mask (the outermost DIC points lie on
 the specimen edge, so they always do) are extrapolated linearly from the
 nearest masked pixel, up to ``max_extrapolation_px``; their signed distance to
 the mask edge is stored (negative = extrapolated), so users see which values
-are not interpolated (:mod:`irdic.stages.extrapolation`).
+are not interpolated (:mod:`irdic.footprint.extrapolation`).
 
 ``status`` codes (:class:`irdic.vocabulary.Status`; CF ``flag_values``/``flag_meanings`` in its attributes):
 
@@ -49,10 +49,10 @@ from ..noise import IRNoise, interpolation_noise_gains, ir_noise as estimate_ir_
 from ..store import open_store, write_dataset
 from ..vocabulary import COMPONENTS, PIXEL_AXES, Status, cf_attrs, status_attrs
 from .common import paths, stage_context
-from .extrapolation import extrapolate, extrapolation_samples, in_mask
-from .footprint_temperature import FootprintOperator, footprint_side
+from ..footprint.extrapolation import extrapolate, extrapolation_samples, in_mask
+from ..footprint.temperature import FootprintOperator, footprint_side
 from .parameters import settings
-from .visibility import Projection, masks_and_facing, project_points
+from ..footprint.visibility import Projection, masks_and_facing, project_points
 
 __all__ = ["run", "run_gather", "couple", "count_attrs"]
 
@@ -223,7 +223,7 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
     as the points: a second pass would factorise every edge tile of every
     mask again. Also returns which DIC times lie in the IR time span (n_t,)
     and which values were extrapolated (n_t, M); last the footprint temperature of boxes of ``side`` px
-    (:mod:`irdic.stages.footprint_temperature`, same pass) and its noise factor (n_t, M) each, None for
+    (:mod:`irdic.footprint.temperature`, same pass) and its noise factor (n_t, M) each, None for
     side 1.
     """
     u, v = ir["u"].values, ir["v"].values

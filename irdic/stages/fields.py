@@ -17,7 +17,7 @@ Beyond the paper (its outlook for noisy IR data): regression in space and
 time where the estimated noise matters ("auto", the default; ``null`` is the
 paper's interpolation), the rate then the time derivative of each point's
 Lagrangian series (:func:`_space_time`), and per-point uncertainties
-(:mod:`irdic.stages.uncertainty`).
+(:mod:`irdic.uncertainty.model`).
 """
 
 from __future__ import annotations
@@ -43,9 +43,9 @@ from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
-from .footprint_fields import footprint_temperatures, paper_value, pixel_pitch, window_extras
+from ..footprint.fields import footprint_temperatures, paper_value, pixel_pitch, window_extras
 from .parameters import settings
-from .uncertainty import Window, uncertainties, uncertainty_notes
+from ..uncertainty.model import Window, uncertainties, uncertainty_notes
 
 __all__ = ["run", "run_gather", "fields"]
 
@@ -280,7 +280,7 @@ def _resolve_gcv(points, x, t, psi, p, ops=None):
 def _temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=None, ops=None):
     """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
     and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
-    uncertainties of :func:`irdic.stages.uncertainty.uncertainties`.
+    uncertainties of :func:`irdic.uncertainty.model.uncertainties`.
 
     The projection Jacobian of the calibrated camera at the surface points
     turns pixel gradients into surface ones (see the module docstring).
@@ -354,7 +354,7 @@ def _space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, o
     -------
     grad (T, N, 3) K/mm, total (T, N) K/s, local (T, N) K/s, value (T, N) degC,
     spatial (the inputs of the regression's bias estimate, see
-    :func:`irdic.stages.uncertainty.uncertainties`), chosen (the spacings used).
+    :func:`irdic.uncertainty.model.uncertainties`), chosen (the spacings used).
 
     Notes
     -----
@@ -462,7 +462,7 @@ def _fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, 
 
 
 def _with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
-    """``<field>_std`` and ``<field>_bias_dominated`` beside each field (see :mod:`irdic.stages.uncertainty`)."""
+    """``<field>_std`` and ``<field>_bias_dominated`` beside each field (see :mod:`irdic.uncertainty.model`)."""
     for name in ("temperature", "temperature_gradient", "temperature_rate", "max_principal_strain"):
         std, bias = unc[name]
         dims = ds[name].dims

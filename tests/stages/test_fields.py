@@ -183,7 +183,7 @@ def test_uncertainty_coverage_monte_carlo():
         # interpolation far noisier than the regression, and that estimate's scatter adds to it; since the std
         # holds the upward noise bias of this static shell's zero tensor and its bias term the norm of the
         # tensor's difference (the deviatoric direction is noise there), 0.94 / 0.98
-        # (irdic.stages.strain_uncertainty; on the demo barrel the same change brings 0.57 / 0.85 up to 0.61 / 0.90)
+        # (irdic.uncertainty.strain; on the demo barrel the same change brings 0.57 / 0.85 up to 0.61 / 0.90)
         top = 0.95 if v == "max_principal_strain" else 0.82
         assert 0.55 <= one <= top and 0.86 <= two <= 0.99, (v, one, two)
 
@@ -260,7 +260,7 @@ def test_tube_strain_std_holds_the_regression_bias():
     """Issue 15: the tube's strain bias (4.4e-4 RMS, as large as its noise) is estimated against the surface
     regression at half the spacing, whose own strain bias is as large and uncorrelated (4.32e-4, correlation
     -0.08 on the noise-free coordinates): half of ``<d² - v>``, over the whole specimen where no neighbourhood
-    resolves it (:func:`irdic.stages.regression_bias.strain_reference_options`). This seed: 0.75 / 0.935 within
+    resolves it (:func:`irdic.uncertainty.regression_bias.strain_reference_options`). This seed: 0.75 / 0.935 within
     1 / 2 std with the local estimate alone, 0.83 / 0.98 now; pooled over the benchmark's seeds 1, 3, 5, 7
     0.69 / 0.91 -> 0.74 / 0.94 (this seed is the benchmark's most covered)."""
     pts, truth, f, m = _noisy("tube", "demo", dic_noise=0.003, seed=3)
@@ -295,7 +295,7 @@ def test_static_shell_strain_std_holds_the_noise_bias_of_a_zero_tensor():
     """Issue 15: a static specimen's true strain tensor is 0, and the max principal value of its noisy estimate
     is biased upwards; the probes' spread of that value about the noisy estimate is not its error's RMS. Demo
     half-shell (true strain 0), seed 5: 0.67 / 0.91 within 1 / 2 std with that spread, 0.71 / 0.95 with the RMS
-    error at the tensor estimated from the probes' covariance (:mod:`irdic.stages.strain_uncertainty`); the
+    error at the tensor estimated from the probes' covariance (:mod:`irdic.uncertainty.strain`); the
     store says the strain is below its noise floor."""
     pts, truth, f, m = _noisy("halfshell", "demo", dic_noise=0.003, seed=5)
     mm = m & ~f.max_principal_strain_bias_dominated.values

@@ -67,7 +67,7 @@ def noise_scale(theta, acc, regress_space, ks, trusted):
 
 
 def scaled_probes(acc, k2):
-    """The probes' mean squares ``acc`` (:func:`irdic.stages.uncertainty._spatial_probes`) with the noise variance scaled by ``k2``."""
+    """The probes' mean squares ``acc`` (:func:`irdic.uncertainty.model._spatial_probes`) with the noise variance scaled by ``k2``."""
     return {k: (None if a is None else a * k2) for k, a in acc.items()}
 
 

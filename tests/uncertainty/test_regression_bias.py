@@ -1,10 +1,10 @@
-"""Issue 15: the regressions' bias estimates of the uncertainty (irdic.stages.regression_bias) and the rate's
+"""Issue 15: the regressions' bias estimates of the uncertainty (irdic.uncertainty.regression_bias) and the rate's
 reference in time (irdic.numerics.temporal.local_rate_weights)."""
 
 import numpy as np
 
 from irdic.numerics.temporal import TemporalInterpolant, local_rate_weights, rate_reference_stencil
-from irdic.stages.regression_bias import (BIAS_Z, local_bias, reference_options, reference_spacing,
+from irdic.uncertainty.regression_bias import (BIAS_Z, local_bias, reference_options, reference_spacing,
                                          strain_reference_options)
 
 

@@ -1,12 +1,12 @@
 """Issue 15: the max principal strain's std from the strain tensor's noise covariance
-(:mod:`irdic.stages.strain_uncertainty`), against analytic truth."""
+(:mod:`irdic.uncertainty.strain`), against analytic truth."""
 
 import numpy as np
 import pytest
 from scipy.special import i0e, i1e
 
-from irdic.stages.regression_bias import BIAS_Z
-from irdic.stages.strain_uncertainty import below_noise_floor, max_principal_rms, tensor_components
+from irdic.uncertainty.regression_bias import BIAS_Z
+from irdic.uncertainty.strain import below_noise_floor, max_principal_rms, tensor_components
 from irdic.strain import principal_2d, strain, strain_components
 
 #: the demo barrel's strain noise: mean and both deviatoric components alike (3.7-4.1e-5 each), here in units
