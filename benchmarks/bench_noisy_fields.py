@@ -47,8 +47,8 @@ import xarray as xr
 from scipy import ndimage
 
 from irdic.camera import CameraModel
-from irdic.stages.couple import couple
-from irdic.stages.fields import fields
+from irdic.coupling import couple
+from irdic.fields import fields
 from irdic.synthetic import HalfShell, experiment, lab_camera
 from irdic.synthetic.specimens import LABEL_SURFACE
 

@@ -45,6 +45,7 @@ def test_lazy_imports_inside_functions_are_followed():
     assert "plot/experiment.py" in ch.stage_modules("figures")
     assert "signals.py" in ch.stage_modules("fields")  # imported inside fields.run
     assert "stages/couple.py" not in ch.stage_modules("fields")
+    assert not [m for m in ch.stage_modules("fields") if m.startswith("coupling/")]
     with pytest.raises(KeyError, match="unknown stage 'ingest'"):
         ch.stage_modules("ingest")
 

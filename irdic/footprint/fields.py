@@ -200,7 +200,7 @@ def paper_value(points, series, space_time, spatial):
     """The denoised temperature from the paper's point temperatures, with the inputs of its bias estimate.
 
     ``space_time(theta, series) -> (grad, total, local, value, spatial, chosen)`` is the fields stage's
-    regression (:func:`irdic.stages.fields._space_time`) with the spacings chosen for the footprint
+    regression (:func:`irdic.fields.space_time.space_time`) with the spacings chosen for the footprint
     temperatures (the noise probes run through one operator), ``spatial`` its inputs of the bias
     estimates on the footprint temperatures. Returns ``(value (T, N) degC, spatial)`` with the value's entries (the
     input, the output, the temporal difference) from the paper's temperatures and the gradient's and

@@ -18,7 +18,7 @@ are propagated through those same operators:
 - Temporal regression: the rate is ``W1 Θ`` per point series, so its
   variance is ``σ_T² Σ_j W1_ij²`` (the weights of the chosen regression).
   With the spatial regression too, the fields regress in space first and
-  then in time (:func:`irdic.stages.fields._space_time`): the rate
+  then in time (:func:`irdic.fields.space_time.space_time`): the rate
   ``W1 (S Θ)``, value and gradient of ``S (W0 (S Θ))``, all by the probes.
 - Spatial regression and strain: propagated by random probes, ``K`` noise
   realisations run through the same operator with the smoothing parameters
@@ -265,10 +265,10 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
                                                                            smoothing=k))
 
         ts, ti = operator(kt), operator(None)
-        # the rate may come from a lighter regression than the value (irdic.stages.fields._rate_series)
+        # the rate may come from a lighter regression than the value (irdic.fields.space_time._rate_series)
         kr = chosen_k.get("temperature_smoothing_rate") or kt
         tr = ts if kr == kt else operator(kr)
-        # the rate's bias reference: a local polynomial in time (irdic.stages.fields._space_time)
+        # the rate's bias reference: a local polynomial in time (irdic.fields.space_time.space_time)
         W = (ts.weights(t, 0), tr.weights(t, 1), ti.weights(t, 0), rate_reference_weights(ti.times, t, smoothing=kr))
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
@@ -354,7 +354,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             value_in = noise_c
             res = noise_c - v.reshape(noise_c.shape)
         else:
-            # in space at each time first, then in time (irdic.stages.fields._space_time)
+            # in space at each time first, then in time (irdic.fields.space_time.space_time)
             s = np.nan_to_num(regress_space(noise.reshape(b * tw, N), None, ks)[1].reshape(b, tw, N))
             res = (noise - s)[:, off:off + T][:, sub]
             r = np.einsum("ij,kjn->kin", W1[sub], s)

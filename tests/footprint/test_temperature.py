@@ -100,7 +100,7 @@ def test_noise_factor_of_a_box_cut_by_a_straight_edge():
 def _footprint_errors(scale, n):
     """The tube's footprint temperatures minus the truth over ``n`` IR noise realisations (0.05 K) through the
     couple stage: (n, T, N) K, and the last realisation's points."""
-    from irdic.stages.couple import couple
+    from irdic.coupling import couple
 
     from .._synthetic_stores import synthetic_inputs
 

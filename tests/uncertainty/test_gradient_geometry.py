@@ -8,8 +8,8 @@ import pytest
 import xarray as xr
 
 from irdic.camera import CameraModel
-from irdic.stages.couple import couple
-from irdic.stages.fields import fields
+from irdic.coupling import couple
+from irdic.fields import fields
 from irdic.uncertainty.gradient_geometry import TANGENT_PROBES, gradient_dic_var, tangent_noise
 from irdic.surface import fit_stages
 from irdic.surface.geometry import surface_geometry

@@ -3,7 +3,7 @@
 import pytest
 
 from irdic.errors import ConfigError
-from irdic.stages.demo import make_demo
+from irdic.synthetic.demo_folder import make_demo
 
 
 @pytest.fixture(scope="module")

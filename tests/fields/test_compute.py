@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from irdic.errors import ConfigError, DataError
-from irdic.stages.couple import couple
-from irdic.stages.fields import fields
+from irdic.coupling import couple
+from irdic.fields import fields
 
 from .._synthetic_stores import synthetic_inputs
 
