@@ -1,4 +1,4 @@
-"""Benchmark of couple + fields on a moving specimen (issue 10), against the scipy way.
+"""Benchmark of couple + fields on a moving specimen, against the scipy way.
 
 The tube in tension-torsion all along (irdic.synthetic, 10 Hz IR and DIC,
 by default 300 x 300 frames and 78 x 168 = 13,104 DIC points) is written to

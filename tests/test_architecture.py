@@ -167,3 +167,20 @@ def test_workflow_scripts_call_one_stage_entry():
     for f in sorted((ROOT / "scripts").glob("*.py")):
         names = re.findall(r"^\s*(?:from|import) (irdic[\w.]*)", f.read_text(), flags=re.M)
         assert names and set(names) == {"irdic.stages"}, (f.name, names)
+
+
+#: words that say where code came from rather than what it does (an issue number, a work session, a part of a plan)
+PROCESS_WORDS = re.compile(r"\bissues? #?\d+|\bsessions?\b|\bpart \d+\b", re.IGNORECASE)
+
+
+def test_no_process_words_in_the_product():
+    texts = [*FILES, ROOT / "README.md", ROOT / "benchmarks" / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+             *sorted((ROOT / "benchmarks").glob("*.py"))]
+    found = [f"{f.relative_to(ROOT)}:{n}: {line.strip()[:80]}" for f in texts if f.is_file()
+             for n, line in enumerate(f.read_text(encoding="utf-8").splitlines(), 1) if PROCESS_WORDS.search(line)]
+    assert not found, found
+
+
+def test_the_process_words_rule_sees_them():
+    assert PROCESS_WORDS.search("(issue 15, part 4)") and PROCESS_WORDS.search("the ninth session's code")
+    assert not PROCESS_WORDS.search("the round patch of the issued frames, in parts")

@@ -53,7 +53,7 @@ def test_lazy_imports_inside_functions_are_followed():
 def test_editing_validation_changes_the_couple_hash(pkg):
     before = {stage: ch.code_hash(stage) for stage in ch.STAGES}
     assert len(set(before.values())) == len(before)  # every stage has its own set of modules
-    # the argument checks (irdic/_checks.py today, irdic/validation.py after the redesign) feed couple
+    # the argument checks (irdic/validation.py; irdic/_checks.py in older layouts) feed couple
     for name in ("_checks.py", "validation.py"):
         if (pkg / name).exists():
             _edit(pkg / name)

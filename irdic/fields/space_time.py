@@ -160,7 +160,7 @@ def _rate_series(th_s, ts_in, t_eval, p, fit, tkw):
     -----
     The value and gradient stay one field, ``S_x S_t2 S_x Θ``; the rate is ``∂_t S_t1 S_x Θ``, ``S_t1`` at
     most as smooth; they differ by the heavier one's temporal bias, which the value's std holds. A fast
-    transient's rate at 2 Hz is bias-limited, the gradient noise-limited (benchmarks/README.md, issue 15).
+    transient's rate at 2 Hz is bias-limited, the gradient noise-limited (benchmarks/README.md, noisy fields).
     """
     k = p.get("temperature_smoothing_rate") or ("gcv" if p["temperature_smoothing"] == "gcv" else None)
     if k is None:

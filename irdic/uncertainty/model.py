@@ -1,4 +1,4 @@
-"""Per-point standard uncertainty of the fields stage's results (issue 15, part 4).
+"""Per-point standard uncertainty of the fields stage's results.
 
 Every field of ``fields.zarr`` is, for fixed smoothing parameters and fixed
 geometry, a linear function of the IR pixel values (temperature, gradient,

@@ -1,4 +1,4 @@
-"""The noise probes' shared settings and their times (issue 15, part 4).
+"""The noise probes' shared settings and their times.
 
 The per-point uncertainties (:mod:`irdic.uncertainty.model`,
 :mod:`irdic.uncertainty.strain`) run random noise probes through the

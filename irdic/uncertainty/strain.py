@@ -1,4 +1,4 @@
-"""Standard uncertainty of the max principal strain (issue 15, part 4).
+"""Standard uncertainty of the max principal strain.
 
 DIC noise probes run through the surface fit (smoothing frozen at the chosen
 values) and the strain, as for the other fields

@@ -1,4 +1,4 @@
-"""Footprint temperatures (issue 15): local-linear box values of the IR pixels, against analytic truth."""
+"""Footprint temperatures: local-linear box values of the IR pixels, against analytic truth."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The demo generator removes only what it wrote (issue 9: never lose a user's data)."""
+"""The demo generator removes only what it wrote: it never loses a user's data."""
 
 import pytest
 

@@ -1,4 +1,4 @@
-"""Issue 15: the in-plane gradient's uncertainty from the DIC noise of its tangent plane
+"""The in-plane gradient's uncertainty from the DIC noise of its tangent plane
 (irdic.uncertainty.gradient_geometry)."""
 
 from types import SimpleNamespace
