@@ -184,3 +184,35 @@ def test_no_process_words_in_the_product():
 def test_the_process_words_rule_sees_them():
     assert PROCESS_WORDS.search("(issue 15, part 4)") and PROCESS_WORDS.search("the ninth session's code")
     assert not PROCESS_WORDS.search("the round patch of the issued frames, in parts")
+
+
+#: dotted names in the texts that are not references: examples of the notation, file names
+NOT_REFERENCES = {"irdic.a", "irdic.a.b", "irdic.yaml"}
+
+
+def _resolves(name: str) -> bool:
+    import importlib
+
+    parts = name.split(".")
+    for k in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:k]))
+        except ImportError:
+            continue
+        for attr in parts[k:]:
+            if not hasattr(obj, attr):
+                return False
+            obj = getattr(obj, attr)
+        return True
+    return False
+
+
+def test_dotted_references_name_what_exists():
+    # after a module moves, a docstring or page that still names its old path points nowhere
+    texts = [*FILES, ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "benchmarks" / "README.md",
+             *sorted((ROOT / "benchmarks").glob("*.py")), *sorted((ROOT / "workflow" / "rules").glob("*.smk"))]
+    names = {m.group(0).rstrip(".") for f in texts if f.is_file()
+             for m in re.finditer(r"\birdic(?:\.[A-Za-z_]\w*)+", f.read_text(encoding="utf-8"))}
+    bad = sorted(n for n in names - NOT_REFERENCES if not _resolves(n))
+    assert not bad, bad
+    assert not _resolves("irdic.stages.uncertainty") and _resolves("irdic.uncertainty.model.uncertainties")

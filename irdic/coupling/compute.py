@@ -7,7 +7,7 @@ specimen feed the interpolant: a mask per time from the projected point cloud
 (:mod:`irdic.footprint.visibility`, eroded by ``mask_erosion_px``), also
 intersected with the masks of the neighbouring DIC times so that pixels the
 moving edge crosses are left out. The pixel temperatures are interpolated in
-space and time (:func:`irdic.rbf.evaluate_series`, IMQ with the paper's
+space and time (:func:`irdic.image_rbf.evaluate_series`, IMQ with the paper's
 shape factors by default) and evaluated at the projected points: temperature,
 pixel gradient and local rate ∂Θ/∂t at the fixed pixel.
 

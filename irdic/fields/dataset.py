@@ -54,7 +54,7 @@ def fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, t
 
 
 def with_uncertainty(ds: xr.Dataset, unc: dict) -> xr.Dataset:
-    """``<field>_std`` and ``<field>_bias_dominated`` beside each field (see :mod:`irdic.stages.uncertainty`)."""
+    """``<field>_std`` and ``<field>_bias_dominated`` beside each field (see :mod:`irdic.uncertainty.model`)."""
     for name in ("temperature", "temperature_gradient", "temperature_rate", "max_principal_strain"):
         std, bias = unc[name]
         dims = ds[name].dims

@@ -25,7 +25,7 @@ __all__ = ["space_time", "temperature_fields"]
 def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=None, ops=None):
     """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
     and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
-    uncertainties of :func:`irdic.stages.uncertainty.uncertainties`.
+    uncertainties of :func:`irdic.uncertainty.model.uncertainties`.
 
     The projection Jacobian of the calibrated camera at the surface points
     turns pixel gradients into surface ones (see the module docstring).
@@ -99,7 +99,7 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     -------
     grad (T, N, 3) K/mm, total (T, N) K/s, local (T, N) K/s, value (T, N) degC,
     spatial (the inputs of the regression's bias estimate, see
-    :func:`irdic.stages.uncertainty.uncertainties`), chosen (the spacings used).
+    :func:`irdic.uncertainty.model.uncertainties`), chosen (the spacings used).
 
     Notes
     -----

@@ -1,6 +1,6 @@
 """Calibrate stage: one IR image of the reference object + the DIC marker export -> ``calibration.zarr``.
 
-The algorithm is :func:`irdic.calibrate.calibrate_from_files`; this entry
+The algorithm is :func:`irdic.calibration.calibrate_from_files`; this entry
 names the files and fills the ``calibration`` settings from the schema.
 """
 
