@@ -1,4 +1,4 @@
-"""The moving tube of issue 10 at any size: 10 Hz IR and DIC, tension-torsion all along."""
+"""The moving tube of the couple benchmarks at any size: 10 Hz IR and DIC, tension-torsion all along."""
 
 from __future__ import annotations
 

@@ -110,7 +110,7 @@ def main() -> None:
             pix = pts.pixel.values[k]
             ok = pts.visible.values[k]
             if mask_px is None:
-                from irdic.footprint import specimen_mask
+                from irdic.footprint.mask import specimen_mask
 
                 m = specimen_mask(pix[ok] - [r.u[0], r.v[0]], np.arange(r.u.size), np.arange(r.v.size), erosion_px=1.0)
                 vv, uu = np.nonzero(m)

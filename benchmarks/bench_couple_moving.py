@@ -1,4 +1,4 @@
-"""Benchmark of couple + fields on a moving specimen (issue 10), against the scipy way.
+"""Benchmark of couple + fields on a moving specimen, against the scipy way.
 
 The tube in tension-torsion all along (irdic.synthetic, 10 Hz IR and DIC,
 by default 300 x 300 frames and 78 x 168 = 13,104 DIC points) is written to
@@ -118,7 +118,7 @@ def scipy_way(root: Path, ex, subset: int) -> tuple[float, float]:
         ok = pts.visible.values[k]
         p = pts.pixel.values[k][ok]
         t1 = time.perf_counter()
-        from irdic.footprint import specimen_mask
+        from irdic.footprint.mask import specimen_mask
 
         mk = specimen_mask(p - [u0, v0], np.arange(r.u.size), np.arange(r.v.size), erosion_px=1.0)
         vv, uu = np.nonzero(mk)

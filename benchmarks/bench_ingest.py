@@ -1,7 +1,7 @@
 """Benchmark of the ingest stage: throughput and memory versus series length.
 
 Writes synthetic IRBIS text series (crop exports) of two lengths, ingests
-them with :func:`irdic.stages.ingest_ir.ingest_ir` on one thread, and reports wall time, MB/s of text
+them with :func:`irdic.ingest.ir.ingest_ir` on one thread, and reports wall time, MB/s of text
 per wall second and per CPU second (``time.process_time``, all threads of the process: the
 figure that stays meaningful on a shared machine) and the peak of Python-allocated memory (tracemalloc): the peak must not grow
 with the number of frames, because frames are streamed into the store. In
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from irdic.stages.ingest_ir import ingest_ir
+from irdic.ingest.ir import ingest_ir
 from irdic.threads import stage_threads
 from irdic.synthetic.writers import write_irbis
 

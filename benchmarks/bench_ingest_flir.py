@@ -5,7 +5,7 @@ with :func:`irdic.synthetic.writers.write_flir`, then times on one thread:
 
 - ``read``: :func:`irdic.io.flir.iter_flir_frames` alone (follow the FFF
   chain, parse each frame's camera info, counts to °C);
-- ``ingest``: :func:`irdic.stages.ingest_ir.ingest_ir` into ``ir.zarr``
+- ``ingest``: :func:`irdic.ingest.ir.ingest_ir` into ``ir.zarr``
   (headers pass, decode, checks, the store);
 - ``fromfile``: the obvious way, ``numpy.fromfile`` of each frame's pixels at
   offsets known beforehand (no chain, no camera info) and the formula of
@@ -40,8 +40,8 @@ import numpy as np
 
 from irdic.io.flir import iter_flir_frames, iter_flir_headers
 from irdic.io.flir_planck import counts_to_celsius
-from irdic.stages.ingest_ir import ingest_ir
-from irdic.stages.parameters import schema_defaults
+from irdic.ingest.ir import ingest_ir
+from irdic.parameters import schema_defaults
 from irdic.synthetic.writers import write_flir
 from irdic.threads import stage_threads
 

@@ -8,7 +8,7 @@ Prints three tables:
    ``--repeat`` runs, single thread).
 2. ``.irb``: MB/s of :func:`irdic.io.irb.read_irb` on the samples and on a
    synthetic 1024 x 768 x ``--frames`` sequence written with
-   :func:`~irdic.io.irb.write_irb`, next to reading the same file's bytes
+   :func:`~irdic.synthetic.writers.write_irb`, next to reading the same file's bytes
    (``open().read()`` in 16 MiB pieces; the file is in the page cache, so
    this is the memory-copy ceiling, not the disk).
 3. Peak Python-heap memory (tracemalloc) of iterating a short and a long

@@ -1,4 +1,4 @@
-"""Issue 15's table: the default configuration on realistic noisy scenes, against the analytic truth.
+"""Noisy data: the default configuration on realistic noisy scenes, against the analytic truth.
 
 Two scenes, each coupled and then run through the fields stage with the
 DEFAULT configuration (``auto`` smoothing everywhere):
@@ -28,7 +28,7 @@ Usage (repository root, one BLAS thread on a shared machine)::
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_noisy_fields.py [--scale tiny|demo] [--seed 3] [--scenes barrel tube] [--ir-noise K] [--dic-noise MM]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_noisy_fields.py --seeds 1 3 5 7
 
-``--seeds``: the issue's Monte Carlo check of the uncertainties. Each seed
+``--seeds``: a Monte Carlo check of the uncertainties. Each seed
 is a noise realisation (IR and DIC noise, mixed pixels, failed points) of
 the same scene; the coverage within 1 and 2 std is reported per seed and
 pooled over all of them (the fraction of every seed's interior errors).
@@ -47,8 +47,8 @@ import xarray as xr
 from scipy import ndimage
 
 from irdic.camera import CameraModel
-from irdic.stages.couple import couple
-from irdic.stages.fields import fields
+from irdic.coupling import couple
+from irdic.fields import fields
 from irdic.synthetic import HalfShell, experiment, lab_camera
 from irdic.synthetic.specimens import LABEL_SURFACE
 
@@ -123,7 +123,7 @@ def measure(name: str, scale: str, seed: int, ir_noise: float = IR_NOISE, dic_no
 
 def coverage(f, tr, m) -> dict:
     """Fractions of the interior errors within 1 and 2 std, where the store does not flag the bias as dominant
-    (the issue's bands: 0.60-0.76 and 0.92-0.98), and the fraction of interior values so flagged."""
+    (the target bands: 0.60-0.76 and 0.92-0.98), and the fraction of interior values so flagged."""
     out = {}
     for v, true in (("temperature", "temperature"), ("temperature_gradient", "temperature_gradient"),
                     ("temperature_rate", "temperature_rate"), ("max_principal_strain", "strain_max")):

@@ -75,7 +75,7 @@ def check_inputs(config: Mapping) -> None:
         (``experiments.<name>.dic.path: ...``).
     """
     from .errors import DataError
-    from .stages.inputs import list_inputs
+    from .ingest.inputs import list_inputs
 
     keys = []
     for name, s in config.get("setups", {}).items():

@@ -2,7 +2,7 @@
 
 The one PCA-normal implementation: the surface parametrisation
 (:mod:`irdic.surface`), the visibility test of the IR footprint
-(:mod:`irdic.footprint`) and the calibration markers use it.
+(:mod:`irdic.footprint.mask`) and the calibration markers use it.
 """
 
 from __future__ import annotations

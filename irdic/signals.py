@@ -2,7 +2,7 @@
 
 Two sources carry the load that goes with the temperature field:
 
-- the DIC exports (nodemap ``# SIGNALS:``), stored by :func:`irdic.stages.ingest_dic.ingest_dic`
+- the DIC exports (nodemap ``# SIGNALS:``), stored by :func:`irdic.ingest.dic.ingest_dic`
   in ``dic.zarr`` as ``signal_value(time, signal)``;
 - the testing machine's own time series (CSV of time, force, displacement,
   torque, angle at 10-1000 Hz), read by :func:`read_machine` and stored by
@@ -16,7 +16,7 @@ coordinate ``signal`` (names), ``signal_kind`` (``value_element``,
 ''). A variable cannot share its name with its dimension in xarray, hence
 ``signal_value`` rather than ``signal``.
 
-Time convention (as for the IR and DIC series, :func:`irdic.stages.inputs.frame_times`):
+Time convention (as for the IR and DIC series, :func:`irdic.ingest.inputs.frame_times`):
 ``t = t_file - t_file[0] (time_origin "first") + time_offset``; the machine's
 default ``time_origin`` is ``"file"`` because its record usually starts
 before the cameras, so ``time_offset`` is the DIC time at the machine

@@ -45,6 +45,7 @@ def test_lazy_imports_inside_functions_are_followed():
     assert "plot/experiment.py" in ch.stage_modules("figures")
     assert "signals.py" in ch.stage_modules("fields")  # imported inside fields.run
     assert "stages/couple.py" not in ch.stage_modules("fields")
+    assert not [m for m in ch.stage_modules("fields") if m.startswith("coupling/")]
     with pytest.raises(KeyError, match="unknown stage 'ingest'"):
         ch.stage_modules("ingest")
 
@@ -52,7 +53,7 @@ def test_lazy_imports_inside_functions_are_followed():
 def test_editing_validation_changes_the_couple_hash(pkg):
     before = {stage: ch.code_hash(stage) for stage in ch.STAGES}
     assert len(set(before.values())) == len(before)  # every stage has its own set of modules
-    # the argument checks (irdic/_checks.py today, irdic/validation.py after the redesign) feed couple
+    # the argument checks (irdic/validation.py; irdic/_checks.py in older layouts) feed couple
     for name in ("_checks.py", "validation.py"):
         if (pkg / name).exists():
             _edit(pkg / name)
@@ -68,12 +69,12 @@ def test_editing_validation_changes_the_couple_hash(pkg):
 
 def test_an_edit_reruns_exactly_the_stages_that_import_it(pkg):
     before = {stage: ch.code_hash(stage) for stage in ch.STAGES}
-    _edit(pkg / "stages" / "visibility.py")
+    _edit(pkg / "footprint" / "visibility.py")
     changed = {s for s in before if before[s] != ch.code_hash(s)}
     assert changed == {"couple"}
     # the fields stage's noise probes extrapolate as the couple stage does: both re-run
     mid = {stage: ch.code_hash(stage) for stage in ch.STAGES}
-    _edit(pkg / "stages" / "extrapolation.py")
+    _edit(pkg / "footprint" / "extrapolation.py")
     assert {s for s in mid if mid[s] != ch.code_hash(s)} == {"couple", "fields"}
     after = {stage: ch.code_hash(stage) for stage in ch.STAGES}
     _edit(pkg / "io" / "irbis.py")

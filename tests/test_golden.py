@@ -52,7 +52,7 @@ def golden_arrays(workdir: Path) -> dict[str, np.ndarray]:
     import os
 
     from irdic.pipeline import run
-    from irdic.stages.demo import make_demo
+    from irdic.synthetic.demo_folder import make_demo
     from irdic.store import open_store
 
     workdir = Path(workdir)

@@ -140,7 +140,7 @@ def test_killed_stage_leaves_no_store_and_the_next_run_cleans_up(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [".ir.zarr.lock", "ir.zarr"]
 
 
-# --------------------------------------------------------------------------- data safety (issue 9)
+# --------------------------------------------------------------------------- data safety
 
 _BY_TIME = {"a": {"chunks": (1, 3)}}
 

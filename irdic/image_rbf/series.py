@@ -276,7 +276,7 @@ def _frame_times(frame_times, n_frames):
     return ft
 
 
-@blas_threads(1)  # thousands of small tile factorisations: threaded BLAS only synchronises (issue 10)
+@blas_threads(1)  # thousands of small tile factorisations: threaded BLAS only synchronises
 def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra=None):
     """theta, d/du, d/dv, d/dt, edge distance and theta through ``extra`` (sparse, on the rows of ``F``)
     (n_times, M) for the in-span times, chunk by chunk.

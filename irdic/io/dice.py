@@ -54,7 +54,7 @@ def read_dice(path: str | os.PathLike) -> xr.Dataset:
         ``point`` = SUBSET_ID (the row index when the column was not
         exported, ``attrs["point_id_source"] = "row"``; then, when
         COORDINATE_X/Y are present, ``attrs["point_key"]`` names them so that
-        :func:`irdic.stages.ingest_dic.ingest_dic` matches subsets between frames by
+        :func:`irdic.ingest.dic.ingest_dic` matches subsets between frames by
         their reference image position rather than by row). The other columns
         (SIGMA, GAMMA, image coordinates, ...) as ``(point)`` variables.
         ``attrs["frame_index"]`` from the file name. No time: DICe does not

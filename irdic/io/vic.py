@@ -61,7 +61,7 @@ def read_vic(path: str | os.PathLike) -> xr.Dataset:
         "row"``): VIC has no ID column. When the image columns ``x, y`` (the
         subset centre in the reference image) are present,
         ``attrs["point_key"] = "x_image,y_image"`` tells
-        :func:`irdic.stages.ingest_dic.ingest_dic` to match points between frames by
+        :func:`irdic.ingest.dic.ingest_dic` to match points between frames by
         them rather than by row. Other columns as ``(point)`` variables; the
         image columns x, y, u, v are renamed ``x_image``, ``y_image``,
         ``u_image``, ``v_image``.

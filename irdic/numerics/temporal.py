@@ -533,7 +533,7 @@ def local_rate_weights(times, t_eval=None, *, samples=LOCAL_RATE_SAMPLES, degree
     Notes
     -----
     The reference of the temporal regression's rate bias
-    (:mod:`irdic.stages.uncertainty`). The exact IMQ interpolant (``c R0``
+    (:mod:`irdic.uncertainty.model`). The exact IMQ interpolant (``c R0``
     = 1 s) is itself biased where the stages are sparse for the signal: on
     the true series of the demo scenes its rate is off by 3.0 % (barrel,
     1 s stages) and 2.5 % (tube, 0.5 s), as much as the regression it

@@ -3,7 +3,7 @@
 ``inputs`` and ``outputs`` map names to paths (a mapping or Snakemake's
 ``snakemake.input``/``snakemake.output``); ``params`` are the stage's
 section of the validated configuration (absent keys take the schema's
-defaults, :mod:`irdic.stages.parameters`); ``log`` (a log file) and
+defaults, :mod:`irdic.parameters`); ``log`` (a log file) and
 ``threads`` (CPU threads, applied once at entry) are common to all. The
 Snakemake scripts, :func:`irdic.pipeline.run` and the command line all call
 these entries.
@@ -22,6 +22,9 @@ figures         points, fields?                                {figure name: PNG
 export          points, fields?                                paraview, csv
 ============== ============================================== ==================================
 
-This package imports none of its modules, so that each stage's code hash
-(:mod:`irdic.codehash`) covers only what that stage imports.
+An entry reads its stores, calls the domain packages (:mod:`irdic.ingest`,
+:mod:`irdic.calibration`, :mod:`irdic.coupling`, :mod:`irdic.fields`, ...)
+and writes its store; the domain never imports a stage. This package imports
+none of its modules, so that each stage's code hash (:mod:`irdic.codehash`)
+covers only what that stage imports.
 """

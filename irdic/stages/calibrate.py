@@ -1,6 +1,6 @@
 """Calibrate stage: one IR image of the reference object + the DIC marker export -> ``calibration.zarr``.
 
-The algorithm is :func:`irdic.calibrate.calibrate_from_files`; this entry
+The algorithm is :func:`irdic.calibration.calibrate_from_files`; this entry
 names the files and fills the ``calibration`` settings from the schema.
 """
 
@@ -10,7 +10,7 @@ import os
 from typing import Mapping
 
 from .common import optional_path, paths, stage_context
-from .parameters import settings
+from ..parameters import settings
 
 __all__ = ["run"]
 

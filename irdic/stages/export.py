@@ -7,7 +7,7 @@ from typing import Mapping
 
 from ..store import open_store
 from .common import open_optional, optional_path, paths, stage_context
-from .parameters import settings
+from ..parameters import settings
 
 __all__ = ["run"]
 

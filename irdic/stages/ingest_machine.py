@@ -11,7 +11,7 @@ import os
 from typing import Mapping
 
 from .common import optional_path, paths, stage_context
-from .parameters import settings
+from ..parameters import settings
 
 __all__ = ["run"]
 

@@ -305,7 +305,7 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     noise by the square of its wavenumber, so its risk keeps falling with
     wider spacings until the bias sets in. On the tube demo (0.05 K IR
     noise, 2-decimal exports) GCV's flat curve chose 5-8 spacings and a
-    7.8 % gradient error; see benchmarks/README.md (issue 15).
+    7.8 % gradient error; see benchmarks/README.md.
     """
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)

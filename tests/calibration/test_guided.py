@@ -1,4 +1,4 @@
-"""Faint foreshortened markers searched for where the first camera predicts them (issue 14)."""
+"""Faint foreshortened markers searched for where the first camera predicts them."""
 
 import time
 import warnings
@@ -101,7 +101,7 @@ def test_projected_ellipses_match_the_rendered_markers(faint_oblique):
 def test_bright_markers_are_centred_by_the_template_fit():
     """At contrast/noise 55 the centres come from the template fit, not the detector's windowed centroid.
 
-    Regression (issue 14, seed 5 of the calibration matrix, lab pose): every
+    Regression (seed 5 of the calibration matrix, lab pose): every
     marker's centre error was consistent with pixel noise (no outlier), but
     the windowed centroid with its 2 px margin carries ~2.3 x the noise of
     the Cramer-Rao bound; over 84 markers the centre error was 0.015 px RMS
@@ -124,7 +124,7 @@ def test_bright_markers_are_centred_by_the_template_fit():
 def test_faint_markers_are_centred_with_the_templates_own_radius():
     """At contrast/noise 3 the marker radius comes from the fitted templates, not the detector's sizes.
 
-    Regression (issue 14, seed 5 of the calibration matrix, lab pose, C/N 3):
+    Regression (seed 5 of the calibration matrix, lab pose, C/N 3):
     no marker was an outlier (largest centre error 2.7 sigma of 84), but the
     radius estimated from the detector's half-contrast sizes was 1.557 mm
     (true 1.6); templates 2.7 % too small bias the centres with the pixel
@@ -169,7 +169,7 @@ def test_a_template_of_the_wrong_size_is_fitted_to_the_marker():
 def test_the_template_fit_converges_across_a_thin_faint_ellipse():
     """C/N 3, axis ratio 0.28: every fit converges, and its centres scatter as the Cramer-Rao bound says.
 
-    Regression (issue 14, oblique pose of the calibration matrix): across a
+    Regression (oblique pose of the calibration matrix): across a
     thin ellipse the Gauss-Newton iteration zig-zagged or crept (successive
     steps in ratio -0.8 to +0.8) and 7 % of the steep wing's fits had not
     converged after 8 steps; those markers kept the detector's centroid (up
@@ -203,7 +203,7 @@ def test_the_template_fit_converges_across_a_thin_faint_ellipse():
 def test_faint_thin_markers_are_all_template_fitted():
     """Oblique pose, C/N 3 (noise field 11): every matched marker is centred by the template fit.
 
-    Regression (issue 14): 4 matched markers of the steep wing kept the
+    Regression: 4 matched markers of the steep wing kept the
     detector's windowed centroid (errors up to 3.1 x their Cramer-Rao
     sigma) where the template fit had not converged, and 2 were not used.
     """
@@ -223,7 +223,7 @@ def test_faint_thin_markers_are_all_template_fitted():
 
 @pytest.mark.parametrize("factor", [1.3, 1 / 1.3])
 def test_a_wrong_marker_radius_is_refused(faint_oblique, factor):
-    """A given marker radius 30 % off is refused with the given and the measured radius (issue 14).
+    """A given marker radius 30 % off is refused with the given and the measured radius.
 
     Contrast/noise 3, oblique pose: the free-size templates measure 1.594-1.597
     mm whichever radius predicted them; the tolerance is 5 % + 5 standard

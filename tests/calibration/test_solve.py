@@ -247,7 +247,7 @@ def test_figures_and_files(lab, lab_cal, tmp_path):
     assert not (tmp_path / "cal2.zarr").exists()
 
 
-# -- harder targets (issue 14): faint markers, clicked seeds, strongly oblique wings
+# -- harder targets: faint markers, clicked seeds, strongly oblique wings
 
 #: one wing seen 74 deg from its normal (axis ratio of its markers 0.27), the other at 18 deg
 OBLIQUE = dict(distance=450.0, azimuth_deg=41.0, elevation_deg=8.0, roll_deg=2.0)

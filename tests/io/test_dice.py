@@ -137,7 +137,7 @@ def _dice_no_ids(path, rows, shift):
 
 
 def test_stage_without_subset_ids_and_a_row_fewer_matches_by_coordinates(tmp_path):
-    from irdic.stages.ingest_dic import ingest_dic
+    from irdic.ingest.dic import ingest_dic
     from irdic.store import open_store
 
     src = tmp_path / "dice"
@@ -151,7 +151,7 @@ def test_stage_without_subset_ids_and_a_row_fewer_matches_by_coordinates(tmp_pat
 
 
 def test_duplicate_reference_position_without_ids_is_refused(tmp_path):
-    from irdic.stages.ingest_dic import ingest_dic
+    from irdic.ingest.dic import ingest_dic
 
     src = tmp_path / "dice"
     src.mkdir()

@@ -387,7 +387,7 @@ def test_config_overrides_are_validated(values, message):
 def test_ingest_seq_with_overrides(tmp_path):
     import xarray as xr
 
-    from irdic.stages.ingest_ir import ingest_ir
+    from irdic.ingest.ir import ingest_ir
 
     t = _scene(4)
     times = [1.7e9 + k * 0.04 for k in range(4)]
@@ -404,7 +404,7 @@ def test_ingest_seq_with_overrides(tmp_path):
 
 
 def test_ingest_refuses_bad_series(tmp_path):
-    from irdic.stages.ingest_ir import ingest_ir
+    from irdic.ingest.ir import ingest_ir
     from irdic.synthetic.writers import write_irb
 
     t = _scene()
@@ -424,7 +424,7 @@ def test_demo_written_as_flir_ingests_to_the_same_temperatures(tmp_path):
     import xarray as xr
 
     from irdic.io.flir_planck import celsius_to_counts
-    from irdic.stages.ingest_ir import ingest_ir
+    from irdic.ingest.ir import ingest_ir
     from irdic.synthetic.demo import FLIR_PARAMETERS, write_experiment
     from irdic.synthetic.experiments import experiment
 
@@ -450,7 +450,7 @@ def test_folder_of_radiometric_jpegs_is_a_series(tmp_path):
     import imagecodecs
     import xarray as xr
 
-    from irdic.stages.ingest_ir import ingest_ir
+    from irdic.ingest.ir import ingest_ir
 
     t = _scene(3)
     folder = tmp_path / "ir"

@@ -378,7 +378,7 @@ def test_all_errors_are_irdic_errors(tmp_path):
         read_nodemap(p)
 
 
-# ----------------------------------------------------------------------------- memory (issue 9)
+# ----------------------------------------------------------------------------- memory
 
 
 def _big_nodemap(path, n, seed=3):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from irdic.errors import DataError, FormatError, IrdicWarning
-from irdic.stages.ingest_dic import ingest_dic
+from irdic.ingest.dic import ingest_dic
 from irdic.io.nodemap import read_nodemap
 from irdic.synthetic.writers import write_nodemap
 from irdic.io.signals import parse_signals, standard_name

@@ -93,7 +93,7 @@ def _vic_frame(path, rows, shift):
 
 
 def test_frame_with_a_row_fewer_keeps_points_on_their_own_positions(tmp_path):
-    from irdic.stages.ingest_dic import ingest_dic
+    from irdic.ingest.dic import ingest_dic
     from irdic.store import open_store
 
     src = tmp_path / "vic"
@@ -109,7 +109,7 @@ def test_frame_with_a_row_fewer_keeps_points_on_their_own_positions(tmp_path):
 
 def test_frames_without_image_columns_and_different_rows_are_refused(tmp_path):
     from irdic.errors import DataError
-    from irdic.stages.ingest_dic import ingest_dic
+    from irdic.ingest.dic import ingest_dic
 
     src = tmp_path / "vic"
     src.mkdir()

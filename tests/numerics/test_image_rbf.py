@@ -502,7 +502,7 @@ def test_series_moving_mask_matches_per_time_masks():
 
 
 def test_series_on_worker_threads_equals_one_thread():
-    """The chunks of a moving outline run on the stage's threads with one shared tile cache (issue 10).
+    """The chunks of a moving outline run on the stage's threads with one shared tile cache.
 
     Each time keeps its own mask and the same numbers as on one thread (to
     round-off: a shared tile may be built by either thread, whole or
@@ -532,7 +532,7 @@ def test_series_on_worker_threads_equals_one_thread():
 def test_edge_tiles_shared_across_positions_and_masks():
     """A mask shifted by whole tiles reuses every edge factorisation, with the same results.
 
-    Regression (issue 10): the tile cache was keyed by tile position, so a
+    Regression: the tile cache was keyed by tile position, so a
     moving outline refactorised every edge tile at every time.
     """
     n = 96
@@ -565,7 +565,7 @@ def test_stable_mask_extends_shared_factors_with_the_same_interpolant():
 
     The extended factor is that of the same saddle system with the stable
     pixels ordered first: the interpolant agrees with a direct factorisation
-    to round-off, and the masks share their stable factors (issue 10).
+    to round-off, and the masks share their stable factors.
     """
     n = 96
     gv, gu = np.mgrid[0:n, 0:n]

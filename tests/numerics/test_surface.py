@@ -774,7 +774,7 @@ def test_gradient_risk_of_points_denser_than_the_pixels_is_judged_one_per_pixel(
 
 
 def test_gradient_risk_estimates_the_gradient_error_and_beats_gcv():
-    """Issue 15: the spacing of the temperature regression is chosen for its gradient. The Mallows-type
+    """The spacing of the temperature regression is chosen for its gradient. The Mallows-type
     estimate tracks the true mean squared gradient error at every spacing, and its choice has a smaller
     gradient error than GCV's (which judges values: a flat curve on smooth fields)."""
     from irdic.surface.regression import GRADIENT_CANDIDATES, gradient_risk_spatial

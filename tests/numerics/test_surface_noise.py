@@ -1,4 +1,4 @@
-"""Issue 15 part 5: strain at realistic DIC noise (0.003 mm) against the analytic truth."""
+"""Strain at realistic DIC noise (0.003 mm) against the analytic truth."""
 
 import numpy as np
 import pytest

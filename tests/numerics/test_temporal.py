@@ -220,7 +220,7 @@ def test_fill_series_of_several_arrays_is_each_filled_alone():
 
 
 def test_gcv_max_fraction_admits_the_rates_lighter_regression():
-    """Issue 15: GCV left out every candidate with more than M/2 parameters, so on 21 stages of a fast
+    """GCV used to leave out every candidate with more than M/2 parameters, so on 21 stages of a fast
     transient it could not reach centres every 2 stages (13 parameters), where its own curve has its minimum;
     the rate's regression admits up to RATE_MAX_FRACTION."""
     from irdic.numerics.temporal import RATE_MAX_FRACTION, gcv_temporal

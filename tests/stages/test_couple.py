@@ -9,10 +9,10 @@ import xarray as xr
 from irdic.errors import CalibrationError, DataError, IrdicWarning
 from irdic.stages import calibrate as calibrate_stage
 from irdic.stages import couple as couple_stage
-from irdic.stages.couple import couple
-from irdic.stages.demo import make_demo
-from irdic.stages.ingest_dic import ingest_dic
-from irdic.stages.ingest_ir import ingest_ir
+from irdic.coupling import couple
+from irdic.synthetic.demo_folder import make_demo
+from irdic.ingest.dic import ingest_dic
+from irdic.ingest.ir import ingest_ir
 from irdic.store import open_store
 from irdic.vocabulary import Status
 

@@ -9,7 +9,7 @@ import irdic.pipeline
 from irdic.codehash import code_hash
 import irdic.plot
 from irdic.synthetic.experiments import n_stages as demo_stages
-from irdic.stages.inputs import list_inputs
+from irdic.ingest.inputs import list_inputs
 
 irdic.config.validate_config(config)
 # outputs must stay inside the results folder whatever the names (links included)

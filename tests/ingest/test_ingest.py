@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from irdic.errors import DataError, FormatError, IrdicError, IrdicWarning
-from irdic.stages.ingest_dic import ingest_dic
-from irdic.stages.ingest_ir import ingest_ir
-from irdic.stages.inputs import frame_times, list_inputs
+from irdic.ingest.dic import ingest_dic
+from irdic.ingest.ir import ingest_ir
+from irdic.ingest.inputs import frame_times, list_inputs
 from irdic.synthetic.writers import write_irbis, write_nodemap
 from irdic.store import open_store
 from irdic.synthetic.writers import write_irbis, write_nodemap
@@ -198,7 +198,7 @@ def test_mostly_nan_frame_names_its_valid_sensor_window(tmp_path):
 
 
 def test_nan_check_names_full_sensor_pixels_of_a_cropped_frame():
-    from irdic.stages.ingest_ir import check_nan_fraction
+    from irdic.ingest.ir import check_nan_fraction
     from irdic.io.stack import temperature_dataarray
 
     x = np.full((6, 8), np.nan)
@@ -215,7 +215,7 @@ def test_some_nan_pixels_warn_with_their_fraction(tmp_path, caplog):
     frames = np.full((2, 10, 10), 21.0)
     frames[1, 0, :5] = np.nan  # 5 of 200 values: 2.5 %
     _npy_stack(src / "stack.npy", frames)
-    with caplog.at_level("WARNING", logger="irdic.stages.ingest_ir"):
+    with caplog.at_level("WARNING", logger="irdic.ingest.ir"):
         ingest_ir(src, tmp_path / "ir.zarr", frame_rate=10.0)
     assert "IR: 2.50 % of all pixel values are NaN (no temperature), first in stack.npy[1] (5.00 % of that frame)" \
         in caplog.text

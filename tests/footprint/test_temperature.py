@@ -1,10 +1,10 @@
-"""Footprint temperatures (issue 15): local-linear box values of the IR pixels, against analytic truth."""
+"""Footprint temperatures: local-linear box values of the IR pixels, against analytic truth."""
 
 import numpy as np
 import pytest
 
 from irdic.noise import interpolation_noise_gains
-from irdic.stages.footprint_temperature import FootprintOperator, footprint_side
+from irdic.footprint.temperature import FootprintOperator, footprint_side
 
 
 def _disc(H=40, W=50, r=15.0):
@@ -47,7 +47,7 @@ def test_quadratic_field_offset_and_noise_reduction():
 def test_footprint_side_is_the_largest_odd_box_within_the_point_spacing():
     for spacing, side in ((3.1, 3), (2.0, 1), (2.9, 1), (5.5, 3), (13.0, 3)):
         g = np.stack(np.meshgrid(np.arange(10) * spacing, np.arange(10) * spacing), -1).reshape(1, -1, 2)
-        # the two fields of irdic.stages.visibility.Projection it reads
+        # the two fields of irdic.footprint.visibility.Projection it reads
         fake = type("P", (), {"local": g, "in_frame": np.ones(g.shape[:2], bool)})()
         assert footprint_side(fake) == side, (spacing, footprint_side(fake))
 
@@ -100,7 +100,7 @@ def test_noise_factor_of_a_box_cut_by_a_straight_edge():
 def _footprint_errors(scale, n):
     """The tube's footprint temperatures minus the truth over ``n`` IR noise realisations (0.05 K) through the
     couple stage: (n, T, N) K, and the last realisation's points."""
-    from irdic.stages.couple import couple
+    from irdic.coupling import couple
 
     from .._synthetic_stores import synthetic_inputs
 
@@ -133,7 +133,7 @@ def test_pixel_pitch_is_the_size_of_a_pixel_on_the_surface():
     projected positions of neighbouring points; None without them."""
     import xarray as xr
 
-    from irdic.stages.footprint_fields import pixel_pitch
+    from irdic.footprint.fields import pixel_pitch
 
     rng = np.random.default_rng(4)
     psi = np.stack(np.meshgrid(np.arange(30.0), np.arange(20.0)), -1).reshape(-1, 2) * 0.2
@@ -156,7 +156,7 @@ def test_probes_carry_the_correlated_noise_of_points_extrapolated_from_the_edge(
     that correlation near 0."""
     from scipy.spatial import cKDTree
 
-    from irdic.stages.footprint_fields import footprint_noise, footprint_probes, footprint_temperatures
+    from irdic.footprint.fields import footprint_noise, footprint_probes, footprint_temperatures
 
     e, pts = _footprint_errors("demo", 6)
     e = e - e.mean(axis=0)  # the noise: the box's offset is not
@@ -191,7 +191,7 @@ def test_probes_without_footprint_share_the_nearest_pixels_noise():
     tube forced to side 1 at 1 / 1.9 of the data's); a chunk's window carries the positions for them."""
     import xarray as xr
 
-    from irdic.stages.footprint_fields import footprint_probes, window_extras
+    from irdic.footprint.fields import footprint_probes, window_extras
 
     pix = np.array([[[10.2, 5.1], [9.8, 4.9], [13.0, 5.0], [20.0, 9.0]]] * 3)
     pts = xr.Dataset({"pixel": (("time", "point", "axis"), pix),

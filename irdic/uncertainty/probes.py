@@ -1,7 +1,7 @@
-"""The noise probes' shared settings and their times (issue 15, part 4).
+"""The noise probes' shared settings and their times.
 
-The per-point uncertainties (:mod:`irdic.stages.uncertainty`,
-:mod:`irdic.stages.strain_uncertainty`) run random noise probes through the
+The per-point uncertainties (:mod:`irdic.uncertainty.model`,
+:mod:`irdic.uncertainty.strain`) run random noise probes through the
 fields stage's operators with the smoothing frozen; a long record's probes
 are evaluated at at most :data:`PROBE_TIMES` times, every other time taking
 the nearest probed time's result (the noise propagated by a fixed operator

@@ -1,8 +1,8 @@
-"""Standard uncertainty of the max principal strain (issue 15, part 4).
+"""Standard uncertainty of the max principal strain.
 
 DIC noise probes run through the surface fit (smoothing frozen at the chosen
 values) and the strain, as for the other fields
-(:mod:`irdic.stages.uncertainty`). What the probes give is the noise
+(:mod:`irdic.uncertainty.model`). What the probes give is the noise
 covariance of the strain TENSOR: its mean ``m = (E11 + E22)/2`` and its
 deviatoric 2-vector ``d = ((E11 - E22)/2, E12)``, per point. The max
 principal strain ``e_max = m + |d|`` is not a smooth function of them where
@@ -73,7 +73,7 @@ def max_principal_rms(comp, cov):
     -----
     With ``C_d`` the deviatoric block of ``cov``, ``E|d̂|² = |d|² + tr C_d``
     and, at ``d = 0``, ``|d̂|²`` scatters by ``sqrt(2 tr C_d²)``; the true
-    magnitude is taken as resolved only beyond :data:`~irdic.stages.regression_bias.BIAS_Z`
+    magnitude is taken as resolved only beyond :data:`~irdic.uncertainty.regression_bias.BIAS_Z`
     such standard errors, ``|d|² ≈ max(|d̂|² - tr C_d - z sqrt(2 tr C_d²),
     0)``, along ``d̂``, and ``m ≈ m̂``. (With the moments alone, ``z = 0``, a
     zero tensor's largest noise draws got the smallest std: 0.57 / 0.87
@@ -142,7 +142,7 @@ def _mse(c, C, z, w):
 
 def resolved_magnitude(comp, cov):
     """The method-of-moments magnitude of the deviatoric part (...) of :func:`max_principal_rms` (Notes): 0 where
-    ``|d̂|²`` is within :data:`~irdic.stages.regression_bias.BIAS_Z` standard errors of its noise mean."""
+    ``|d̂|²`` is within :data:`~irdic.uncertainty.regression_bias.BIAS_Z` standard errors of its noise mean."""
     Cd = np.asarray(cov)[..., 1:, 1:]
     noise = np.trace(Cd, axis1=-2, axis2=-1) + BIAS_Z * np.sqrt(2 * np.sum(np.square(Cd), axis=(-2, -1)))
     return np.sqrt(np.maximum(np.sum(np.square(np.asarray(comp)[..., 1:]), axis=-1) - noise, 0.0))
@@ -195,7 +195,7 @@ def strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None):
     The probes (:func:`_probe_tensors`) give each point's noise covariance of
     the tensor components, :func:`max_principal_rms` the RMS error of
     ``e_max`` from it; the regression's bias is estimated
-    (:func:`~irdic.stages.regression_bias.local_bias`) from the tensor's
+    (:func:`~irdic.uncertainty.regression_bias.local_bias`) from the tensor's
     difference to the reference spacing's, the part of it that moves
     ``e_max`` (:func:`_e_max_part`).
 
@@ -206,7 +206,7 @@ def strain_std(points, sf, t, p, s_x, rng, window=None, trusted=None, ops=None):
     0.98, 0.79 / 0.95 -> 0.72 / 0.95, 0.57 / 0.85 -> 0.61 / 0.90, 0.67 /
     0.92 -> 0.69 / 0.95; the tube (far from degeneracy) unchanged. The bias
     against the half-spacing reference, which is as biased
-    (:func:`~irdic.stages.regression_bias.strain_reference_options`): the
+    (:func:`~irdic.uncertainty.regression_bias.strain_reference_options`): the
     local estimate alone covered the tube's errors 0.69 / 0.91 pooled over
     those seeds, with the halved, pooled one 0.74 / 0.94 (barrel 0.71 /
     0.94 -> 0.70 / 0.95).

@@ -1,10 +1,10 @@
-"""Issue 15: the regressions' bias estimates of the uncertainty (irdic.stages.regression_bias) and the rate's
+"""The regressions' bias estimates of the uncertainty (irdic.uncertainty.regression_bias) and the rate's
 reference in time (irdic.numerics.temporal.local_rate_weights)."""
 
 import numpy as np
 
 from irdic.numerics.temporal import TemporalInterpolant, local_rate_weights, rate_reference_stencil
-from irdic.stages.regression_bias import (BIAS_Z, local_bias, reference_options, reference_spacing,
+from irdic.uncertainty.regression_bias import (BIAS_Z, local_bias, reference_options, reference_spacing,
                                          strain_reference_options)
 
 
@@ -24,7 +24,7 @@ def test_local_bias_on_pure_noise_is_not_a_bias():
     d = rng.normal(0.0, 2.0, v.shape)
     null = rng.normal(0.0, 2.0, (K,) + v.shape) ** 2
     b = local_bias(d, v, psi, null=null)
-    old = local_bias(d, v, psi)  # without the probes' scatter: the clipped average, the estimate of before
+    old = local_bias(d, v, psi)  # without the probes' scatter: the plain clipped average
     assert np.mean(old > 0) > 0.4
     assert np.mean(b > 0) < 0.2 and np.mean(b ** 2) < 0.6 * np.mean(old ** 2), (np.mean(b > 0), np.mean(b ** 2),
                                                                               np.mean(old ** 2))

@@ -1,5 +1,5 @@
-"""Issue 15: the in-plane gradient's uncertainty from the DIC noise of its tangent plane
-(irdic.stages.gradient_geometry)."""
+"""The in-plane gradient's uncertainty from the DIC noise of its tangent plane
+(irdic.uncertainty.gradient_geometry)."""
 
 from types import SimpleNamespace
 
@@ -8,9 +8,9 @@ import pytest
 import xarray as xr
 
 from irdic.camera import CameraModel
-from irdic.stages.couple import couple
-from irdic.stages.fields import fields
-from irdic.stages.gradient_geometry import TANGENT_PROBES, gradient_dic_var, tangent_noise
+from irdic.coupling import couple
+from irdic.fields import fields
+from irdic.uncertainty.gradient_geometry import TANGENT_PROBES, gradient_dic_var, tangent_noise
 from irdic.surface import fit_stages
 from irdic.surface.geometry import surface_geometry
 from irdic.synthetic import HalfShell, experiment, lab_camera
@@ -71,7 +71,7 @@ def test_barrel_gradient_std_holds_the_tangent_planes_dic_noise():
     noise; the DIC noise tilts and stretches the fitted tangent plane, an error of ~0.4 x the IR noise's
     (benchmark scene) that the std left out: within 2 std 0.868 before, 0.895 with it, 0.98 since the bias
     against the half-spacing reference is its RMS over the specimen where no neighbourhood resolves it
-    (:func:`irdic.stages.regression_bias.reference_options`). Within 1 std 0.78 on these clean exports (0.67-0.75
+    (:func:`irdic.uncertainty.regression_bias.reference_options`). Within 1 std 0.78 on these clean exports (0.67-0.75
     on the benchmark's rounded ones, benchmarks/README): that RMS stands also where the ripple is small."""
     ex = experiment("halfshell", "demo", ir_noise=0.05, dic_noise=0.003, seed=3,
                     specimen=HalfShell(R_o=40.0, R_i=36.0, axis_z=-40.0), camera=lab_camera())

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from irdic.errors import ConfigError, GeometryError
-from irdic.footprint import edge_distance, facing_camera, point_normals, specimen_mask
+from irdic.footprint.mask import edge_distance, facing_camera, point_normals, specimen_mask
 
 
 def _grid(n=30, spacing=1.0):
@@ -82,7 +82,7 @@ def test_triangle_rasterisation_matches_point_location():
     """The per-triangle rasteriser marks exactly the pixel centres that Delaunay.find_simplex puts in a kept triangle."""
     from scipy.spatial import Delaunay
 
-    from irdic.footprint import _rasterise
+    from irdic.footprint.mask import _rasterise
 
     rng = np.random.default_rng(3)
     # a jittered, sheared grid with a hole, ~1 px spacing as on the IR sensor

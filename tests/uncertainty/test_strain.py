@@ -1,12 +1,12 @@
-"""Issue 15: the max principal strain's std from the strain tensor's noise covariance
-(:mod:`irdic.stages.strain_uncertainty`), against analytic truth."""
+"""The max principal strain's std from the strain tensor's noise covariance
+(:mod:`irdic.uncertainty.strain`), against analytic truth."""
 
 import numpy as np
 import pytest
 from scipy.special import i0e, i1e
 
-from irdic.stages.regression_bias import BIAS_Z
-from irdic.stages.strain_uncertainty import below_noise_floor, max_principal_rms, tensor_components
+from irdic.uncertainty.regression_bias import BIAS_Z
+from irdic.uncertainty.strain import below_noise_floor, max_principal_rms, tensor_components
 from irdic.strain import principal_2d, strain, strain_components
 
 #: the demo barrel's strain noise: mean and both deviatoric components alike (3.7-4.1e-5 each), here in units
@@ -57,7 +57,7 @@ def test_rms_is_the_rice_error_at_the_estimated_magnitude(r0):
 
 @pytest.mark.parametrize("C", [BARREL, ANISO])
 def test_far_from_degeneracy_the_linearised_std(C):
-    """|d| >> noise: ``C_mm + 2 uᵀ C_dm + uᵀ C_d u`` (``u = d/|d|``), the probes' std of before."""
+    """|d| >> noise: ``C_mm + 2 uᵀ C_dm + uᵀ C_d u`` (``u = d/|d|``), the linearised std."""
     comp = np.array([[0.5, 60.0, -80.0], [-3.0, 4.0, 9.0]])  # |d| = 100 (linear branch) and 9.8 (quadrature)
     got = max_principal_rms(comp, C)
     u = comp[:, 1:] / np.linalg.norm(comp[:, 1:], axis=1, keepdims=True)

@@ -3,7 +3,7 @@
 Points behind the camera or outside the IR frame, and points on surface
 facing away from it, are not visible. Only pixels on the specimen feed the
 interpolant: a mask per time from the projected point cloud
-(:func:`irdic.footprint.specimen_mask`), also intersected with the masks of
+(:func:`irdic.footprint.mask.specimen_mask`), also intersected with the masks of
 the neighbouring DIC times so that pixels the moving edge crosses are left
 out.
 """
@@ -17,7 +17,7 @@ import numpy as np
 import xarray as xr
 
 from ..errors import CalibrationError, DataError
-from ..footprint import facing_camera, point_normals, specimen_mask
+from .mask import facing_camera, point_normals, specimen_mask
 from ..numerics.threads import parallel_map
 
 __all__ = ["Projection", "project_points", "fill_in_time", "masks_and_facing", "MASK_REUSE_PX"]

@@ -1,9 +1,9 @@
-"""The demo generator removes only what it wrote (issue 9: never lose a user's data)."""
+"""The demo generator removes only what it wrote: it never loses a user's data."""
 
 import pytest
 
 from irdic.errors import ConfigError
-from irdic.stages.demo import make_demo
+from irdic.synthetic.demo_folder import make_demo
 
 
 @pytest.fixture(scope="module")

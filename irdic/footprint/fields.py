@@ -1,4 +1,4 @@
-"""The fields stage's side of the footprint temperatures (:mod:`irdic.stages.footprint_temperature`).
+"""The fields stage's side of the footprint temperatures (:mod:`irdic.footprint.temperature`).
 
 The couple stage writes ``points.temperature_footprint`` and its per-point
 noise factor; here the fields stage takes them: as the temperatures its
@@ -8,7 +8,7 @@ correlated like the box fits' noise), and with the paper's temperatures for
 the denoised value (:func:`paper_value`). Kept apart from the couple side so
 that the fields stage does not depend on the projection code (its code hash,
 :mod:`irdic.codehash`, stays its own); the probes of the points extrapolated
-from the mask edge follow :mod:`irdic.stages.extrapolation`, so an edit there
+from the mask edge follow :mod:`irdic.footprint.extrapolation`, so an edit there
 re-runs both stages.
 """
 
@@ -121,7 +121,7 @@ def _extrapolation_lines(pix, inner, ext, L):
     """The couple stage's samples of the extrapolated points ``ext`` at one time, ``L`` (n_ext,) px their
     distances outside the mask: ``(samples (n_ext, S, 2) px, sample offsets (n_ext, S, 2) px, parabola weights
     (n_ext, S))``, or None. The line into the mask runs towards the mean of the 4 nearest points inside (the
-    mask is not known here), from ``q`` at ``L`` outside (:func:`irdic.stages.extrapolation.extrapolate`)."""
+    mask is not known here), from ``q`` at ``L`` outside (:func:`irdic.footprint.extrapolation.extrapolate`)."""
     from scipy.spatial import cKDTree
 
     if inner.sum() < 4:
@@ -148,7 +148,7 @@ def _extrapolated_noise(box, offsets, w, side):
 
 
 def footprint_probes(points, window, sigma):
-    """``(draw, s_paper)`` for the noise probes of :mod:`irdic.stages.uncertainty`: ``draw(rng, b)`` gives ``b``
+    """``(draw, s_paper)`` for the noise probes of :mod:`irdic.uncertainty.model`: ``draw(rng, b)`` gives ``b``
     probes of :func:`footprint_noise` at the record's (or the chunk window's) points. When the fields regress
     footprint temperatures (:func:`footprint_temperatures`) ``s_paper`` (K) is the noise of the paper's point
     temperatures (pixel noise ``sigma`` times their gain), whose regression is the value; without them the
@@ -174,7 +174,7 @@ def footprint_probes(points, window, sigma):
 
 
 def window_extras(points, w) -> dict:
-    """The :class:`~irdic.stages.uncertainty.Window` fields of the noise probes at times ``w``: the footprint's,
+    """The :class:`~irdic.uncertainty.model.Window` fields of the noise probes at times ``w``: the footprint's,
     or the pixel positions and extrapolated points alone without it (none without pixel positions)."""
     if "pixel" not in points:
         return {}
@@ -200,12 +200,12 @@ def paper_value(points, series, space_time, spatial):
     """The denoised temperature from the paper's point temperatures, with the inputs of its bias estimate.
 
     ``space_time(theta, series) -> (grad, total, local, value, spatial, chosen)`` is the fields stage's
-    regression (:func:`irdic.stages.fields._space_time`) with the spacings chosen for the footprint
+    regression (:func:`irdic.fields.space_time.space_time`) with the spacings chosen for the footprint
     temperatures (the noise probes run through one operator), ``spatial`` its inputs of the bias
     estimates on the footprint temperatures. Returns ``(value (T, N) degC, spatial)`` with the value's entries (the
     input, the output, the temporal difference) from the paper's temperatures and the gradient's and
     rate's (the last: the gradient's reference input) from the footprint
-    (:func:`irdic.stages.uncertainty.uncertainties`).
+    (:func:`irdic.uncertainty.model.uncertainties`).
 
     Notes
     -----

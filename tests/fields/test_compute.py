@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from irdic.errors import ConfigError, DataError
-from irdic.stages.couple import couple
-from irdic.stages.fields import fields
+from irdic.coupling import couple
+from irdic.fields import fields
 
 from .._synthetic_stores import synthetic_inputs
 
@@ -49,7 +49,7 @@ def test_noise_free_accuracy(case):
     f = fields(pts, cal)
     # noise-free data: "auto" is the paper's interpolation everywhere, and says why
     # (the tube's weak gradient, 6 mK/px, against a 1.7 mK noise estimate that is signal leakage
-    # of the moving tube into the second differences, still regresses in space: issue 15, open)
+    # of the moving tube into the second differences, still regresses in space: not resolved yet)
     for opt in ("temperature_smoothing", "temperature_smoothing_space", "surface_smoothing"):
         assert f.attrs[f"{opt}_reason"].startswith("auto: ")
         if name == "halfshell" or opt != "temperature_smoothing_space":
@@ -128,7 +128,7 @@ def test_bad_arguments(case):
 
 
 def test_uncertainty_variables_and_rate_coverage():
-    """Issue 15 part 4: std and bias flags beside each field; the rate's std matches its error against the truth."""
+    """Std and bias flags beside each field; the rate's std matches its error against the truth."""
     pts, truth, f, m = _noisy("halfshell", "tiny", dic_noise=0.003, seed=1)
     for v in ("temperature", "temperature_gradient", "temperature_rate", "max_principal_strain"):
         assert f[f"{v}_std"].dims == f[v].dims and f[f"{v}_bias_dominated"].dims == f[v].dims
@@ -154,7 +154,7 @@ def test_uncertainty_variables_and_rate_coverage():
 
 
 def test_uncertainty_coverage_monte_carlo():
-    """Issue 15 part 4: over seeds, the std (noise and the regressions' bias) covers the error of each field.
+    """Over seeds, the std (noise and the regressions' bias) covers the error of each field.
 
     The error against the analytic truth is noise plus the regression's bias; the std without the bias
     covered 0.37-0.45 within 1 std (about half the error). Bands are the targets 0.60-0.76 / 0.92-0.98
@@ -174,7 +174,7 @@ def test_uncertainty_coverage_monte_carlo():
     for v, w in within.items():
         one, two = np.mean(w, axis=0)
         if v in ("temperature", "temperature_rate"):
-            # the issue's bands, 2 std widened by the spread of seeds (1-3: temperature 0.63-0.71 / 0.91-0.95,
+            # the target bands (0.60-0.76 / 0.92-0.98), 2 std widened by the spread of seeds (1-3: temperature 0.63-0.71 / 0.91-0.95,
             # rate 0.65-0.69 / 0.88-0.92); the rate's 1 std to 0.80 since its bias estimate against a local
             # quartic in time also sees the interpolant's (5 stages; seeds 1, 2: 0.79 / 0.98, 0.75 / 0.97)
             assert 0.60 <= one <= (0.80 if v == "temperature_rate" else 0.76) and 0.89 <= two <= 0.98, (v, one, two)
@@ -183,13 +183,13 @@ def test_uncertainty_coverage_monte_carlo():
         # interpolation far noisier than the regression, and that estimate's scatter adds to it; since the std
         # holds the upward noise bias of this static shell's zero tensor and its bias term the norm of the
         # tensor's difference (the deviatoric direction is noise there), 0.94 / 0.98
-        # (irdic.stages.strain_uncertainty; on the demo barrel the same change brings 0.57 / 0.85 up to 0.61 / 0.90)
+        # (irdic.uncertainty.strain; on the demo barrel the same change brings 0.57 / 0.85 up to 0.61 / 0.90)
         top = 0.95 if v == "max_principal_strain" else 0.82
         assert 0.55 <= one <= top and 0.86 <= two <= 0.99, (v, one, two)
 
 
 def test_space_time_regression_space_first_tube_rate():
-    """Issue 15: the tube's temperature is smooth in space but fast in time; regressing each stage in space
+    """The tube's temperature is smooth in space but fast in time; regressing each stage in space
     before the series in time keeps GCV in time from smoothing the heating away (rate 7.8 % before, 4.2 % now)."""
     pts, truth, f, m = _noisy("tube", "tiny", dic_noise=0.003, seed=5)
     assert f.attrs["temperature_smoothing_space_chosen"] == "gcv"
@@ -198,7 +198,7 @@ def test_space_time_regression_space_first_tube_rate():
 
 
 def test_tube_gradient_spacing_chosen_for_the_gradient():
-    """Issue 15: the temperature's spatial spacing is chosen by the gradient's estimated risk, not by GCV of the
+    """The temperature's spatial spacing is chosen by the gradient's estimated risk, not by GCV of the
     values (flat on the tube's smooth field): tube tiny, seed 1, gradient 16.9 % with GCV, 13.1 % now."""
     pts, truth, f, m = _noisy("tube", "tiny", dic_noise=0.005, seed=1)
     assert f.attrs["temperature_smoothing_space_chosen"] == "gcv"
@@ -208,7 +208,7 @@ def test_tube_gradient_spacing_chosen_for_the_gradient():
 
 
 def test_temporal_regression_bias_in_the_std_and_flags_tube():
-    """Issue 15: on the demo tube (21 stages at 2 Hz, fast heating) GCV in time smooths with centres every 3
+    """On the demo tube (21 stages at 2 Hz, fast heating) GCV in time smooths with centres every 3
     stages, a bias larger than the rate's noise. The denoised temperature's std includes the temporal bias
     (within 1 / 2 std on the benchmark's scene, 0.38 / 0.68 before, 0.65 / 0.92 now), and the rate says it is
     bias-dominated (90 % of the interior points) instead of claiming a noise std (0.25 / 0.43 coverage before)."""
@@ -222,7 +222,7 @@ def test_temporal_regression_bias_in_the_std_and_flags_tube():
 
 
 def test_tube_rate_from_the_lighter_temporal_regression():
-    """Issue 15: the rate of the tube's fast heating (demo, 21 stages at 2 Hz) is limited by the temporal
+    """The rate of the tube's fast heating (demo, 21 stages at 2 Hz) is limited by the temporal
     regression's bias. GCV in time takes centres every 3 stages for the value and gradient; the rate now
     comes from GCV's choice among candidates with up to 2/3 parameters per stage (every 2 stages): here
     3.5 % -> 2.6 %; the gradient keeps the heavier regression's temporal averaging (5.3 %, unchanged)."""
@@ -236,7 +236,7 @@ def test_tube_rate_from_the_lighter_temporal_regression():
 
 
 def test_tube_gradient_from_the_footprint_temperatures_and_its_coverage():
-    """Issue 15: the spatial regression of the gradient takes the couple stage's footprint temperatures (the
+    """The spatial regression of the gradient takes the couple stage's footprint temperatures (the
     plane fitted to the ~9 pixels about each pixel), the value stays the regression of the paper's. Tube demo,
     seed 3: gradient 4.7 % -> 2.4 % on the benchmark's scene; the gradient's std covered 0.52 / 0.76 within 1 / 2
     std while the probes gave every point the interior's white noise (the points extrapolated from the mask's
@@ -257,10 +257,10 @@ def test_tube_gradient_from_the_footprint_temperatures_and_its_coverage():
 
 
 def test_tube_strain_std_holds_the_regression_bias():
-    """Issue 15: the tube's strain bias (4.4e-4 RMS, as large as its noise) is estimated against the surface
+    """The tube's strain bias (4.4e-4 RMS, as large as its noise) is estimated against the surface
     regression at half the spacing, whose own strain bias is as large and uncorrelated (4.32e-4, correlation
     -0.08 on the noise-free coordinates): half of ``<d² - v>``, over the whole specimen where no neighbourhood
-    resolves it (:func:`irdic.stages.regression_bias.strain_reference_options`). This seed: 0.75 / 0.935 within
+    resolves it (:func:`irdic.uncertainty.regression_bias.strain_reference_options`). This seed: 0.75 / 0.935 within
     1 / 2 std with the local estimate alone, 0.83 / 0.98 now; pooled over the benchmark's seeds 1, 3, 5, 7
     0.69 / 0.91 -> 0.74 / 0.94 (this seed is the benchmark's most covered)."""
     pts, truth, f, m = _noisy("tube", "demo", dic_noise=0.003, seed=3)
@@ -270,7 +270,7 @@ def test_tube_strain_std_holds_the_regression_bias():
 
 
 def test_uncertainty_coverage_demo_halfshell_bias_estimates():
-    """Issue 15: on the demo half-shell (31 stages at 1 Hz, slow heating, true strain 0) the std's bias parts
+    """On the demo half-shell (31 stages at 1 Hz, slow heating, true strain 0) the std's bias parts
     were estimated against references as biased (the rate's: the IMQ interpolant in time, 3 % off on the true
     series) or as noisy (the exact interpolation) as the error they judged, and every positive local estimate
     was kept: within 1 std temperature 0.82, gradient 0.85, strain 0.99, and 75 % of the rates flagged
@@ -292,10 +292,10 @@ def test_uncertainty_coverage_demo_halfshell_bias_estimates():
 
 
 def test_static_shell_strain_std_holds_the_noise_bias_of_a_zero_tensor():
-    """Issue 15: a static specimen's true strain tensor is 0, and the max principal value of its noisy estimate
+    """A static specimen's true strain tensor is 0, and the max principal value of its noisy estimate
     is biased upwards; the probes' spread of that value about the noisy estimate is not its error's RMS. Demo
     half-shell (true strain 0), seed 5: 0.67 / 0.91 within 1 / 2 std with that spread, 0.71 / 0.95 with the RMS
-    error at the tensor estimated from the probes' covariance (:mod:`irdic.stages.strain_uncertainty`); the
+    error at the tensor estimated from the probes' covariance (:mod:`irdic.uncertainty.strain`); the
     store says the strain is below its noise floor."""
     pts, truth, f, m = _noisy("halfshell", "demo", dic_noise=0.003, seed=5)
     mm = m & ~f.max_principal_strain_bias_dominated.values

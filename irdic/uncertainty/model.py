@@ -1,4 +1,4 @@
-"""Per-point standard uncertainty of the fields stage's results (issue 15, part 4).
+"""Per-point standard uncertainty of the fields stage's results.
 
 Every field of ``fields.zarr`` is, for fixed smoothing parameters and fixed
 geometry, a linear function of the IR pixel values (temperature, gradient,
@@ -18,12 +18,12 @@ are propagated through those same operators:
 - Temporal regression: the rate is ``W1 Θ`` per point series, so its
   variance is ``σ_T² Σ_j W1_ij²`` (the weights of the chosen regression).
   With the spatial regression too, the fields regress in space first and
-  then in time (:func:`irdic.stages.fields._space_time`): the rate
+  then in time (:func:`irdic.fields.space_time.space_time`): the rate
   ``W1 (S Θ)``, value and gradient of ``S (W0 (S Θ))``, all by the probes.
 - Spatial regression and strain: propagated by random probes, ``K`` noise
   realisations run through the same operator with the smoothing parameters
   frozen at the chosen values; the standard deviation over the probes.
-  In a record longer than :data:`~irdic.stages.probes.PROBE_TIMES` DIC
+  In a record longer than :data:`~irdic.uncertainty.probes.PROBE_TIMES` DIC
   times the probes are evaluated at that many times spread over it, and
   every other time takes the nearest probed time's standard deviation: the
   noise propagated by a fixed operator follows the geometry, which changes
@@ -31,30 +31,30 @@ are propagated through those same operators:
   record. The strain's probes give the covariance of the strain tensor, and
   the max principal strain's std is its RMS error at the tensor estimated
   from it, the upward noise bias of a (near-)degenerate tensor included
-  (:mod:`irdic.stages.strain_uncertainty`).
+  (:mod:`irdic.uncertainty.strain`).
 - Calibration: the temperature gets ``pixel_std |∇_pix Θ|`` (the projected
   position's uncertainty times the pixel gradient) in quadrature, and the
   DIC noise ``σ_x |∇Θ|`` (a point's noisy coordinates place its sample);
   the gradient the DIC noise of its tangent plane
-  (:func:`~irdic.stages.gradient_geometry.gradient_dic_var`).
+  (:func:`~irdic.uncertainty.gradient_geometry.gradient_dic_var`).
 - The probes' noise is scaled to the data's: the residuals of each time's
   spatial regression, data over probes
-  (:func:`~irdic.stages.regression_bias.noise_scale`).
+  (:func:`~irdic.uncertainty.regression_bias.noise_scale`).
 - Regression bias: a regression's error is noise plus bias. Its difference
   ``d`` to a less biased reference of the same input (value: the points'
   own series; gradient and strain: the regression with half the spacing,
-  :func:`~irdic.stages.regression_bias.reference_spacing`; the rate: a
+  :func:`~irdic.uncertainty.regression_bias.reference_spacing`; the rate: a
   local polynomial in time, :func:`~irdic.numerics.temporal.rate_reference_stencil`)
   has ``E d² = b² + b_ref² + v`` (``v``: the noise variance of ``d``, from the
   same probes through both operators); ``b² = <d²> - <v>`` averaged locally, where
   it exceeds its own scatter on noise
-  (:func:`~irdic.stages.regression_bias.local_bias`), is added to the variance.
+  (:func:`~irdic.uncertainty.regression_bias.local_bias`), is added to the variance.
   The gradient's reference, from 2 point spacings on, is as biased as the
-  regression (``b_ref ≈ b``, :func:`~irdic.stages.regression_bias.reference_options`):
+  regression (``b_ref ≈ b``, :func:`~irdic.uncertainty.regression_bias.reference_options`):
   half of that average, where it exceeds two of its standard errors, over
   the whole specimen where no neighbourhood resolves it: there an RMS over
   the region, not a local value. The strain's likewise, at one standard
-  error (:func:`~irdic.stages.regression_bias.strain_reference_options`).
+  error (:func:`~irdic.uncertainty.regression_bias.strain_reference_options`).
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
@@ -77,12 +77,12 @@ from ..gradient import material_rate, surface_gradient
 from ..numerics.temporal import TemporalInterpolant, rate_reference_weights, temporal_window
 from ..numerics.threads import parallel_map
 from ..vocabulary import Status
-from .footprint_fields import footprint_probes
+from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
 from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
                               scaled_probes)
-from .strain_uncertainty import noise_floor_note, strain_std
+from .strain import noise_floor_note, strain_std
 
 __all__ = ["uncertainties", "uncertainty_notes", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
 
@@ -100,7 +100,7 @@ class Window(NamedTuple):
     strain's reference); ``first``/``last``: the chunk holds the record's
     first/last DIC time; ``record`` (M,) s: the whole record's stage times
     (the temporal operator's window). With footprint temperatures
-    (:func:`~irdic.stages.footprint_fields.footprint_temperatures`):
+    (:func:`~irdic.footprint.fields.footprint_temperatures`):
     ``theta_paper`` (T_w, N), the paper's point temperatures, and ``pixel``
     (T_w, N, 2) px, the points' projected positions, ``noise_factor`` (T_w, N)
     their footprint temperatures' (``points.temperature_footprint_noise_factor``), ``extrapolated`` (T_w, N)
@@ -152,7 +152,7 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
         3]): the point temperatures, the regressed gradient, the value
         regression's input and output (their difference gives its bias), and
         last the input whose lighter regression is the gradient's bias
-        reference (:func:`~irdic.stages.regression_bias.reference_spacing`;
+        reference (:func:`~irdic.uncertainty.regression_bias.reference_spacing`;
         the points' own series after the regression in time, or the point
         temperatures); with a regression in time too (``S_t`` in time, ``S`` in
         space, ``I_t`` the exact interpolation in time): the rate of
@@ -205,7 +205,7 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
 def uncertainty_notes(unc, e_max):
     """The store's ``uncertainty_notes``: those of :func:`uncertainties` (``unc``), and where the max principal
     strain ``e_max`` (T, N), which the fields stage computes after them, is below its noise floor
-    (:func:`~irdic.stages.strain_uncertainty.noise_floor_note`)."""
+    (:func:`~irdic.uncertainty.strain.noise_floor_note`)."""
     floor = noise_floor_note(e_max, unc["max_principal_strain"][0])
     return "; ".join(n for n in (unc["notes"], floor) if n and n != "none") or "none"
 
@@ -236,10 +236,10 @@ def _ir_noise(a):
 def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None, spatial=None,
             trusted=None, footprint=None, theta_paper=None):
     """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
-    bias (:func:`~irdic.stages.regression_bias.local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None.
-    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.stages.footprint_fields.footprint_probes`, with
+    bias (:func:`~irdic.uncertainty.regression_bias.local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None.
+    ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.footprint.fields.footprint_probes`, with
     ``theta_paper`` (T, N) the paper's point temperatures. The probes' noise is scaled to the data's
-    (:func:`~irdic.stages.regression_bias.noise_scale`)."""
+    (:func:`~irdic.uncertainty.regression_bias.noise_scale`)."""
     T, N = sf.x.shape[:2]
     # the paper's relations: exact propagation of the per-point linear maps
     e = np.zeros((T, N, 2))
@@ -265,10 +265,10 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
                                                                            smoothing=k))
 
         ts, ti = operator(kt), operator(None)
-        # the rate may come from a lighter regression than the value (irdic.stages.fields._rate_series)
+        # the rate may come from a lighter regression than the value (irdic.fields.space_time._rate_series)
         kr = chosen_k.get("temperature_smoothing_rate") or kt
         tr = ts if kr == kt else operator(kr)
-        # the rate's bias reference: a local polynomial in time (irdic.stages.fields._space_time)
+        # the rate's bias reference: a local polynomial in time (irdic.fields.space_time.space_time)
         W = (ts.weights(t, 0), tr.weights(t, 1), ti.weights(t, 0), rate_reference_weights(ti.times, t, smoothing=kr))
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
         temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
@@ -315,17 +315,17 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
 def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias, draw=None):
     """Noise probes through the spatial (and temporal) regression of the temperatures.
 
-    :data:`~irdic.stages.probes.PROBES` white-noise fields of the point noise ``s_T`` (K) run
-    through the regressions with the smoothing frozen, :data:`~irdic.stages.probes.PROBE_GROUP` at
+    :data:`~irdic.uncertainty.probes.PROBES` white-noise fields of the point noise ``s_T`` (K) run
+    through the regressions with the smoothing frozen, :data:`~irdic.uncertainty.probes.PROBE_GROUP` at
     a time (one regression call each, so memory does not grow with the
     probes). Returns the mean squares over the probes (T, N): ``v`` (value),
     ``g`` (T, N, 3, gradient), ``r`` (rate, with ``W``); with ``bias``, the
     noise variance of the regression's difference to the exact interpolation
     (``v_var``, ``g_var``; ``rt_var``, ``rs_var``, ``vt_var`` of
-    :func:`_space_time_bias`), which :func:`~irdic.stages.regression_bias.local_bias` subtracts.
-    The probes are evaluated at the :data:`~irdic.stages.probes.PROBE_TIMES` times of
-    :func:`~irdic.stages.probes.probe_times` (the regression in time mixes all of them first);
-    every other time takes the nearest one's mean squares (:func:`~irdic.stages.probes.spread`).
+    :func:`_space_time_bias`), which :func:`~irdic.uncertainty.regression_bias.local_bias` subtracts.
+    The probes are evaluated at the :data:`~irdic.uncertainty.probes.PROBE_TIMES` times of
+    :func:`~irdic.uncertainty.probes.probe_times` (the regression in time mixes all of them first);
+    every other time takes the nearest one's mean squares (:func:`~irdic.uncertainty.probes.spread`).
     ``draw(rng, b)``: ``b`` unit-variance noise fields (b, T_w, N) with the
     input's spatial correlation instead of white ones.
     """
@@ -354,7 +354,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             value_in = noise_c
             res = noise_c - v.reshape(noise_c.shape)
         else:
-            # in space at each time first, then in time (irdic.stages.fields._space_time)
+            # in space at each time first, then in time (irdic.fields.space_time.space_time)
             s = np.nan_to_num(regress_space(noise.reshape(b * tw, N), None, ks)[1].reshape(b, tw, N))
             res = (noise - s)[:, off:off + T][:, sub]
             r = np.einsum("ij,kjn->kin", W1[sub], s)
@@ -400,10 +400,10 @@ def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std, neighbourhood
     bias exceeds its noise.
 
     ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`; ``ks``: the spatial spacing;
-    ``neighbourhoods``: :func:`~irdic.stages.regression_bias.local_bias`'s cache for ``psi``;
+    ``neighbourhoods``: :func:`~irdic.uncertainty.regression_bias.local_bias`'s cache for ``psi``;
     ``acc``: the probes' noise variances of those differences
     (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each
-    through the same operators as the difference (:func:`~irdic.stages.regression_bias.local_bias`). The
+    through the same operators as the difference (:func:`~irdic.uncertainty.regression_bias.local_bias`). The
     temporal bias is judged against a local polynomial in time of the
     spatially regressed series (:func:`~irdic.numerics.temporal.rate_reference_stencil`;
     the IMQ interpolant was as biased as the regression), whose noise is that

@@ -8,7 +8,7 @@ interpolates, with the same operator and in the same pass
 pixels were first replaced by a local-linear fit over a box about one point
 spacing wide (:func:`footprint_matrix`). The fields stage's spatial
 regressions take it for the gradient and the rate
-(:func:`irdic.stages.footprint_fields.footprint_temperatures`); ``points.temperature`` stays the paper's,
+(:func:`irdic.footprint.fields.footprint_temperatures`); ``points.temperature`` stays the paper's,
 and the denoised temperature is still regressed from it (the box's offset,
 see :func:`footprint_matrix`, does not enter the value).
 """
@@ -133,7 +133,7 @@ class FootprintOperator:
             The points' positions (px of the frame array).
         res, M, cols, samples
             The series evaluation of the points and their extrapolation
-            samples, as :func:`irdic.stages.extrapolation.extrapolate` takes them.
+            samples, as :func:`irdic.footprint.extrapolation.extrapolate` takes them.
 
         Notes
         -----

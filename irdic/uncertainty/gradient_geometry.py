@@ -1,4 +1,4 @@
-"""The IR fields' uncertainty from the points' positions: the DIC noise and the calibration (issue 15, part 4).
+"""The IR fields' uncertainty from the points' positions: the DIC noise and the calibration.
 
 The temperature is sampled where a point's noisy coordinates (and the
 calibration) put it (:func:`position_var`). The in-plane gradient also lies

@@ -12,8 +12,8 @@ import copy
 from functools import lru_cache
 from typing import Mapping
 
-from ..config import load_schema
-from ..errors import ConfigError
+from .config import load_schema
+from .errors import ConfigError
 
 __all__ = ["schema_defaults", "settings"]
 

@@ -1,4 +1,4 @@
-"""Local estimates of a regression's bias, and whether they resolve it (issue 15, part 4).
+"""Local estimates of a regression's bias, and whether they resolve it.
 
 A regression's error is noise plus bias. Its difference ``d`` to a reference
 of the same input (the exact interpolation; the regression at half the
@@ -67,7 +67,7 @@ def noise_scale(theta, acc, regress_space, ks, trusted):
 
 
 def scaled_probes(acc, k2):
-    """The probes' mean squares ``acc`` (:func:`irdic.stages.uncertainty._spatial_probes`) with the noise variance scaled by ``k2``."""
+    """The probes' mean squares ``acc`` (:func:`irdic.uncertainty.model._spatial_probes`) with the noise variance scaled by ``k2``."""
     return {k: (None if a is None else a * k2) for k, a in acc.items()}
 
 
@@ -77,7 +77,7 @@ def reference_spacing(k):
 
     Notes
     -----
-    The exact interpolation, the reference of before, carries the full
+    The exact interpolation, as a reference, carries the full
     noise of the data: against it a bias below a few per cent of that
     noise is not resolved at all (the demo barrel's gradient: the
     interpolation's noise ~0.2 K/mm, the regression's bias 1.3e-3 K/mm).

@@ -16,8 +16,8 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
-from .errors import ConfigError, GeometryError
-from .pointcloud import local_normals
+from ..errors import ConfigError, GeometryError
+from ..pointcloud import local_normals
 
 __all__ = ["point_normals", "facing_camera", "specimen_mask", "edge_distance"]
 

@@ -1,0 +1,266 @@
+"""DIC points + IR frames + calibration -> temperatures at material points.
+
+For every DIC time the valid DIC points are projected into the IR image with
+the calibrated camera; points behind the camera, outside the IR frame or on
+surface facing away from it are flagged not visible. Only pixels on the
+specimen feed the interpolant: a mask per time from the projected point cloud
+(:mod:`irdic.footprint.visibility`, eroded by ``mask_erosion_px``), also
+intersected with the masks of the neighbouring DIC times so that pixels the
+moving edge crosses are left out. The pixel temperatures are interpolated in
+space and time (:func:`irdic.image_rbf.evaluate_series`, IMQ with the paper's
+shape factors by default) and evaluated at the projected points: temperature,
+pixel gradient and local rate ∂Θ/∂t at the fixed pixel.
+
+Points that project just outside the mask (the outermost DIC points lie on
+the specimen edge, so they always do) are extrapolated linearly from the
+nearest masked pixel, up to ``max_extrapolation_px``; their signed distance to
+the mask edge is stored (negative = extrapolated), so users see which values
+are not interpolated (:mod:`irdic.footprint.extrapolation`).
+
+``status`` codes (:class:`irdic.vocabulary.Status`; CF ``flag_values``/``flag_meanings`` in its attributes):
+
+== ==================================================================
+0  interpolated inside the specimen mask
+1  extrapolated from the mask edge (≤ max_extrapolation_px)
+2  DIC point missing at this time
+3  behind the IR camera or outside the IR frame
+4  surface facing away from the IR camera
+5  outside the specimen mask, farther than max_extrapolation_px
+6  DIC time outside the IR time span
+== ==================================================================
+"""
+
+from __future__ import annotations
+
+import logging
+import time as _time
+
+import numpy as np
+import xarray as xr
+
+from ..camera import load_camera
+from ..chunks import chunk_slice, window
+from ..errors import ConfigError, DataError
+from ..footprint.extrapolation import extrapolate, extrapolation_samples, in_mask
+from ..footprint.temperature import FootprintOperator, footprint_side
+from ..footprint.visibility import Projection, masks_and_facing, project_points
+from ..image_rbf import evaluate_series
+from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
+from ..numerics.temporal import temporal_window
+from ..parameters import settings
+from ..vocabulary import Status, cf_attrs
+from .dataset import count_attrs, points_dataset
+
+__all__ = ["couple"]
+
+log = logging.getLogger(__name__)
+
+
+def _check_params(method, mask_erosion_px, max_extrapolation_px, max_view_angle_deg):
+    if method not in ("rbf", "bilinear", "cubic"):
+        raise ConfigError(f"interpolation.method must be rbf, bilinear or cubic, got {method!r}")
+    if not mask_erosion_px >= 0:
+        raise ConfigError(f"interpolation.mask_erosion_px must be >= 0 px, got {mask_erosion_px}")
+    if not max_extrapolation_px >= 0:
+        raise ConfigError(f"interpolation.max_extrapolation_px must be >= 0 px, got {max_extrapolation_px}")
+    if not 0 < max_view_angle_deg <= 90:
+        raise ConfigError(f"interpolation.max_view_angle_deg must lie in (0, 90], got {max_view_angle_deg}")
+
+
+def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int] | None = None,
+           **params) -> xr.Dataset:
+    """Temperatures, pixel gradients and local rates at the DIC points.
+
+    Parameters
+    ----------
+    dic : xarray.Dataset
+        ``dic.zarr``: ``x(time, point, component)`` mm.
+    ir : xarray.Dataset
+        ``ir.zarr``: ``temperature(time, v, u)`` °C with full-sensor ``u``, ``v``.
+    calibration : xarray.Dataset
+        ``calibration.zarr`` of the setup the experiment was recorded with.
+    chunk : (index, count), optional
+        Only the DIC times of this time chunk (:mod:`irdic.chunks`), from
+        the IR frames within the temporal kernel's reach of them; the result
+        equals the same times of the whole-record result to ~1e-4 K except
+        within that reach of the record's ends (see
+        :func:`irdic.numerics.temporal.temporal_reach`).
+    **params
+        The ``interpolation`` section of the configuration; absent keys take
+        the schema's defaults:
+
+        - ``method`` {"rbf", "bilinear", "cubic"}: spatial interpolant (the
+          paper's IMQ RBF by default);
+        - ``c_space``, ``R0_space`` (px): IMQ shape factor and distance
+          normalisation in the image;
+        - ``c_time``, ``R0_time`` (s): the same in time;
+        - ``mask_erosion_px``: erosion of the specimen mask (px);
+        - ``max_edge_factor``: triangles longer than this multiple of the
+          point spacing are not specimen;
+        - ``max_view_angle_deg``: points whose surface normal makes a larger
+          angle with the line of sight to the IR camera are not visible;
+        - ``max_extrapolation_px``: how far outside the mask (px) points are
+          still extrapolated;
+        - ``halo`` (px): half-width of the local windows that reproduce the
+          global interpolant.
+
+    Returns
+    -------
+    xarray.Dataset
+        The content of ``points.zarr`` (see the module docstring and README).
+    """
+    p = settings("interpolation", params)
+    _check_params(p["method"], p["mask_erosion_px"], p["max_extrapolation_px"], p["max_view_angle_deg"])
+    if chunk is not None:
+        return _couple_chunk(dic, ir, calibration, chunk, p)
+    return _couple(dic, ir, calibration, p)
+
+
+def _couple_chunk(dic, ir, calibration, chunk, p) -> xr.Dataset:
+    """:func:`couple` of one time chunk: its DIC times with one neighbour each side (the masks) and its IR window."""
+    t_dic = dic["time"].values.astype(float)
+    t_ir = ir["time"].values.astype(float)
+    sl = chunk_slice(t_dic.size, *chunk)
+    # one neighbour each side: a time's mask is intersected with its neighbours'
+    a, b = max(sl.start - 1, 0), min(sl.stop + 1, t_dic.size)
+    reach = temporal_window(t_ir, c=p["c_time"], R0=p["R0_time"])
+    frames = window(t_ir, t_dic[sl.start], t_dic[sl.stop - 1], reach)
+    if reach is None and chunk[1] > 1:
+        log.warning("couple: the temporal kernel (c_time %g, R0_time %g s) reaches over all %d IR frames "
+                    "(spacing %.3g s): every chunk reads the whole IR record, so chunking does not bound memory; "
+                    "set execution.chunk_frames: 0, or choose c_time * R0_time below 8 frame spacings",
+                    p["c_time"], p["R0_time"], t_ir.size, float(np.median(np.diff(t_ir))))
+    log.info("couple: chunk %d of %d, DIC times %d..%d, IR frames %d..%d (kernel reach %s frames)", chunk[0] + 1,
+             chunk[1], sl.start, sl.stop - 1, frames.start, frames.stop - 1, "all" if reach is None else reach)
+    # the whole record must have a DIC time in the IR span; a chunk outside it is all status 6
+    whole = bool(((t_dic >= t_ir[0]) & (t_dic <= t_ir[-1])).any())
+    # DIC positions of the whole record (small next to the IR frames): gaps are filled from the nearest valid
+    # time and the choice of reused masks runs from the first time
+    ds = _couple(dic, ir.isel(time=frames), calibration, p, require_span=not whole, only=slice(a, b),
+                 record_times=t_ir)
+    ds = ds.isel(time=slice(sl.start - a, sl.stop - a))
+    ds.attrs.update(ir_time_span_s=[float(t_ir[0]), float(t_ir[-1])], ir_frames=int(t_ir.size),
+                    chunk=[int(chunk[0]), int(chunk[1])])
+    return ds
+
+
+def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=None) -> xr.Dataset:
+    """The couple stage on ``ir``'s frames; ``only`` (a slice of DIC times) and ``record_times`` (the whole
+    record's IR frame times, for the noise gains) when ``ir`` is a chunk's window."""
+    started = _time.perf_counter()
+    camera = load_camera(calibration)
+    u, v = ir["u"].values, ir["v"].values
+    t_ir = ir["time"].values.astype(float)
+    _check_sensor(calibration, u, v)
+    pr = project_points(camera, dic, u, v)
+    n_t, M, _ = pr.x.shape
+    side = footprint_side(pr)  # from the record's first stage: the same in every chunk
+    masks, facing = masks_and_facing(
+        pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
+        np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],
+        max_angle=p["max_view_angle_deg"], only=only)
+    if only is not None:
+        pr, dic = pr.times(only), dic.isel(time=only)
+        n_t = pr.x.shape[0]
+    seen = pr.in_frame & facing
+    # the temporal operator's window comes from the whole record: every chunk evaluates alike
+    p = dict(p, time_window=temporal_window(t_ir if record_times is None else record_times, c=p["c_time"],
+                                            R0=p["R0_time"]))
+    t_dic = dic["time"].values.astype(float)
+    theta, gu, gv, rate, edge, in_span, extrap, footprint = _interpolate(ir, t_dic, pr, masks, seen, p, require_span,
+                                                                          side)
+    theta_fp, fp_factor = footprint if footprint is not None else (None, None)
+    status = _status(pr, facing, seen, in_span, extrap, theta)
+    visible = status <= Status.EXTRAPOLATED_FROM_EDGE
+    if theta_fp is not None:  # where no footprint sample was on the mask: the paper's value
+        theta_fp = np.where(np.isfinite(theta_fp), theta_fp, theta)
+    for a in (theta, gu, gv, rate, edge) + (() if theta_fp is None else (theta_fp, fp_factor)):
+        a[~visible] = np.nan
+    # noise of the IR data at the specimen pixels: the fields stage's auto rule and uncertainties use it;
+    # a chunk estimates it on its own IR window and masks (run_gather combines the chunks' estimates)
+    noise = estimate_ir_noise(ir["temperature"], t_ir, np.logical_and.reduce(masks, axis=0))
+    log.info("couple: IR noise %.3g K temporal, %.3g K spatial, quantisation %.3g K (%d specimen pixels)",
+             noise.temporal, noise.spatial, noise.quantisation, noise.pixels)
+    # the gains are a property of the operator and the record's frame spacing: the same in every chunk
+    gains = interpolation_noise_gains(t_ir if record_times is None else record_times, method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
+                                      R0_time=p["R0_time"], halo=p["halo"])
+    counts = {k[len("count_"):]: n for k, n in count_attrs(status).items()}
+    log.info("couple: %d DIC times x %d points in %.1f s; %s", n_t, M, _time.perf_counter() - started,
+             ", ".join(f"{k} {v}" for k, v in counts.items() if v))
+    fields = dict(theta=theta, gu=gu, gv=gv, rate=rate, edge=edge, status=status, visible=visible, masks=masks)
+    ds = points_dataset(dic, calibration, camera, pr, t_ir, counts, noise, gains, **fields)
+    ds.attrs["footprint_px"] = int(side)
+    if theta_fp is not None:
+        # its gain (probe), like the plain one a property of the operator: the same in every chunk
+        gain_fp = interpolation_noise_gains(t_ir if record_times is None else record_times, method=p["method"],
+                                            c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"], R0_time=p["R0_time"],
+                                            halo=p["halo"], footprint=side).temperature
+        for name, a in (("temperature_footprint", theta_fp), ("temperature_footprint_noise_factor", fp_factor)):
+            ds[name] = (("time", "point"), a.astype(np.float32), cf_attrs("points", name))
+        ds.attrs["ir_noise_gain_temperature_footprint"] = float(gain_fp)
+    return ds
+
+
+def _check_sensor(calibration: xr.Dataset, u: np.ndarray, v: np.ndarray) -> None:
+    """DataError when the IR frames reach beyond the sensor the calibration image came from."""
+    sw, sh = calibration.attrs.get("sensor_width"), calibration.attrs.get("sensor_height")
+    if sw is not None and sh is not None and (u.max() >= int(sw) or v.max() >= int(sh) or u.min() < 0 or v.min() < 0):
+        raise DataError(
+            f"the IR frames cover pixels u {u.min()}..{u.max()}, v {v.min()}..{v.max()}, but the calibration "
+            f"image was {sw} x {sh} px: the IR exports do not come from the calibrated camera set-up"
+        )
+
+
+def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.ndarray, seen: np.ndarray, p: dict,
+                 require_span: bool = True, side: int = 1):
+    """Temperature, pixel gradient (u, v), local rate and edge distance at the seen points, each (n_t, M).
+
+    Points that project just outside the mask are extrapolated from samples
+    of the interpolant inside it. The samples are evaluated in the same pass
+    as the points: a second pass would factorise every edge tile of every
+    mask again. Also returns which DIC times lie in the IR time span (n_t,)
+    and which values were extrapolated (n_t, M); last the footprint temperature of boxes of ``side`` px
+    (:mod:`irdic.footprint.temperature`, same pass) and its noise factor (n_t, M) each, None for
+    side 1.
+    """
+    u, v = ir["u"].values, ir["v"].values
+    t_ir = ir["time"].values.astype(float)
+    M = pr.x.shape[1]
+    query = np.where(seen[..., None], pr.local, np.nan)
+    outside = seen & ~in_mask(masks, pr.local)
+    samples, cols = extrapolation_samples(pr.local, masks, outside, p["max_extrapolation_px"])
+    res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
+                          method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
+                          R0_time=p["R0_time"], time_window=p["time_window"], halo=p["halo"], u=u, v=v,
+                          name="ir: frames", pixel_operator=(op := FootprintOperator(side)) if side > 1 else None)
+    theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
+                                 (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
+    in_span = np.asarray(res.in_span)
+    if require_span and not in_span.any():
+        raise DataError(
+            f"no DIC time ({t_dic[0]:g}..{t_dic[-1]:g} s) lies inside the IR time span "
+            f"({t_ir[0]:g}..{t_ir[-1]:g} s): check time_offset/time_origin of the experiment"
+        )
+    extrap = extrapolate(res, M, cols, samples, pr.local, theta, gu, gv, rate, edge)
+    theta_fp = None
+    if res.theta_extra is not None:
+        # outside the mask: the same parabola through the footprint's samples (the derivatives are scratch)
+        theta_fp = np.array(res.theta_extra[:, :M], dtype=float)
+        scratch = [np.array(a[:, :M], dtype=float) for a in (res.dtheta_du, res.dtheta_dv, res.dtheta_dt,
+                                                             res.edge_distance)]
+        extrapolate(res._replace(theta=res.theta_extra), M, cols, samples, pr.local, theta_fp, *scratch)
+        theta_fp = (theta_fp, op.noise_factor(pr.local, res, M, cols, samples))
+    return theta, gu, gv, rate, edge, in_span, extrap, theta_fp
+
+
+def _status(pr: Projection, facing, seen, in_span, extrap, theta) -> np.ndarray:
+    """``points.status`` (n_t, M) int8; a later rule overrides an earlier one."""
+    S = Status
+    status = np.full(pr.valid.shape, S.INTERPOLATED, dtype=np.int8)
+    status[extrap] = S.EXTRAPOLATED_FROM_EDGE
+    status[seen & in_span[:, None] & ~np.isfinite(theta)] = S.OUTSIDE_SPECIMEN_MASK
+    status[~facing & pr.in_frame] = S.FACING_AWAY
+    status[pr.valid & ~pr.in_frame] = S.OUTSIDE_IR_FRAME
+    status[~pr.valid] = S.DIC_POINT_MISSING
+    status[~in_span[:, None] & (status <= S.EXTRAPOLATED_FROM_EDGE)] = S.TIME_OUTSIDE_IR_SPAN
+    return status

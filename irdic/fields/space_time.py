@@ -1,0 +1,168 @@
+"""The temperature fields: in-plane gradient, material rate and denoised value, by interpolation or regression.
+
+The paper's relations on the interpolated pixel gradients, or, where the
+smoothing is on, the regression in space of each time
+(:mod:`irdic.fields.spatial`) then in time of each point's series
+(:func:`space_time`); and their uncertainties
+(:func:`irdic.uncertainty.model.uncertainties`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..camera import load_camera
+from ..footprint.fields import paper_value
+from ..gradient import material_rate, surface_gradient
+from ..numerics.series import fill_series, smooth_series
+from ..numerics.temporal import RATE_MAX_FRACTION, rate_reference_weights
+from ..uncertainty.model import uncertainties
+from .spatial import regressed_gradient
+
+__all__ = ["space_time", "temperature_fields"]
+
+
+def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=None, ops=None):
+    """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
+    and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
+    uncertainties of :func:`irdic.uncertainty.model.uncertainties`.
+
+    The projection Jacobian of the calibrated camera at the surface points
+    turns pixel gradients into surface ones (see the module docstring).
+    ``series`` (:class:`~irdic.uncertainty.model.Window`): a time chunk's window around the times
+    ``t``, for the regression in time and the uncertainty probes.
+    """
+    T, N = sf.x.shape[:2]
+    camera = load_camera(calibration)
+    flat = sf.x.reshape(-1, 3)
+    ok = np.isfinite(flat).all(axis=1)
+    J = np.full((T * N, 2, 3), np.nan)
+    J[ok] = camera.jacobian(flat[ok])
+    J = J.reshape(T, N, 2, 3)
+    g_pix = points["temperature_pixel_gradient"].transpose("time", "point", "axis").values.astype(float)
+    local = points["temperature_local_rate"].values.astype(float)
+    theta = points["temperature"].values.astype(float)
+    grad = surface_gradient(g_pix, J, sf.tangents)
+    rate = material_rate(local, g_pix, J, sf.velocity)
+    total, loc = rate.rate, rate.local
+    visible = np.isfinite(theta)
+    best = theta
+    chosen_k = {"temperature_smoothing": None, "temperature_smoothing_space": None}
+    spatial = None
+    ops = {} if ops is None else ops  # the spatial operators of the regressions and their probes, factorised once
+    if p["temperature_smoothing_space"] is not None:
+        def regress(th, ser, q=p):
+            return space_time(th, t, sf, geo, q, ser, rate.convective, visible, (total, loc), ops)
+        grad, total, loc, best, spatial, chosen_k = regress(theta, series)
+        if "temperature_paper" in points:  # footprint temperatures: the value from the paper's, same spacings
+            best, spatial = paper_value(points, series, lambda th, ser: regress(th, ser, {**p, **chosen_k}), spatial)
+    elif p["temperature_smoothing"] is not None:
+        # a chunk regresses its window's series and evaluates it at its own times
+        th, ts = (series.theta, series.t) if series is not None else (theta, t)
+        fit = smooth_series(th, ts, t if series is not None else None, smoothing=p["temperature_smoothing"],
+                            c=p["c_time"], R0=p["R0_time"], record_times=t if series is None else series.record)
+        chosen_k["temperature_smoothing"] = fit.smoothing
+        total = np.where(visible, fit.rate, np.nan)
+        loc = total - rate.convective
+        best = np.where(visible, fit.value, np.nan)
+
+    def regress_space(th, dual, k):
+        return regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"], ops=ops)[:2]
+
+    unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
+                        g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial, ops=ops)
+    return grad, total, loc, rate.convective, best, unc
+
+
+def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, ops=None):
+    """Gradient, rate (material, local) and value of the space-time regression of the point temperatures.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (T, N)
+        Point temperatures (degC) at the DIC times ``t`` (s).
+    sf, geo
+        The fitted surface and its geometry (surface parameters, dual basis).
+    p : dict
+        The fields settings; ``temperature_smoothing_space`` is set.
+    series : Window or None
+        A time chunk's window (its regressions run over the window).
+    convective : ndarray, shape (T, N)
+        Convective part of the rate (K/s).
+    visible : ndarray of bool, shape (T, N)
+    paper_rate : (total, local)
+        The paper's rate and local part, kept when there is no regression in time.
+    ops : dict, optional
+        Cache of the spatial operators (:func:`irdic.surface.shared_interpolant`).
+
+    Returns
+    -------
+    grad (T, N, 3) K/mm, total (T, N) K/s, local (T, N) K/s, value (T, N) degC,
+    spatial (the inputs of the regression's bias estimate, see
+    :func:`irdic.uncertainty.model.uncertainties`), chosen (the spacings used).
+
+    Notes
+    -----
+    Space first, then time. The tube's temperature is smooth in space (a
+    quadratic axial profile) but changes within a few DIC stages in time, so
+    a point's own series, with the full 0.05 K noise, makes GCV in time
+    choose centres every 4 stages, whose bias alone is 7 % of the rate. The
+    spatial regression of each stage removes most of the noise first
+    (GCV over the points, whose noise is white in space); GCV of the
+    regressed series in time then judges a nearly noise-free signal and
+    chooses the light smoothing the signal needs. The gradient is the spatial
+    regression's derivative of the temporally regressed values (the regressed
+    field's own gradient), the rate the temporal derivative of the spatially
+    regressed series, by a lighter regression in time (:func:`_rate_series`).
+    """
+    kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
+    chosen = {"temperature_smoothing": None, "temperature_smoothing_space": None}
+    grad, value, ks = regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], **kw)
+    chosen["temperature_smoothing_space"] = ks
+    total, loc = paper_rate
+    if p["temperature_smoothing"] is None:
+        return grad, total, loc, value, (theta, grad, theta, value, theta), chosen
+    # a chunk regresses its window's series (in space at each stage, then in time) and evaluates at its own times
+    if series is not None:
+        th_in, ts_in, t_eval, record = series.theta, series.t, t, series.record
+        _, th_s, _ = regressed_gradient(th_in, sf.psi, None, ks, **kw)
+    else:
+        th_in, ts_in, t_eval, record, th_s = theta, t, None, t, value
+    # the regressions in time below fill the same gaps: once, together
+    th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
+    tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)
+    fit = smooth_series(th_s, ts_in, t_eval, smoothing=p["temperature_smoothing"], **tkw)
+    rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw)
+    chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing
+    total = np.where(visible, rate_fit.rate, np.nan)
+    smoothed = np.where(visible, fit.value, np.nan)
+    grad, value, _ = regressed_gradient(smoothed, sf.psi, geo.dual, ks, **kw)
+    # the spatial regression's bias is judged against the temporal regression of the points' own series
+    own = smooth_series(th_in, ts_in, t_eval, smoothing=fit.smoothing, **tkw)
+    own_rate = own.rate if rate_fit.smoothing == fit.smoothing else \
+        smooth_series(th_in, ts_in, t_eval, smoothing=rate_fit.smoothing, **tkw).rate
+    # the temporal regressions' bias: against the same (regressed) series, whose noise is small (against the
+    # points' own series the estimate drowned in their noise): the rate's against a local polynomial in time
+    exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)
+    bias_inputs = (theta, grad, (own_v := np.where(visible, own.value, np.nan)), value, total - rate_reference_weights(
+        ts_in, t_eval, smoothing=rate_fit.smoothing) @ th_s, total - own_rate, smoothed - exact.value, own_v)
+    return grad, total, total - convective, value, bias_inputs, chosen
+
+
+def _rate_series(th_s, ts_in, t_eval, p, fit, tkw):
+    """The temporal regression of the spatially regressed series ``th_s`` whose derivative is the rate.
+
+    With ``temperature_smoothing`` "gcv": GCV's spacing among candidates with up to
+    :data:`~irdic.numerics.temporal.RATE_MAX_FRACTION` parameters per stage (the value's: 1/2), or that
+    resolved for the record (``p["temperature_smoothing_rate"]``); a configured number serves both (``fit``).
+
+    Notes
+    -----
+    The value and gradient stay one field, ``S_x S_t2 S_x Θ``; the rate is ``∂_t S_t1 S_x Θ``, ``S_t1`` at
+    most as smooth; they differ by the heavier one's temporal bias, which the value's std holds. A fast
+    transient's rate at 2 Hz is bias-limited, the gradient noise-limited (benchmarks/README.md, noisy fields).
+    """
+    k = p.get("temperature_smoothing_rate") or ("gcv" if p["temperature_smoothing"] == "gcv" else None)
+    if k is None:
+        return fit
+    return smooth_series(th_s, ts_in, t_eval, smoothing=k, gcv_max_fraction=RATE_MAX_FRACTION, **tkw)
