@@ -35,6 +35,7 @@ from __future__ import annotations
 import logging
 import os
 import time as _time
+from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -48,6 +49,7 @@ from ..image_rbf import evaluate_series
 from ..noise import IRNoise, interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..store import open_store, write_dataset
 from ..vocabulary import COMPONENTS, PIXEL_AXES, Status, cf_attrs, status_attrs
+from .clock import ir_clock
 from .common import paths, stage_context
 from .extrapolation import extrapolate, extrapolation_samples, in_mask
 from .footprint_temperature import FootprintOperator, footprint_side
@@ -71,7 +73,7 @@ def _check_params(method, mask_erosion_px, max_extrapolation_px, max_view_angle_
 
 
 def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int] | None = None,
-           **params) -> xr.Dataset:
+           experiment: str | None = None, **params) -> xr.Dataset:
     """Temperatures, pixel gradients and local rates at the DIC points.
 
     Parameters
@@ -82,6 +84,11 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
         ``ir.zarr``: ``temperature(time, v, u)`` °C with full-sensor ``u``, ``v``.
     calibration : xarray.Dataset
         ``calibration.zarr`` of the setup the experiment was recorded with.
+    experiment : str, optional
+        The experiment's name, for ``experiments.<name>.ir.time_offset`` in
+        messages about the IR clock (:mod:`irdic.stages.clock`: with
+        ``ir.zarr``'s ``time_offset`` ``auto`` the offset is estimated from the
+        whole record, so every time chunk gets the same).
     chunk : (index, count), optional
         Only the DIC times of this time chunk (:mod:`irdic.chunks`), from
         the IR frames within the temporal kernel's reach of them; the result
@@ -114,9 +121,10 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
     """
     p = settings("interpolation", params)
     _check_params(p["method"], p["mask_erosion_px"], p["max_extrapolation_px"], p["max_view_angle_deg"])
-    if chunk is not None:
-        return _couple_chunk(dic, ir, calibration, chunk, p)
-    return _couple(dic, ir, calibration, p)
+    ir, clock = ir_clock(dic, ir, calibration, experiment)
+    ds = _couple_chunk(dic, ir, calibration, chunk, p) if chunk is not None else _couple(dic, ir, calibration, p)
+    ds.attrs.update(clock)
+    return ds
 
 
 def _couple_chunk(dic, ir, calibration, chunk, p) -> xr.Dataset:
@@ -357,7 +365,9 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     i = paths(inputs, "couple", "inputs", ("dic", "ir", "calibration"))
     o = paths(outputs, "couple", "outputs", ("store",))
     with stage_context("couple", log, threads):
-        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), chunk=chunk, **params)
+        # results/<experiment>/ir.zarr: the experiment's name for messages about its configuration
+        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), chunk=chunk,
+                    experiment=Path(i["ir"]).parent.name, **params)
         write_dataset(ds, o["store"], stage="couple", params=params,
                       inputs=[os.fspath(i[k]) for k in ("dic", "ir", "calibration")],
                       encoding={"temperature": {"chunks": (1, ds.sizes["point"])}})

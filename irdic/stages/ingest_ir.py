@@ -21,7 +21,7 @@ import numpy as np
 import xarray as xr
 
 from .. import io as _io
-from ..errors import DataError, IrdicWarning
+from ..errors import ConfigError, DataError, IrdicWarning
 from ..logs import Progress
 from ..store import FrameStore, provenance
 from ..vocabulary import series_attrs
@@ -153,9 +153,11 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
     **params
         ``format`` (IR format or ``"auto"``, see :func:`irdic.io.read_ir`),
         ``time_source``, ``frame_rate`` (Hz), ``time_origin``,
-        ``time_offset`` (s) as in ``experiments.<name>.ir`` of the
-        configuration (see :func:`irdic.stages.inputs.frame_times`); absent
-        ones take the schema's defaults.
+        ``time_offset`` (s, or ``"auto"``: the times are kept on the IR
+        clock and the couple stage estimates the offset from the data) as in
+        ``experiments.<name>.ir`` of the configuration (see
+        :func:`irdic.stages.inputs.frame_times`); absent ones take the
+        schema's defaults. The store's attribute ``time_offset`` says which.
 
     Returns
     -------
@@ -185,6 +187,9 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
     """
     p = settings("ir_source", params, drop=("path",))
     fmt = p.pop("format")
+    offset = p["time_offset"]
+    # auto: the IR clock is kept as the files give it; the couple stage estimates the offset from the data
+    p["time_offset"] = 0.0 if offset == "auto" else _offset(offset)
     files = as_files(source, "IR exports")
     with _untimed_stacks():
         n, stamps = _count_ir_frames(files, fmt)
@@ -200,6 +205,7 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         attrs = series_attrs("ir", first.attrs)
         attrs.update(provenance("ingest-ir", dict(format=fmt, **p), [str(f) for f in files[:1000]]))
         attrs["n_source_files"] = len(files)
+        attrs["time_offset"] = offset if offset == "auto" else float(offset)  # the couple stage reads it
         with FrameStore(
             out, "temperature", n, ("v", "u"), {"v": first["v"].values, "u": first["u"].values},
             dtype=np.float32,
@@ -211,6 +217,17 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
             t, numbers = _write_frames(fs, _chain(first, label0, it), n, files, p)
     log_gaps("IR", t, numbers)
     return Path(out)
+
+
+def _offset(value) -> float:
+    """A configured ``time_offset`` as a finite number of seconds (ConfigError otherwise)."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        out = np.nan
+    if isinstance(value, bool) or not np.isfinite(out):
+        raise ConfigError(f"ir.time_offset must be a finite number of seconds or 'auto', got {value!r}")
+    return out
 
 
 def _write_frames(fs: FrameStore, frames, n: int, files: Sequence[Path], time_params: dict):
