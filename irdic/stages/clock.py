@@ -22,7 +22,7 @@ import xarray as xr
 from ..camera import load_camera
 from ..errors import DataError, IrdicWarning
 from ..timing import estimate_offset
-from ..timing.offset import crop_box
+from ..timing.offset import MAX_FRAMES, crop_box
 from .visibility import project_points
 
 __all__ = ["ir_clock", "CHECK_SIGMAS"]
@@ -42,12 +42,15 @@ def _estimate(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, key: str
     seen_always = (pr.in_frame | ~pr.valid).all(axis=0)
     local = np.where(seen_always[None, :, None] & pr.valid[..., None], pr.local, np.nan)
     rows, cols = crop_box(local, (v.size, u.size))
-    frames = ir["temperature"].isel(v=rows, u=cols).values
+    # at most MAX_FRAMES frames, evenly spread, are read (the region the points cover only)
+    n = ir.sizes["time"]
+    keep = np.unique(np.linspace(0, n - 1, min(n, MAX_FRAMES)).round().astype(int))
+    frames = np.asarray(ir["temperature"].isel(time=keep, v=rows, u=cols).values, dtype=np.float32)
     finite = np.isfinite(frames).all(axis=(1, 2))
     if not finite.all():
         log.info("IR clock: %d of %d frames with NaN pixels over the specimen are left out", (~finite).sum(),
                  finite.size)
-    return estimate_offset(frames[finite], ir["time"].values.astype(float)[finite],
+    return estimate_offset(frames[finite], ir["time"].values.astype(float)[keep][finite],
                            dic["time"].values.astype(float), local - [cols.start, rows.start], parameter=key)
 
 

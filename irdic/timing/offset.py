@@ -61,7 +61,7 @@ MAX_STD_FRAMES = 0.25
 #: points used (evenly spread over the cloud's order): the criterion's noise falls as 1/sqrt(points)
 MAX_POINTS = 3000
 #: frames used (evenly spread over the record)
-MAX_FRAMES = 800
+MAX_FRAMES = 600
 #: Gaussian smoothing of the frames (px) before they are sampled
 SMOOTHING_PX = 3.0
 #: an offset is estimated only where the points move at least this much in the image (px) ...
@@ -130,7 +130,8 @@ class _Sampler:
     """
 
     def __init__(self, frames, t_ir, t_dic, positions, smoothing: float = 0.0):
-        self.raw = np.asarray(frames, dtype=np.float64)
+        # float32 as stored (half the memory); samples and sums are float64
+        self.raw = np.asarray(frames, dtype=np.float32)
         self.smoothing = float(smoothing)
         self.frames = (gaussian_filter(self.raw, (0, self.smoothing, self.smoothing), mode="nearest")
                        if self.smoothing > 0 else self.raw)
@@ -421,7 +422,7 @@ def _uncertainty(sampler: _Sampler, J: _Criterion, tau: float, period: float) ->
         return np.inf, sigma
     # the estimate's error is -sum(D e) / S with e the smoothed pixel noise at the samples: e = G B n
     acc = np.bincount(flat.ravel(), weights=(wts * D[..., None]).ravel(), minlength=sampler.frames.size)
-    acc = acc.reshape(sampler.frames.shape)
+    acc = acc.reshape(sampler.frames.shape)  # float64: the weights of all samples on each pixel
     if sampler.smoothing > 0:
         acc = gaussian_filter(acc, (0, sampler.smoothing, sampler.smoothing), mode="constant")
     var = sigma**2 * float(np.sum(acc * acc)) / S**2
