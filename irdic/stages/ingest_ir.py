@@ -203,7 +203,8 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         label0, first = next(it)
         # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
         attrs = series_attrs("ir", first.attrs)
-        attrs.update(provenance("ingest-ir", dict(format=fmt, **p), [str(f) for f in files[:1000]]))
+        attrs.update(provenance("ingest-ir", dict(format=fmt, **dict(p, time_offset=offset)),
+                                [str(f) for f in files[:1000]]))
         attrs["n_source_files"] = len(files)
         attrs["time_offset"] = offset if offset == "auto" else float(offset)  # the couple stage reads it
         with FrameStore(
