@@ -162,3 +162,12 @@ def test_info_and_report_show_the_clock(tmp_path):
     Image.new("RGB", (4, 4)).save(tmp_path / "s07/figures/history.png")
     page = write_report(tmp_path, tmp_path / "report.html").read_text()
     assert "IR clock: time_offset 0.8115 s +- 0.021 s (estimated)" in page
+
+
+def test_every_time_chunk_gets_the_same_offset():
+    dic, ir, cal, _ = clock_scene(-0.7, realistic=True, seed=6)
+    _, whole = ir_clock(dic, ir, cal, "s07")
+    for i in range(2):
+        part = couple(dic, ir, cal, chunk=(i, 2), method="bilinear")
+        assert part.attrs["ir_time_offset"] == whole["ir_time_offset"]
+        assert part.attrs["ir_time_offset_std"] == whole["ir_time_offset_std"]
