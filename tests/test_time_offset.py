@@ -171,3 +171,16 @@ def test_every_time_chunk_gets_the_same_offset():
         part = couple(dic, ir, cal, chunk=(i, 2), method="bilinear")
         assert part.attrs["ir_time_offset"] == whole["ir_time_offset"]
         assert part.attrs["ir_time_offset_std"] == whole["ir_time_offset_std"]
+
+
+def test_uncertainty_by_monte_carlo():
+    """Six noise realisations: every truth within 3 std, and the std neither far too small nor far too large."""
+    z = []
+    for seed in range(10, 16):
+        offset = (seed - 12.5) * 0.3  # -0.75 .. +0.75 s: -1.5 .. +1.5 IR frames
+        dic, ir, cal, _ = clock_scene(offset, realistic=True, seed=seed)
+        _, a = ir_clock(dic, ir, cal, "s07")
+        z.append((a["ir_time_offset"] - offset) / a["ir_time_offset_std"])
+    z = np.array(z)
+    assert np.all(np.abs(z) <= 3), z
+    assert 0.3 <= np.sqrt(np.mean(z**2)) <= 2.0, z
