@@ -44,13 +44,12 @@ import time
 
 import numpy as np
 import xarray as xr
-from scipy import ndimage
 
 from irdic.camera import CameraModel
 from irdic.coupling import couple
 from irdic.fields import fields
 from irdic.synthetic import HalfShell, experiment, lab_camera
-from irdic.synthetic.specimens import LABEL_SURFACE
+from irdic.synthetic import render
 
 IR_NOISE = 0.05  # K
 DIC_NOISE = 0.003  # mm
@@ -60,17 +59,8 @@ DECIMALS = 2
 def realistic_stack(ex, rng) -> xr.DataArray:
     """IR frames with mixed edge pixels, pixel noise and 2-decimal rounding (float32, deg C)."""
     r = ex.renderer
-    frames = []
-    for t in ex.ir_times:
-        hit = r.clean(t)
-        T = np.asarray(hit.temperature, dtype=float)
-        spec = hit.label == LABEL_SURFACE
-        # pixels on both sides of the outline see specimen and background at once
-        edge = ndimage.binary_dilation(spec) & ~ndimage.binary_erosion(spec)
-        T = np.where(edge, ndimage.uniform_filter(T, 3, mode="nearest"), T)
-        T = T + rng.normal(0.0, ex.ir_noise, T.shape)
-        frames.append(np.round(T, DECIMALS).astype(np.float32))
-    return xr.DataArray(np.stack(frames), dims=("time", "v", "u"),
+    frames = render.realistic_stack(r, ex.ir_times, rng, noise=ex.ir_noise, decimals=DECIMALS)
+    return xr.DataArray(frames, dims=("time", "v", "u"),
                         coords={"time": ex.ir_times, "v": r.v.astype(np.int64), "u": r.u.astype(np.int64)},
                         attrs={"units": "°C"}, name="temperature")
 

@@ -61,6 +61,16 @@ def _span(c) -> str:
     return ", ".join(labels) + (", ..." if v.size > 6 else "")
 
 
+def _time_offset(text: str):
+    """``--time-offset``: seconds, or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds or auto, got {text!r}") from None
+
+
 def describe_store(path) -> str:
     """A readable summary of an irdic zarr store.
 
@@ -86,6 +96,10 @@ def describe_store(path) -> str:
             lines += _table([(str(k), m.replace("_", " ")) for k, m in zip(values, str(meanings).split())])
     a = ds.attrs
     lines.append(f"  stage: {a.get('irdic_stage', '?')}  irdic {a.get('irdic_version', '?')}  created {a.get('irdic_created', '?')}")
+    from .timing.summary import clock_summary
+
+    if clock_summary(a):
+        lines.append("  " + clock_summary(a))
     params = a.get("irdic_parameters")
     if params:
         try:
@@ -153,7 +167,7 @@ def _parser() -> argparse.ArgumentParser:
         s.add_argument("--frame-rate", type=float, help="Hz")
         s.add_argument("--time-source", choices=["file", "frame_rate"])
         s.add_argument("--time-origin", choices=["first", "file"])
-        s.add_argument("--time-offset", type=float, help="s")
+        s.add_argument("--time-offset", type=_time_offset, help="s, or auto (IR: estimated by the couple stage)")
         if kind == "ir":
             s.add_argument("--emissivity", type=float, help="FLIR files: replaces the camera's emissivity")
             s.add_argument("--reflected-temperature", type=float,

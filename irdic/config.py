@@ -148,6 +148,9 @@ def _message(error: jsonschema.ValidationError) -> str:
         )
     if error.validator == "required":
         return f"{where}: {error.message}"
+    if error.validator == "anyOf":
+        alts = [repr(a["const"]) if "const" in a else f"a {a.get('type', 'value')}" for a in error.validator_value]
+        return f"{where}: {_clip(repr(error.instance))} is not {' or '.join(alts)}"
     if error.validator == "enum":
         return f"{where}: {_clip(repr(error.instance))} is not one of {', '.join(map(repr, error.validator_value))}"
     return f"{where}: {_clip(error.message)}"

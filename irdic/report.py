@@ -46,6 +46,16 @@ def collect_figures(results: str | os.PathLike) -> list[tuple[str, Path]]:
     return out
 
 
+def _clock(points: Path) -> str | None:
+    """The IR clock line of an experiment's ``points.zarr`` (:func:`irdic.timing.summary.clock_summary`)."""
+    if not points.exists():
+        return None
+    from .store import open_store
+    from .timing.summary import clock_summary
+
+    return clock_summary(open_store(points).attrs)
+
+
 def write_report(results: str | os.PathLike, out: str | os.PathLike) -> Path:
     """Write the HTML page of :func:`collect_figures` to ``out`` (images embedded: one file to share)."""
     figures = collect_figures(results)
@@ -58,6 +68,10 @@ def write_report(results: str | os.PathLike, out: str | os.PathLike) -> Path:
         if sec != section:
             parts.append(f"<h2>{html.escape(sec)}</h2>")
             section = sec
+            clock = _clock(Path(results) / sec.split(" ", 1)[1] / "points.zarr") if sec.startswith("experiment ") \
+                else None
+            if clock:
+                parts.append(f"<p>{html.escape(clock)}</p>")
         data = base64.b64encode(png.read_bytes()).decode("ascii")
         caption = figure_caption(png) or png.stem
         parts.append(f"<figure><img alt='{html.escape(png.stem)}' src='data:image/png;base64,{data}'>"

@@ -48,6 +48,7 @@ from ..image_rbf import evaluate_series
 from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..numerics.temporal import temporal_window
 from ..parameters import settings
+from ..timing.clock import ir_clock
 from ..vocabulary import Status, cf_attrs
 from .dataset import count_attrs, points_dataset
 
@@ -68,7 +69,7 @@ def _check_params(method, mask_erosion_px, max_extrapolation_px, max_view_angle_
 
 
 def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int] | None = None,
-           **params) -> xr.Dataset:
+           experiment: str | None = None, **params) -> xr.Dataset:
     """Temperatures, pixel gradients and local rates at the DIC points.
 
     Parameters
@@ -79,6 +80,11 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
         ``ir.zarr``: ``temperature(time, v, u)`` °C with full-sensor ``u``, ``v``.
     calibration : xarray.Dataset
         ``calibration.zarr`` of the setup the experiment was recorded with.
+    experiment : str, optional
+        The experiment's name, for ``experiments.<name>.ir.time_offset`` in
+        messages about the IR clock (:mod:`irdic.timing.clock`: with
+        ``ir.zarr``'s ``time_offset`` ``auto`` the offset is estimated from the
+        whole record, so every time chunk gets the same).
     chunk : (index, count), optional
         Only the DIC times of this time chunk (:mod:`irdic.chunks`), from
         the IR frames within the temporal kernel's reach of them; the result
@@ -111,9 +117,10 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
     """
     p = settings("interpolation", params)
     _check_params(p["method"], p["mask_erosion_px"], p["max_extrapolation_px"], p["max_view_angle_deg"])
-    if chunk is not None:
-        return _couple_chunk(dic, ir, calibration, chunk, p)
-    return _couple(dic, ir, calibration, p)
+    ir, clock = ir_clock(dic, ir, calibration, experiment)
+    ds = _couple_chunk(dic, ir, calibration, chunk, p) if chunk is not None else _couple(dic, ir, calibration, p)
+    ds.attrs.update(clock)
+    return ds
 
 
 def _couple_chunk(dic, ir, calibration, chunk, p) -> xr.Dataset:

@@ -182,9 +182,11 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         ``format`` (IR format or ``"auto"``, see :func:`irdic.io.read_ir`),
         ``emissivity``/``reflected_temperature`` (°C) replacing a FLIR
         file's object parameters (None keeps them), ``time_source``, ``frame_rate`` (Hz), ``time_origin``,
-        ``time_offset`` (s) as in ``experiments.<name>.ir`` of the
-        configuration (see :func:`irdic.ingest.inputs.frame_times`); absent
-        ones take the schema's defaults.
+        ``time_offset`` (s, or ``"auto"``: the times are kept on the IR
+        clock and the couple stage estimates the offset from the data) as in
+        ``experiments.<name>.ir`` of the configuration (see
+        :func:`irdic.ingest.inputs.frame_times`); absent ones take the
+        schema's defaults. The store's attribute ``time_offset`` says which.
 
     Returns
     -------
@@ -214,6 +216,9 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
     """
     p = settings("ir_source", params, drop=("path",))
     fmt = p.pop("format")
+    offset = p["time_offset"]
+    # auto: the IR clock is kept as the files give it; the couple stage estimates the offset from the data
+    p["time_offset"] = 0.0 if offset == "auto" else _offset(offset)
     files = as_files(source, "IR exports")
     formats = [_io.detect_ir_format(f) if fmt == "auto" else fmt for f in files]
     overrides = _overrides(p, files, formats)
@@ -229,8 +234,10 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         label0, first = next(it)
         # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
         attrs = series_attrs("ir", first.attrs)
-        attrs.update(provenance("ingest-ir", dict(format=fmt, **overrides, **p), [str(f) for f in files[:1000]]))
+        attrs.update(provenance("ingest-ir", dict(format=fmt, **overrides, **dict(p, time_offset=offset)),
+                                [str(f) for f in files[:1000]]))
         attrs["n_source_files"] = len(files)
+        attrs["time_offset"] = offset if offset == "auto" else float(offset)  # the couple stage reads it
         with FrameStore(
             out, "temperature", n, ("v", "u"), {"v": first["v"].values, "u": first["u"].values},
             dtype=np.float32,
@@ -242,6 +249,17 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
             t, numbers = _write_frames(fs, _chain(first, label0, it), n, files, p)
     log_gaps("IR", t, numbers)
     return Path(out)
+
+
+def _offset(value) -> float:
+    """A configured ``time_offset`` as a finite number of seconds (ConfigError otherwise)."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        out = np.nan
+    if isinstance(value, bool) or not np.isfinite(out):
+        raise ConfigError(f"ir.time_offset must be a finite number of seconds or 'auto', got {value!r}")
+    return out
 
 
 def _write_frames(fs: FrameStore, frames, n: int, files: Sequence[Path], time_params: dict):

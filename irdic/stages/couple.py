@@ -9,6 +9,7 @@ record or one time chunk, and the chunks gathered.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from typing import Mapping, Sequence
 
 from ..coupling import couple
@@ -33,7 +34,9 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     i = paths(inputs, "couple", "inputs", ("dic", "ir", "calibration"))
     o = paths(outputs, "couple", "outputs", ("store",))
     with stage_context("couple", log, threads):
-        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), chunk=chunk, **params)
+        # results/<experiment>/ir.zarr: the experiment's name for messages about its configuration
+        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), chunk=chunk,
+                    experiment=Path(i["ir"]).parent.name, **params)
         write_dataset(ds, o["store"], stage="couple", params=params,
                       inputs=[os.fspath(i[k]) for k in ("dic", "ir", "calibration")],
                       encoding={"temperature": {"chunks": (1, ds.sizes["point"])}})

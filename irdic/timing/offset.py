@@ -1,0 +1,453 @@
+"""The offset between the IR and the DIC clock, estimated from the data.
+
+A wrong offset moves every DIC point in the IR image by its image velocity
+times the error, so the IR frames show a temperature pattern that no longer
+moves with the material. This module finds the offset ``tau`` (seconds
+added to the IR times, as a configured ``time_offset``) at which the IR
+frames and the DIC motion agree best.
+
+Criterion
+---------
+For a candidate ``tau`` every IR frame ``k`` (time ``t_k`` on the IR clock)
+is sampled bilinearly at the positions the DIC points have in the image at
+the DIC time ``t_k + tau``; the positions are interpolated between the DIC
+stages by a cubic spline in time. Row ``k`` of the matrix ``X(tau)`` (frames
+x points) is then what frame ``k`` shows at the material points. A pattern
+carried by the material has, at the right offset, the same shape in every
+frame up to a level and an amplitude, ``X_k = a_k + b_k P + noise``; at a
+wrong offset every frame is sampled displaced by its image velocity times the
+error, and since the velocity changes during the test, the pattern seen in
+the material drifts from frame to frame. The criterion is the misfit of the
+rank-one model,
+
+``J(tau) = ||X_c||^2 - s_1^2(X_c)``,
+
+with ``X_c`` the rows of ``X`` less their means and ``s_1`` its largest
+singular value. ``J`` is evaluated on a grid of candidates over a quarter
+of the record each way (on the frames that every candidate places inside
+the DIC record, so all candidates are judged on the same data), the best
+one is refined by bounded Brent minimisation (the positions are continuous in
+time: no frame grid limits the resolution), and the standard uncertainty
+comes from the criterion's curvature and the residual noise (Notes of
+:func:`estimate_offset`).
+
+When it cannot work: a static specimen (no motion: every offset fits the
+same), a uniform temperature (no pattern to carry), or motion too small for
+the noise (the uncertainty exceeds :data:`MAX_STD_FRAMES` IR frame periods):
+:class:`~irdic.errors.DataError` naming the configuration key, with the
+motion found and the uncertainty it allows.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+from scipy.ndimage import distance_transform_edt, gaussian_filter
+from scipy.optimize import minimize_scalar
+
+from ..errors import DataError
+from ..footprint.mask import specimen_mask
+
+__all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_POINTS", "MAX_FRAMES", "SMOOTHING_PX", "MODEL_STD_FRAMES", "MIN_MOTION_PX",
+           "MIN_MOTION_JITTERS"]
+
+log = logging.getLogger(__name__)
+
+#: an estimate whose standard uncertainty exceeds this many IR frame periods is refused
+MAX_STD_FRAMES = 0.25
+#: points used (evenly spread over the cloud's order): the criterion's noise falls as 1/sqrt(points)
+MAX_POINTS = 3000
+#: frames used (evenly spread over the record)
+MAX_FRAMES = 600
+#: Gaussian smoothing of the frames (px) before they are sampled
+SMOOTHING_PX = 3.0
+#: an offset is estimated only where the points move at least this much in the image (px) ...
+MIN_MOTION_PX = 0.5
+#: ... and at least this many times their scatter from stage to stage (DIC noise)
+MIN_MOTION_JITTERS = 20.0
+#: the criterion's own bias, in IR frame periods, added in quadrature to the noise's share of the uncertainty:
+#: on noise-free synthetic scenes (smoothed frames of a moving, foreshortened pattern; positions interpolated
+#: between DIC stages) the estimates lie within 0.09 frame periods of the truth
+MODEL_STD_FRAMES = 0.03
+#: coarse candidates at most (the refinement is continuous)
+_MAX_CANDIDATES = 41
+
+
+@dataclass(frozen=True)
+class ClockOffset:
+    """The estimated offset of the IR clock.
+
+    Attributes
+    ----------
+    offset : float
+        Seconds to add to the IR times (as ``time_offset``).
+    std : float
+        Its standard uncertainty (s).
+    frame_period : float
+        Median IR frame spacing (s).
+    motion_px : float
+        Largest displacement of a DIC point in the IR image over the record (px).
+    noise : float
+        Residual of the rank-one model per sample at the estimate (K).
+    candidates, criterion : numpy.ndarray
+        The coarse grid (s) and ``J`` per sample on it (K^2).
+    frames, points : int
+        IR frames and DIC points the estimate used.
+    """
+
+    offset: float
+    std: float
+    frame_period: float
+    motion_px: float
+    noise: float
+    candidates: np.ndarray
+    criterion: np.ndarray
+    frames: int
+    points: int
+
+
+def crop_box(positions: np.ndarray, shape: tuple[int, int], margin: int = 12) -> tuple[slice, slice]:
+    """(rows, columns) slices of a frame of ``shape`` (H, W) around every finite position (..., 2) (u, v) px."""
+    p = positions.reshape(-1, 2)
+    p = p[np.isfinite(p).all(axis=1)]
+    if not p.size:
+        raise DataError("no DIC point projects into the IR frames")
+    u0, v0 = np.floor(p.min(axis=0)).astype(int) - margin
+    u1, v1 = np.ceil(p.max(axis=0)).astype(int) + margin + 1
+    H, W = shape
+    return slice(max(v0, 0), min(v1, H)), slice(max(u0, 0), min(u1, W))
+
+
+class _Sampler:
+    """``X(tau)``: the frames sampled at the DIC points' positions at the DIC times ``t_ir + tau``.
+
+    The frames are smoothed by a Gaussian of ``smoothing`` px first: sampled at positions that move with
+    the candidate offset, raw pixel noise would make the criterion a rough function of the offset whose
+    wiggles (the noise's own gradient along the motion) hide the pattern's misfit.
+    """
+
+    def __init__(self, frames, t_ir, t_dic, positions, smoothing: float = 0.0):
+        # float32 as stored (half the memory); samples and sums are float64
+        self.raw = np.asarray(frames, dtype=np.float32)
+        self.smoothing = float(smoothing)
+        self.frames = (gaussian_filter(self.raw, (0, self.smoothing, self.smoothing), mode="nearest")
+                       if self.smoothing > 0 else self.raw)
+        self.t_ir = t_ir
+        self.t0, self.t1 = float(t_dic[0]), float(t_dic[-1])
+        k = min(3, t_dic.size - 1)
+        self.spline = make_interp_spline(t_dic, positions.reshape(t_dic.size, -1), k=k, axis=0)
+        self.M = positions.shape[1]
+        _, self.h, self.w = self.frames.shape
+
+    def inside(self, tau_lo: float, tau_hi: float) -> np.ndarray:
+        """Frames every offset in [tau_lo, tau_hi] places inside the DIC record."""
+        eps = 1e-9 * max(1.0, abs(self.t1))
+        return np.flatnonzero((self.t_ir + tau_lo >= self.t0 - eps) & (self.t_ir + tau_hi <= self.t1 + eps))
+
+    def weights(self, tau: float, idx: np.ndarray):
+        """Flat pixel indices (n, M, 4) and bilinear weights (n, M, 4) of frames ``idx`` at offset ``tau``."""
+        q = self.spline(self.t_ir[idx] + tau).reshape(idx.size, self.M, 2)
+        u = np.clip(q[..., 0], 0.0, self.w - 1.000001)
+        v = np.clip(q[..., 1], 0.0, self.h - 1.000001)
+        j, i = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+        fu, fv = u - j, v - i
+        base = idx[:, None] * (self.h * self.w) + i * self.w + j
+        flat = np.stack([base, base + 1, base + self.w, base + self.w + 1], axis=-1)
+        wts = np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=-1)
+        return flat, wts
+
+    def __call__(self, tau: float, idx: np.ndarray, raw: bool = False):
+        """The samples (n, M) of the smoothed (or ``raw``) frames."""
+        flat, wts = self.weights(tau, idx)
+        return np.einsum("nmc,nmc->nm", (self.raw if raw else self.frames).reshape(-1)[flat], wts)
+
+
+def _rank_one(Xc: np.ndarray, start: np.ndarray | None = None, iters: int = 300):
+    """Largest singular value squared of ``Xc`` and its (left, right) unit vectors, by power iteration."""
+    n, m = Xc.shape
+    v = np.ones(m) / np.sqrt(m) if start is None or start.size != m else start.copy()
+    lam = 0.0
+    for _ in range(iters):
+        u = Xc @ v
+        w = Xc.T @ u
+        new = float(np.linalg.norm(w))
+        if new == 0.0:
+            return 0.0, np.zeros(n), v
+        v = w / new
+        # new = s1^2 once converged; stop when it changes by less than 1e-14 relative
+        if abs(new - lam) <= 1e-14 * new:
+            lam = new
+            break
+        lam = new
+    u = Xc @ v
+    s = float(np.linalg.norm(u))
+    return s * s, (u / s if s > 0 else u), v
+
+
+class _Criterion:
+    """``J(tau)`` per sample on a fixed set of frames, with a warm start for the power iteration."""
+
+    def __init__(self, sampler: _Sampler, idx: np.ndarray):
+        self.sampler, self.idx = sampler, idx
+        self.start = None
+
+    def parts(self, tau: float):
+        X = self.sampler(tau, self.idx)
+        Xc = X - X.mean(axis=1, keepdims=True)
+        s2, u, v = _rank_one(Xc, self.start)
+        self.start = v
+        return float(np.sum(Xc * Xc)) - s2, Xc, u, v
+
+    def __call__(self, tau: float) -> float:
+        return self.parts(tau)[0] / self.idx.size / self.sampler.M
+
+
+def _prepared(positions, t_dic, max_points, inset=0.0):
+    """Points seen at half the DIC times or more, their gaps interpolated linearly in time; of those the ones at
+    least ``inset`` px inside the cloud's outline at the first and the last time, at most ``max_points``,
+    evenly spread."""
+    ok_t = np.isfinite(positions).all(axis=2)
+    ok = ok_t.sum(axis=0) >= max(2, (t_dic.size + 1) // 2)
+    pos = positions[:, ok].copy()
+    for j in np.flatnonzero(~ok_t[:, ok].all(axis=0)):
+        good = ok_t[:, ok][:, j]
+        for c in (0, 1):
+            pos[:, j, c] = np.interp(t_dic, t_dic[good], pos[good, j, c])
+    keep = np.ones(pos.shape[1], bool)
+    if inset > 0 and keep.sum() >= 3:
+        for k in (0, -1):
+            keep &= _inside_outline(pos[k]) >= inset
+    keep = np.flatnonzero(keep)
+    if keep.size > max_points:
+        keep = keep[np.linspace(0, keep.size - 1, max_points).round().astype(int)]
+    return pos[:, keep]
+
+
+def _inside_outline(p: np.ndarray) -> np.ndarray:
+    """Distance (px) of each position (N, 2) to the outline of the cloud of the positions."""
+    lo = np.floor(p.min(axis=0)).astype(int) - 2
+    hi = np.ceil(p.max(axis=0)).astype(int) + 3
+    u, v = np.arange(lo[0], hi[0]), np.arange(lo[1], hi[1])
+    inside = distance_transform_edt(specimen_mask(p, u, v, erosion_px=0.0))
+    q = np.clip(p.round().astype(int) - lo, 0, [u.size - 1, v.size - 1])
+    return inside[q[:, 1], q[:, 0]]
+
+
+def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, positions: np.ndarray, *,
+                    centre: float = 0.0, parameter: str = "ir.time_offset", smoothing_px: float = SMOOTHING_PX,
+                    max_points: int = MAX_POINTS, max_frames: int = MAX_FRAMES) -> ClockOffset:
+    """Offset of the IR clock (s added to the IR times) that aligns the IR frames with the DIC motion.
+
+    Parameters
+    ----------
+    frames : numpy.ndarray, shape (F, h, w)
+        IR frames (K or deg C), cropped to the region the points cover
+        (:func:`crop_box`); finite.
+    t_ir : numpy.ndarray, shape (F,)
+        IR frame times on the IR clock (s), increasing.
+    t_dic : numpy.ndarray, shape (n_t,)
+        DIC times (s), increasing.
+    positions : numpy.ndarray, shape (n_t, N, 2)
+        The DIC points' (u, v) positions in the cropped frame's pixel
+        coordinates (px, pixel (0, 0) = ``frames[:, 0, 0]``) at every DIC
+        time, NaN where unknown (gaps are interpolated in time; points known
+        at fewer than half of the times, or nearer the cloud's outline than
+        3 smoothing widths + 1 px, are left out).
+    centre : float
+        Middle of the searched offsets (s); the search covers a quarter of the
+        shorter record each way.
+    parameter : str
+        The configuration key named in errors.
+    smoothing_px : float
+        Standard deviation (px) of the Gaussian smoothing of the frames.
+    max_points, max_frames : int
+        Points and frames used at most (evenly spread).
+    Returns
+    -------
+    ClockOffset
+
+    Raises
+    ------
+    DataError
+        Not identifiable: too few points or frames, a static specimen or too
+        little motion for the noise (uncertainty above :data:`MAX_STD_FRAMES`
+        frame periods), or the best candidate at the end of the range.
+
+    Notes
+    -----
+    Near the minimum the samples are ``X(tau) = X(tau*) + X' d + e`` with
+    ``d = tau - tau*``. After removing the directions the rank-one model
+    absorbs (row means, ``u w^T`` and ``z v^T`` for the fitted singular
+    vectors ``u``, ``v``), ``Y = (I - u u^T) X'_c (I - v v^T)`` and the least
+    squares estimate has ``var(d) = var(Y . e) / ||Y||^4``. The sample errors
+    are ``e = B G n``: pixel errors ``n`` of variance ``sigma^2``, smoothed
+    (``G``) and sampled bilinearly (``B``), so ``var(Y . e) = sigma^2
+    ||G B^T Y||^2`` (neighbouring samples share pixels and their errors).
+    ``sigma^2`` comes from the raw frames: their samples' misfit of the
+    rank-one model, each over its bilinear noise gain, per degree of
+    freedom. ``X'`` is a central difference over a tenth of a frame period;
+    it also holds the smoothed noise's own gradient along the image velocity
+    ``w``, whose expected square, ``sigma^2 |w|^2 / (8 pi s^4)`` per sample
+    for a Gaussian of ``s`` px, is taken out of ``||Y||^2``.
+    :data:`MODEL_STD_FRAMES` frame
+    periods of model error are added in quadrature.
+    """
+    t_ir, t_dic = np.asarray(t_ir, float), np.asarray(t_dic, float)
+    # the smoothing kernel of a kept point stays on the specimen
+    inset = np.ceil(3 * smoothing_px) + 1 if smoothing_px > 0 else 0.0
+    pos = _prepared(np.asarray(positions, float), t_dic, max_points, inset)
+    period = float(np.median(np.diff(t_ir))) if t_ir.size > 1 else np.nan
+    _check_sizes(pos, t_dic, t_ir, parameter)
+    motion, jitter = _motion(pos)
+    if t_ir.size > max_frames:
+        keep = np.linspace(0, t_ir.size - 1, max_frames).round().astype(int)
+        frames, t_ir = frames[keep], t_ir[keep]
+    _check_motion(motion, jitter, parameter)
+    sampler = _Sampler(frames, t_ir, t_dic, pos, smoothing_px)
+    grid, crit, best = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", motion, parameter)
+    tau, J = _refined(sampler, grid, best, period)
+    std, noise = _uncertainty(sampler, J, tau, period)
+    _check_identified(std, period, motion, parameter)
+    std = float(np.hypot(std, MODEL_STD_FRAMES * period))
+    log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames; %d frames x %d points, "
+             "motion up to %.3g px, pixel noise %.3g K)", tau, std, tau / period, std / period, J.idx.size,
+             pos.shape[1], motion, noise)
+    return ClockOffset(tau, std, period, motion, noise, grid, crit, int(J.idx.size), int(pos.shape[1]))
+
+
+def _motion(pos: np.ndarray) -> tuple[float, float]:
+    """Largest displacement of a point from its first position (px), over the record, and the positions'
+    scatter from stage to stage (px): the RMS second difference in time over sqrt(6), the noise of white
+    position errors (smooth motion adds to it, so it errs high)."""
+    disp = np.linalg.norm(pos - pos[:1], axis=-1)
+    if pos.shape[0] < 3:
+        return float(disp.max()), 0.0
+    d2 = pos[2:] - 2 * pos[1:-1] + pos[:-2]
+    return float(disp.max()), float(np.sqrt(np.mean(d2**2) / 6.0))
+
+
+def _check_sizes(pos, t_dic, t_ir, parameter):
+    if pos.shape[1] < 10 or t_dic.size < 2 or t_ir.size < 4:
+        raise DataError(f"{parameter}: auto needs at least 10 DIC points seen at every DIC time and away from the "
+                        f"cloud's outline, 2 DIC times and 4 IR frames; found {pos.shape[1]} points, {t_dic.size} "
+                        f"DIC times, {t_ir.size} IR frames: set {parameter} to a number (s)")
+
+
+def _check_motion(motion, jitter, parameter):
+    if not motion >= max(MIN_MOTION_PX, MIN_MOTION_JITTERS * jitter):
+        raise DataError(
+            f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
+            f"{motion:.2g} px in the IR image over the record (their positions scatter by {jitter:.2g} px from "
+            f"stage to stage), less than {MIN_MOTION_PX:g} px or {MIN_MOTION_JITTERS:g} times that scatter: a static "
+            f"specimen carries no timing information. Set {parameter} to a number (s; docs/time-sync.md)")
+
+
+def _check_identified(std, period, motion, parameter):
+    if not np.isfinite(std) or std > MAX_STD_FRAMES * period:
+        raise DataError(
+            f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
+            f"{motion:.3g} px in the IR image over the record, and the temperature pattern they carry fixes the "
+            f"offset only to {_fmt_std(std, period)}, more than {MAX_STD_FRAMES:g} IR frame period ({period:.4g} s); "
+            f"a static specimen, a uniform temperature or too little motion for the record's noise carry no "
+            f"timing information. Set {parameter} to a number (s; docs/time-sync.md)")
+
+
+def _fmt_std(std: float, period: float) -> str:
+    if not np.isfinite(std):
+        return "no precision at all (the criterion is flat)"
+    return f"+- {std:.3g} s ({std / period:.2f} IR frames)"
+
+
+def _coarse(sampler, t_ir, t_dic, centre, period, where, motion, parameter):
+    """The coarse candidates, ``J`` per sample on them (same frames for all) and the index of the best."""
+    span = min(t_dic[-1] - t_dic[0], t_ir[-1] - t_ir[0])
+    half = max(0.25 * span, 2.0 * period)
+    n = int(np.clip(np.ceil(2 * half / period) + 1, 9, _MAX_CANDIDATES))
+    for _ in range(8):
+        grid = centre + np.linspace(-half, half, n)
+        idx = sampler.inside(grid[0], grid[-1])
+        if idx.size >= 4:
+            break
+        half *= 0.5
+    else:
+        raise DataError(f"{where}: the IR record ({t_ir[0]:.4g}..{t_ir[-1]:.4g} s) and the DIC record "
+                        f"({t_dic[0]:.4g}..{t_dic[-1]:.4g} s) overlap in fewer than 4 IR frames around an offset "
+                        f"of {centre:.4g} s; set {parameter} to a number (s)")
+    J = _Criterion(sampler, idx)
+    crit = np.array([J(g) for g in grid])
+    best = int(np.argmin(crit))
+    if best in (0, grid.size - 1) and np.ptp(crit) > 1e-12 * max(crit.max(), 1e-300):
+        raise DataError(
+            f"{where}: the best offset lies at the end of the searched range {grid[0]:.4g}..{grid[-1]:.4g} s "
+            f"(the DIC points move at most {motion:.3g} px in the IR image): the clocks differ by more than a "
+            f"quarter of the record, or the data do not fix the offset; set {parameter} to a number (s)")
+    return grid, crit, best
+
+
+def _refined(sampler: _Sampler, grid: np.ndarray, best: int, period: float):
+    """The minimum of ``J`` between the coarse candidates next to ``best`` (on the frames every offset there
+    places inside the DIC record); while it lies at an end of that bracket, the bracket moves on by one
+    candidate (the coarse criterion, on fewer frames, can pick a neighbour of the true minimum)."""
+    step = grid[1] - grid[0]
+    lo, hi = grid[best] - step, grid[best] + step
+    for _ in range(4):
+        J = _Criterion(sampler, sampler.inside(lo, hi))
+        if J.idx.size < 4:
+            break
+        tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded", options={"xatol": 0.002 * period}).x)
+        if lo + 0.02 * step < tau < hi - 0.02 * step or not grid[0] < tau < grid[-1]:
+            return tau, J
+        shift = step if tau >= hi - 0.02 * step else -step
+        lo, hi = lo + shift, hi + shift
+    return tau, J
+
+
+def _uncertainty(sampler: _Sampler, J: _Criterion, tau: float, period: float) -> tuple[float, float]:
+    """Standard uncertainty of ``tau`` (s) and the pixel noise (K) (see :func:`estimate_offset`)."""
+    _, Xc, u, v = J.parts(tau)
+    h = 0.05 * period
+    D = (sampler(tau + h, J.idx) - sampler(tau - h, J.idx)) / (2 * h)
+    D -= D.mean(axis=1, keepdims=True)
+    D -= np.outer(u, u @ D)
+    D -= np.outer(D @ v, v)
+    n, m = Xc.shape
+    flat, wts = sampler.weights(tau, J.idx)
+    sigma = _pixel_noise(sampler, J.idx, tau, wts)
+    # D holds the smoothed noise's own gradient along the motion as well: take out its expected square
+    S = float(np.sum(D * D)) - _noise_gradient_energy(sampler, J.idx, tau, sigma)
+    if S <= 0 or not np.isfinite(sigma):
+        return np.inf, sigma
+    # the estimate's error is -sum(D e) / S with e the smoothed pixel noise at the samples: e = G B n
+    acc = np.bincount(flat.ravel(), weights=(wts * D[..., None]).ravel(), minlength=sampler.frames.size)
+    acc = acc.reshape(sampler.frames.shape)  # float64: the weights of all samples on each pixel
+    if sampler.smoothing > 0:
+        acc = gaussian_filter(acc, (0, sampler.smoothing, sampler.smoothing), mode="constant")
+    var = sigma**2 * float(np.sum(acc * acc)) / S**2
+    return float(np.sqrt(var)), sigma
+
+
+def _noise_gradient_energy(sampler: _Sampler, idx: np.ndarray, tau: float, sigma: float) -> float:
+    """Expected sum over the samples of (smoothed noise gradient . image velocity)^2 (K^2/s^2).
+
+    White noise of variance ``sigma^2`` smoothed by a Gaussian of ``s`` px has
+    gradient components of variance ``sigma^2 / (8 pi s^4)``; raw frames
+    (``s`` = 0) count as ``s`` = 1/2.
+    """
+    w = sampler.spline.derivative()(sampler.t_ir[idx] + tau).reshape(idx.size, sampler.M, 2)
+    s = max(sampler.smoothing, 0.5)
+    return float(sigma**2 / (8 * np.pi * s**4) * np.sum(w * w))
+
+
+def _pixel_noise(sampler: _Sampler, idx: np.ndarray, tau: float, wts: np.ndarray) -> float:
+    """Pixel noise (K): the raw samples' misfit of the rank-one model, each over its bilinear noise gain."""
+    X = sampler(tau, idx, raw=True)
+    Xc = X - X.mean(axis=1, keepdims=True)
+    s2, u, v = _rank_one(Xc)
+    R = Xc - np.sqrt(s2) * np.outer(u, v)
+    gain = np.einsum("nmc,nmc->nm", wts, wts)  # a sample between pixels averages their noise
+    n, m = X.shape
+    dof = n * m - n - (n + m - 1)
+    return float(np.sqrt(np.sum(R * R / gain) / dof)) if dof > 0 else np.nan

@@ -1,0 +1,186 @@
+"""The IR clock from the data (``time_offset: auto``) against synthetic experiments with known offsets.
+
+The frames are rendered at the true times and stored ``offset`` seconds
+early (:mod:`tests._clock_scenes`), so the offset to find is known exactly.
+Tolerances are the goals: within 0.1 IR frame period on noise-free exports,
+0.2 on realistic ones (0.05 K, 2 decimals, mixed edge pixels, DIC noise),
+and the truth within 3 stated standard uncertainties.
+"""
+
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+from irdic.errors import ConfigError, DataError, IrdicWarning
+from irdic.timing.clock import ir_clock
+from irdic.coupling import couple
+
+from ._clock_scenes import clock_scene
+
+pytestmark = pytest.mark.slow
+
+
+def _check(offset, *, realistic, tol_frames, **kw):
+    dic, ir, cal, _ = clock_scene(offset, realistic=realistic, **kw)
+    period = float(np.median(np.diff(ir["time"].values)))
+    shifted, attrs = ir_clock(dic, ir, cal, "s07")
+    est, std = attrs["ir_time_offset"], attrs["ir_time_offset_std"]
+    assert attrs["ir_time_offset_source"] == "estimated"
+    assert abs(est - offset) <= tol_frames * period, (est, offset, std)
+    assert abs(est - offset) <= 3 * std, (est, offset, std)
+    assert std <= 0.25 * period
+    np.testing.assert_allclose(shifted["time"].values, ir["time"].values + est)
+    return est, std, period
+
+
+# IR at twice the DIC rate (tiny tube: 13 frames at 2 Hz, DIC 1 Hz): sub-frame and multi-frame, both signs
+@pytest.mark.parametrize("frames", [0.37, -0.81, 2.3, -1.65])
+def test_clean_ir_faster(frames):
+    _check(frames * 0.5, realistic=False, tol_frames=0.1)
+
+
+@pytest.mark.parametrize("frames,seed", [(0.63, 1), (-2.2, 2), (1.45, 3)])
+def test_realistic_ir_faster(frames, seed):
+    _check(frames * 0.5, realistic=True, tol_frames=0.2, seed=seed)
+
+
+# IR at the DIC rate (demo tube, every second frame: 21 frames at 2 Hz, frames at the DIC times)
+@pytest.mark.parametrize("frames,realistic", [(0.41, False), (-3.3, False), (2.6, True)])
+def test_same_rate(frames, realistic):
+    _check(frames * 0.5, realistic=realistic, tol_frames=0.2 if realistic else 0.1, scale="demo", same_rate=True)
+
+
+def _rms(points, ex):
+    tr = ex.truth().sel(point=points.point)
+    vis = points.visible.values & np.isfinite(tr.temperature.values)
+    return float(np.sqrt(np.mean((points.temperature.values - tr.temperature.values)[vis] ** 2)))
+
+
+def test_point_temperatures_as_with_the_true_offset():
+    offset = 0.8  # 1.6 IR frames
+    dic, ir, cal, ex = clock_scene(offset, realistic=True, seed=4)
+    auto = couple(dic, ir, cal, method="bilinear")
+    true_ir = ir.assign_coords(time=ir["time"].values + offset).assign_attrs(time_offset=offset)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IrdicWarning)
+        known = couple(dic, true_ir, cal, method="bilinear")
+        ignored = couple(dic, ir.assign_attrs(time_offset=0.0), cal, method="bilinear")
+    e_auto, e_true, e_none = _rms(auto, ex), _rms(known, ex), _rms(ignored, ex)
+    assert abs(e_auto - e_true) <= 0.1 * e_true, (e_auto, e_true)
+    assert e_none > 1.5 * e_true  # the offset matters on this scene: the check above has power
+    assert auto.attrs["ir_time_offset_source"] == "estimated"
+    assert abs(auto.attrs["ir_time_offset"] - offset) <= 3 * auto.attrs["ir_time_offset_std"]
+    assert known.attrs["ir_time_offset"] == offset and known.attrs["ir_time_offset_std"] == 0.0
+
+
+def test_static_specimen_refused():
+    dic, ir, cal, _ = clock_scene(0.3, name="halfshell", realistic=True)
+    with pytest.raises(DataError, match=r"experiments\.s07\.ir\.time_offset: auto cannot estimate") as err:
+        ir_clock(dic, ir, cal, "s07")
+    msg = str(err.value)
+    assert re.search(r"move at most [0-9.e-]+ px in the IR image", msg) and "static specimen" in msg
+
+
+def test_configured_offset_checked():
+    offset = 0.6
+    dic, ir, cal, _ = clock_scene(offset, realistic=True, seed=5)
+    right = ir.assign_coords(time=ir["time"].values + offset).assign_attrs(time_offset=offset)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", IrdicWarning)
+        _, attrs = ir_clock(dic, right, cal, "s07")
+    assert attrs["ir_time_offset"] == offset and attrs["ir_time_offset_source"] == "configured"
+    assert abs(attrs["ir_time_offset_estimate"] - offset) <= 3 * attrs["ir_time_offset_estimate_std"]
+    wrong = ir.assign_coords(time=ir["time"].values + offset + 0.5).assign_attrs(time_offset=offset + 0.5)
+    with pytest.warns(IrdicWarning, match=r"experiments\.s07\.ir\.time_offset: the data put the IR clock"):
+        _, attrs = ir_clock(dic, wrong, cal, "s07")
+    assert abs(attrs["ir_time_offset_estimate"] - offset) <= 3 * attrs["ir_time_offset_estimate_std"]
+
+
+def test_configured_offset_on_a_static_specimen_is_not_checked():
+    dic, ir, cal, _ = clock_scene(0.0, name="halfshell", realistic=True, mode=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", IrdicWarning)
+        shifted, attrs = ir_clock(dic, ir, cal, "s07")
+    assert attrs == {"ir_time_offset": 0.0, "ir_time_offset_std": 0.0, "ir_time_offset_source": "configured"}
+    assert shifted is ir
+
+
+def test_ingest_keeps_the_ir_clock_with_auto(tmp_path):
+    from irdic.stages.ingest_ir import ingest_ir
+    from irdic.store import open_store
+    from irdic.synthetic.writers import write_irbis
+
+    for i in range(3):
+        write_irbis(tmp_path / f"f{i}.txt", np.full((4, 5), 20.0 + i, np.float32), ms=1000 * (10 + i))
+    auto = open_store(ingest_ir(tmp_path, tmp_path / "auto.zarr", time_offset="auto"))
+    np.testing.assert_allclose(auto["time"].values, [0.0, 1.0, 2.0])
+    assert auto.attrs["time_offset"] == "auto"
+    fixed = open_store(ingest_ir(tmp_path, tmp_path / "fixed.zarr", time_offset=0.25))
+    np.testing.assert_allclose(fixed["time"].values, [0.25, 1.25, 2.25])
+    assert fixed.attrs["time_offset"] == 0.25
+    with pytest.raises(ConfigError, match="ir.time_offset must be a finite number of seconds or 'auto'"):
+        ingest_ir(tmp_path, tmp_path / "bad.zarr", time_offset="soon")
+
+
+def test_config_and_cli_accept_auto():
+    from irdic.cli import _parser
+    from irdic.config import validate_config
+
+    def config(value):
+        return {"setups": {"lab": {"markers": {"path": "m"}, "target_image": {"path": "t"}}},
+                "experiments": {"s07": {"setup": "lab", "dic": {"path": "d"},
+                                        "ir": {"path": "i", "time_offset": value}}}}
+
+    assert validate_config(config("auto"))["experiments"]["s07"]["ir"]["time_offset"] == "auto"
+    assert validate_config(config(-0.4))["experiments"]["s07"]["ir"]["time_offset"] == -0.4
+    with pytest.raises(ConfigError, match=r"experiments\.s07\.ir\.time_offset: 'soon' is not a number or 'auto'"):
+        validate_config(config("soon"))
+    args = _parser().parse_args(["ingest-ir", "src", "out.zarr", "--time-offset", "auto"])
+    assert args.time_offset == "auto"
+    assert _parser().parse_args(["ingest-ir", "src", "out.zarr", "--time-offset", "0.5"]).time_offset == 0.5
+
+
+def test_info_and_report_show_the_clock(tmp_path):
+    import xarray as xr
+
+    from irdic.cli import describe_store
+    from irdic.report import write_report
+    from irdic.store import write_dataset
+    from irdic.timing.summary import clock_summary
+
+    attrs = {"ir_time_offset": 0.8115, "ir_time_offset_std": 0.021, "ir_time_offset_source": "estimated"}
+    assert clock_summary(attrs) == "IR clock: time_offset 0.8115 s +- 0.021 s (estimated)"
+    assert clock_summary({"ir_noise_k": 0.05}) is None
+    write_dataset(xr.Dataset({"temperature": ("time", np.zeros(2))}, attrs=attrs), tmp_path / "s07/points.zarr",
+                  stage="couple")
+    assert "IR clock: time_offset 0.8115 s +- 0.021 s (estimated)" in describe_store(tmp_path / "s07/points.zarr")
+    (tmp_path / "s07/figures").mkdir()
+    from PIL import Image
+
+    Image.new("RGB", (4, 4)).save(tmp_path / "s07/figures/history.png")
+    page = write_report(tmp_path, tmp_path / "report.html").read_text()
+    assert "IR clock: time_offset 0.8115 s +- 0.021 s (estimated)" in page
+
+
+def test_every_time_chunk_gets_the_same_offset():
+    dic, ir, cal, _ = clock_scene(-0.7, realistic=True, seed=6)
+    _, whole = ir_clock(dic, ir, cal, "s07")
+    for i in range(2):
+        part = couple(dic, ir, cal, chunk=(i, 2), method="bilinear")
+        assert part.attrs["ir_time_offset"] == whole["ir_time_offset"]
+        assert part.attrs["ir_time_offset_std"] == whole["ir_time_offset_std"]
+
+
+def test_uncertainty_by_monte_carlo():
+    """Six noise realisations: every truth within 3 std, and the std neither far too small nor far too large."""
+    z = []
+    for seed in range(10, 16):
+        offset = (seed - 12.5) * 0.3  # -0.75 .. +0.75 s: -1.5 .. +1.5 IR frames
+        dic, ir, cal, _ = clock_scene(offset, realistic=True, seed=seed)
+        _, a = ir_clock(dic, ir, cal, "s07")
+        z.append((a["ir_time_offset"] - offset) / a["ir_time_offset_std"])
+    z = np.array(z)
+    assert np.all(np.abs(z) <= 3), z
+    assert 0.3 <= np.sqrt(np.mean(z**2)) <= 2.0, z
