@@ -36,6 +36,8 @@ def stage_paths(config: Mapping) -> dict:
         out["experiments"][e] = {k: r / e / f"{k}.zarr" for k in ("dic", "ir", "points", "fields")}
         if config["experiments"][e].get("machine"):
             out["experiments"][e]["machine"] = r / e / "machine.zarr"
+        if config["experiments"][e].get("material"):
+            out["experiments"][e]["heat"] = r / e / "heat.zarr"
     root = r.resolve()
     for section, entries in out.items():
         for name, paths in entries.items():
@@ -50,7 +52,7 @@ def stage_paths(config: Mapping) -> dict:
     return out
 
 
-STAGES = ("demo", "ingest", "calibrate", "couple", "fields", "figures", "export", "report")
+STAGES = ("demo", "ingest", "calibrate", "couple", "fields", "heat", "figures", "export", "report")
 
 
 def _in_demo(config: Mapping, path) -> bool:
@@ -216,6 +218,16 @@ def _fields(config, paths, threads):
         _chunked(fields, config, inputs, p["fields"], p["points"], threads, config["fields"])
 
 
+def _heat(config, paths, threads):
+    from .stages import heat
+
+    for name, e in config["experiments"].items():
+        p = paths["experiments"][name]
+        if "heat" in p:  # only experiments with a material block
+            heat.run({"fields": p["fields"], "points": p["points"]}, {"store": p["heat"]}, threads=threads,
+                     fields_settings=config["fields"], **e["material"])
+
+
 def _figures(config, paths, threads):
     from .plot import FIGURES
     from .stages import figures
@@ -249,4 +261,4 @@ def _report(config, paths, threads):
 
 
 _RUNNERS = {"demo": _demo, "ingest": _ingest, "calibrate": _calibrate, "couple": _couple, "fields": _fields,
-            "figures": _figures, "export": _export, "report": _report}
+            "heat": _heat, "figures": _figures, "export": _export, "report": _report}

@@ -91,6 +91,8 @@ def test_demo_runs_end_to_end(run):
         flds = open_store(work / "results" / exp / "fields.zarr")
         assert flds.attrs["irdic_stage"] == "fields"
         assert flds.temperature_gradient.dims == ("time", "point", "component")
+        heat = open_store(work / "results" / exp / "heat.zarr")
+        assert heat.attrs["irdic_stage"] == "heat" and heat.heat_source.dims == ("time", "point")
     cal = open_store(work / "results" / "setups" / "lab" / "calibration.zarr")
     assert float(cal["rms_px"]) < 0.05
     true_M = open_store(work / "resources" / "demo" / "setup" / "truth.zarr")["projection_matrix"].values
@@ -118,21 +120,25 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["calibration"]["distortion"] = "k1"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"calibrate", "couple", "fields", "all", "figures", "export", "report_html"}
+    assert _planned(res) == {"calibrate", "couple", "fields", "heat", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["ir"]["time_offset"] = 0.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
     # the tube's machine record is also put on the IR frame times (machine.zarr): it follows the IR series
-    assert _planned(res) == {"ingest_ir", "ingest_machine", "couple", "fields", "all", "figures", "export",
+    assert _planned(res) == {"ingest_ir", "ingest_machine", "couple", "fields", "heat", "all", "figures", "export",
                              "report_html"}
     changed = copy.deepcopy(cfg)
     changed["interpolation"]["c_space"] = 1.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"couple", "fields", "all", "figures", "export", "report_html"}
+    assert _planned(res) == {"couple", "fields", "heat", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["fields"]["temperature_smoothing"] = "gcv"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"fields", "all", "figures", "export", "report_html"}
+    assert _planned(res) == {"fields", "heat", "all", "figures", "export", "report_html"}
+    changed = copy.deepcopy(cfg)
+    changed["experiments"]["tube"]["material"]["loss_time_constant"] = 30.0
+    res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
+    assert _planned(res) == {"heat", "all"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["report"] = {"times": [1.0], "points": []}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)

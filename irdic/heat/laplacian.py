@@ -126,29 +126,30 @@ def _noise(theta, Q, visible, judged):
     return np.sqrt(np.sum(np.where(use, resid, 0.0) ** 2, axis=1) / dof)
 
 
-def _block_laplacian(M, coef, coef_x, T, noise):
-    """Laplacian and std (T, nb) of one block of points; ``M`` (5, nb, p), coefficients (p, T) and (p, T, 3)."""
+def _block_laplacian(M, Mx, coef, coef_x, noise):
+    """Laplacian and std (T, nb) of one block of points; ``M``, ``Mx`` (5, nb, p) the derivative rows of the
+    temperature's and the surface's designs, their coefficients (p, T) and (p, T, 3)."""
     nb = M.shape[1]
     dth = np.einsum("knp,pt->tnk", M, coef)
-    dx = np.einsum("knp,ptc->tnkc", M, coef_x)
+    dx = np.einsum("knp,ptc->tnkc", Mx, coef_x)
     lap, w = laplace_beltrami(dth[..., :2], dth[..., 2:], dx[:, :, :2], dx[:, :, 2:])
     gram = np.einsum("knp,lnp->nkl", M, M)
     var = np.einsum("tnk,nkl,tnl->tn", w, gram, w)
     return lap, noise[:, None] * np.sqrt(np.maximum(var, 0.0)), nb
 
 
-def _evaluate(p, design, theta, x, noise, c, R0):
-    """Laplacian and std (T, n) at the points ``p`` of the regressions of ``theta`` (T, n) and ``x`` (T, n, 3)
-    with the QR ``design``, in blocks of points."""
-    Q = design[3]
-    coef = Q.T @ theta.T  # (p, T); the rows of hessian_operator hold R⁻¹
-    coef_x = np.einsum("np,tnc->ptc", Q, x)
+def _evaluate(p, design, design_x, theta, x, noise, c, R0):
+    """Laplacian and std (T, n) at the points ``p`` of the regressions of ``theta`` (T, n) with the QR
+    ``design`` and of ``x`` (T, n, 3) with ``design_x``, in blocks of points."""
+    coef = design[3].T @ theta.T  # (p, T); the rows of hessian_operator hold R⁻¹
+    coef_x = np.einsum("np,tnc->ptc", design_x[3], x)
     T, n = theta.shape
     lap, std = np.empty((T, n)), np.empty((T, n))
     nb = int(np.clip((1 << 21) // (20 * T), 1, 2048))  # points per block: ~16 MB of derivatives
     for s in range(0, n, nb):
         M = hessian_operator(p[s:s + nb], design, c, R0)
-        lap[:, s:s + nb], std[:, s:s + nb], _ = _block_laplacian(M, coef, coef_x, T, noise)
+        Mx = M if design_x is design else hessian_operator(p[s:s + nb], design_x, c, R0)
+        lap[:, s:s + nb], std[:, s:s + nb], _ = _block_laplacian(M, Mx, coef, coef_x, noise)
     return lap, std
 
 
@@ -218,9 +219,10 @@ def surface_laplacian(psi, theta, x, *, spacing="auto", c=0.95, R0=1.0, separati
         k, table = _choose_spacing(p, th_f, judged, c, R0, separation)
     else:
         k = float(spacing)
-    design = ls_design(p, k, median_spacing(p), c, R0)
+    h = median_spacing(p)
+    design = ls_design(p, k, h, c, R0)
     noise[tt] = _noise(th_f, design[3], visible[tt], judged)
-    lb, sb = _evaluate(p, design, th_f, x_f, noise[tt], c, R0)
+    lb, sb = _evaluate(p, design, design, th_f, x_f, noise[tt], c, R0)
     cols = np.flatnonzero(have)
     lap[tt[:, None], cols], std[tt[:, None], cols] = lb, sb
     lap[~np.isfinite(th)] = np.nan

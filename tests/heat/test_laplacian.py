@@ -141,3 +141,21 @@ def test_shape_mismatch_is_a_clear_error():
     psi, x, theta, _ = _tube(T=2)
     with pytest.raises(DataError, match="disagree"):
         surface_laplacian(psi, theta, x[:1])
+
+
+@pytest.mark.parametrize("name", ["tube", "halfshell"])
+def test_synthetic_specimens_on_their_material_grid(name):
+    """The demo specimens' exact positions and temperatures (no IR, no DIC): the closed form of
+    :mod:`irdic.synthetic.laplacian`, the tube stretched and twisted at mid-load."""
+    from irdic.synthetic.laplacian import temperature_laplacian
+    from irdic.synthetic.specimens import HalfShell, Tube
+
+    sp, box = (Tube(), (-14, 14, -20, 20)) if name == "tube" else (HalfShell(), (-38, 38, 1, 49))
+    psi = _grid(*box, 0.5, seed=6)
+    s, h = psi.T
+    t = np.array([3.0, 6.0])[:, None]
+    x = sp.position(s[None], h[None], t)
+    res = surface_laplacian(psi, sp.temperature(s[None], h[None], t), x, spacing=4)
+    true = temperature_laplacian(sp, s[None], h[None], t)
+    rms, _ = _relative(res.laplacian, true, edge_distance(psi) > 3)
+    assert rms < 0.03, rms

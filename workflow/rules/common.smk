@@ -102,6 +102,11 @@ def report_figures():
     return out
 
 
+def heat_experiments():
+    """The experiments with a material block: the heat rule runs for them (heat.zarr)."""
+    return [e for e in EXPERIMENTS if config["experiments"][e].get("material")]
+
+
 def all_outputs():
     out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
     for e in EXPERIMENTS:
@@ -110,6 +115,8 @@ def all_outputs():
             out.append(f"{RESULTS}/{e}/machine.zarr")
         out += [f"{RESULTS}/{e}/figures/{name}.png" for name in figure_names()]
         out += [f"{RESULTS}/{e}/paraview", f"{RESULTS}/{e}/points.csv"]
+        if e in heat_experiments():
+            out.append(f"{RESULTS}/{e}/heat.zarr")
     out.append(f"{RESULTS}/report.html")
     return out
 
