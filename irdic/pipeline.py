@@ -228,8 +228,13 @@ def _heat(config, paths, threads):
                      fields_settings=config["fields"], **e["material"])
 
 
+def _heat_store(p):
+    """An experiment's heat.zarr when it has a material block and the store was written, else None."""
+    return p["heat"] if "heat" in p and Path(p["heat"]).exists() else None
+
+
 def _figures(config, paths, threads):
-    from .plot import FIGURES
+    from .plot import FIGURES, HEAT_FIGURE
     from .stages import figures
 
     for name, e in config["experiments"].items():
@@ -237,7 +242,9 @@ def _figures(config, paths, threads):
         have_fields = Path(p["fields"]).exists()
         folder = Path(p["points"]).parent / "figures"
         names = [n for n in FIGURES if n not in ("strain", "load") or have_fields]
-        figures.run({"points": p["points"], "fields": p["fields"] if have_fields else None},
+        heat = _heat_store(p) if have_fields else None
+        names += [HEAT_FIGURE] if heat is not None else []
+        figures.run({"points": p["points"], "fields": p["fields"] if have_fields else None, "heat": heat},
                     {n: folder / f"{n}.png" for n in names}, threads=threads, experiment=name,
                     times=e["report"]["times"], points=e["report"]["points"])
 
@@ -248,7 +255,9 @@ def _export(config, paths, threads):
     for name, e in config["experiments"].items():
         p = paths["experiments"][name]
         folder = Path(p["points"]).parent
-        export.run({"points": p["points"], "fields": p["fields"] if Path(p["fields"]).exists() else None},
+        have_fields = Path(p["fields"]).exists()
+        export.run({"points": p["points"], "fields": p["fields"] if have_fields else None,
+                    "heat": _heat_store(p) if have_fields else None},
                    {"paraview": folder / "paraview", "csv": folder / "points.csv"}, threads=threads,
                    experiment=name, points=e["report"]["points"], **config["export"])
 

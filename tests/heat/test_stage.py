@@ -82,3 +82,23 @@ def test_cli_heat(stores, capsys):
     assert h.attrs["material_reference_temperature"] == 22.5 and np.all(h.heat_losses.values == 0)
     assert main(args + ["--out", str(work / "cli2.zarr"), "--loss-time-constant", "auto"]) == 2
     assert "material.cooling" in capsys.readouterr().err
+
+
+def test_figure_and_export_carry_the_source(stores):
+    from irdic.report import figure_caption
+    from irdic.stages import export, figures
+
+    work, _ = stores
+    if not (work / "heat.zarr").exists():
+        heat.run({"fields": work / "fields.zarr", "points": work / "points.zarr"}, {"store": work / "heat.zarr"},
+                 loss_time_constant=60.0, **STEEL)
+    inputs = {"points": work / "points.zarr", "fields": work / "fields.zarr", "heat": work / "heat.zarr"}
+    png = work / "figs" / "heat.png"
+    figures.run(inputs, {"heat": png}, experiment="tube", times=[], points=[])
+    assert png.stat().st_size > 10_000
+    caption = figure_caption(png)
+    assert "Heat source" in caption and "MW/m³" in caption and "against" in caption
+    export.run(inputs, {"paraview": work / "pv", "csv": work / "points.csv"}, experiment="tube", points=[])
+    header = (work / "points.csv").read_text().splitlines()[0]
+    assert "heat_source [W/m3]" in header and "temperature_laplacian_std [K/mm2]" in header
+    assert "heat_source" in (work / "pv" / sorted(p.name for p in (work / "pv").glob("*.vtu"))[0]).read_text()
