@@ -314,6 +314,13 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     noise, 2-decimal exports) GCV's flat curve chose 5-8 spacings and a
     7.8 % gradient error; see benchmarks/README.md (issue 15).
     """
+    return _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, "gradient",
+                        _gradient_operator, 2)
+
+
+def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, what, operator, copies):
+    """The spacing of least estimated risk of the derivative ``operator`` (its ``copies`` row blocks per point)
+    and the table of :func:`gradient_risk_spatial` / :func:`laplacian_risk_spatial`."""
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
@@ -322,17 +329,17 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     p, F, judged = _one_per_separation(p, F, judged, separation, h_all)
     p, F, h, judged = _judged_patch(p, F, max_points, judged)
     n = p.shape[0]
-    rows = np.ones(2 * n, bool) if judged is None else np.r_[judged, judged]
-    nj = int(rows.sum()) // 2
+    rows = np.ones(copies * n, bool) if judged is None else np.tile(judged, copies)
+    nj = int(rows.sum()) // copies
     if nj == 0:
-        raise DataError("gradient_risk_spatial: no point is judged (judged is all False)")
-    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates)
+        raise DataError(f"{what}_risk_spatial: no point is judged (judged is all False)")
+    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator)
     if not table:
-        raise DataError(f"gradient_risk_spatial: no candidate spacing fits {n} points (too few points)")
+        raise DataError(f"{what}_risk_spatial: no candidate spacing fits {n} points (too few points)")
     table = [(k * h / h_all, n_par, r) for k, n_par, r in table]
     best = min(table, key=lambda r: r[2])
-    log.info("spatial gradient risk: centre spacing %.3g x %.3g mm (%d parameters, judged on %d points %.3g mm "
-             "apart); %s", best[0], h_all, best[1], n, h, ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
+    log.info("spatial %s risk: centre spacing %.3g x %.3g mm (%d parameters, judged on %d points %.3g mm "
+             "apart); %s", what, best[0], h_all, best[1], n, h, ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
     return best[0], table
 
 
@@ -382,22 +389,5 @@ def laplacian_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=LAPLACIAN
     noise by the fourth power of its wavenumber, so the risk keeps falling
     to wider spacings than the gradient's (:data:`LAPLACIAN_CANDIDATES`).
     """
-    p = psi_array(psi, "psi")
-    F = float_array(samples, "samples").reshape(p.shape[0], -1)
-    c, R0 = positive(c, "c"), positive(R0, "R0")
-    judged = None if judged is None else np.asarray(judged, dtype=bool).reshape(p.shape[0])
-    h_all = median_spacing(p)
-    p, F, judged = _one_per_separation(p, F, judged, separation, h_all)
-    p, F, h, judged = _judged_patch(p, F, max_points, judged)
-    rows = np.ones(p.shape[0], bool) if judged is None else judged
-    nj = int(rows.sum())
-    if nj == 0:
-        raise DataError("laplacian_risk_spatial: no point is judged (judged is all False)")
-    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, _laplacian_operator)
-    if not table:
-        raise DataError(f"laplacian_risk_spatial: no candidate spacing fits {p.shape[0]} points (too few points)")
-    table = [(k * h / h_all, n_par, r) for k, n_par, r in table]
-    best = min(table, key=lambda r: r[2])
-    log.info("spatial Laplacian risk: centre spacing %.3g x %.3g mm (%d parameters); %s", best[0], h_all, best[1],
-             ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
-    return best[0], table
+    return _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, "Laplacian",
+                        _laplacian_operator, 1)
