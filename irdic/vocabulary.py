@@ -186,6 +186,7 @@ DATASET_ATTRS: frozenset[str] = frozenset(
        # the heat stage's material and choices (irdic.heat)
        "material_density", "material_specific_heat", "material_conductivity", "material_reference_temperature",
        "loss_time_constant_s", "loss_time_constant_std_s", "loss_time_constant_chosen", "laplacian_spacing_chosen",
+       "laplacian_smoothing_time_chosen",
        "laplacian_noise_k"]
     + [f"{o}_{w}" for o in ("temperature_smoothing", "temperature_smoothing_space", "surface_smoothing")
        for w in ("chosen", "reason")]

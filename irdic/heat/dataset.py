@@ -20,7 +20,7 @@ from ..errors import ConfigError, DataError
 from ..surface.parametrisation import median_spacing
 from ..vocabulary import cf_attrs
 from .balance import MM2_PER_M2, heat_balance, loss_time_constant
-from .laplacian import JUDGED_MARGIN, surface_laplacian
+from .laplacian import JUDGED_MARGIN, smooth_in_time, surface_laplacian
 
 __all__ = ["heat_dataset", "HEAT_VARIABLES"]
 
@@ -79,7 +79,7 @@ def _tau(material, t, rate, theta, theta0, lap, inner):
     return tau, std, f"auto: least squares over the cooling window {list(window)} s"
 
 
-def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.95, R0=1.0,
+def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.95, R0=1.0, c_t=1.0, R0_t=1.0,
                  separation=None) -> xr.Dataset:
     """The content of ``heat.zarr``.
 
@@ -92,9 +92,12 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
         (kg/m³), ``specific_heat`` (J/(kg K)), ``conductivity`` (W/(m K)),
         ``loss_time_constant`` (s, None or "auto"), ``reference_temperature``
         (degC or None), ``cooling`` ([t0, t1] s or None),
-        ``laplacian_smoothing`` ("auto" or a spacing factor > 1).
+        ``laplacian_smoothing`` ("auto" or a spacing factor > 1),
+        ``laplacian_smoothing_time`` ("gcv", None or a spacing in stages >= 1).
     c, R0 : float
         IMQ kernel of the surface parameters (the fields' ``c_space``, ``R0_space``).
+    c_t, R0_t : float
+        IMQ kernel in time (the fields' ``c_time``, ``R0_time``).
     separation : float, optional
         One IR pixel on the surface (mm), below which the temperature noise is correlated.
 
@@ -116,6 +119,7 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
     lap = surface_laplacian(psi, raw, x, spacing=material["laplacian_smoothing"], c=c, R0=R0,
                             separation=separation)
     t = fields["time"].values.astype(float)
+    lap, k_t = smooth_in_time(lap, t, material.get("laplacian_smoothing_time"), c=c_t, R0=R0_t)
     theta = fields["temperature"].values.astype(float)
     rate = fields["temperature_rate"].values.astype(float)
     theta0, theta0_std = _reference(fields, material)
@@ -133,6 +137,7 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
               "heat_storage": (terms.storage, terms.storage_std), "heat_losses": (terms.losses, terms.losses_std),
               "heat_conduction": (terms.conduction, terms.conduction_std)}
     attrs = _attrs(material, tau, tau_std, how, lap, h)
+    attrs["laplacian_smoothing_time_chosen"] = "none" if k_t <= 1.0 else f"centres every {k_t:.3g} DIC times"
     return _assemble(fields, values, flags, attrs)
 
 

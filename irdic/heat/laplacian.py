@@ -25,13 +25,22 @@ from ..surface.parametrisation import MIN_POINTS, median_spacing
 from ..surface.regression import hessian_operator, laplacian_risk_spatial, ls_design
 from ..validation import float_array, psi_array
 
-__all__ = ["Laplacian", "laplace_beltrami", "surface_laplacian", "JUDGED_MARGIN"]
+__all__ = ["Laplacian", "laplace_beltrami", "surface_laplacian", "smooth_in_time", "JUDGED_MARGIN",
+           "TIME_CANDIDATES"]
 
 log = logging.getLogger(__name__)
 
 #: The noise level and the spacing are judged on points more than this many point spacings inside the cloud's
 #: edge: the rim's data carry more than noise (mixed edge pixels, extrapolated temperatures).
 JUDGED_MARGIN = 3.0
+
+
+#: Centre spacings (DIC times) GCV tries for the Laplacian's regression in time (:func:`smooth_in_time`). The
+#: per-time Laplacian is noise-dominated, so GCV of the series alone goes to the widest spacing it may (12-16
+#: DIC times on the demo tube and half-shell), where the temporal bias outgrows the std that the regression
+#: shrinks: on the realistic half-shell the source's std covered 0.27 / 0.49 of its errors within 1 / 2 std at
+#: 16, 0.35 / 0.62 at 4, for the same accuracy (tube Laplacian 10.7 % at 12, 10.1 % at 4).
+TIME_CANDIDATES = (1.5, 2.0, 3.0, 4.0)
 
 
 class Laplacian(NamedTuple):
@@ -228,3 +237,52 @@ def surface_laplacian(psi, theta, x, *, spacing="auto", c=0.95, R0=1.0, separati
     lap[~np.isfinite(th)] = np.nan
     std[~np.isfinite(lap)] = np.nan
     return Laplacian(lap, std, k, noise, table)
+
+
+def smooth_in_time(result: Laplacian, times, smoothing="gcv", *, c=1.0, R0=1.0) -> tuple[Laplacian, float]:
+    """The Laplacian regressed in time along each point's series, its std propagated.
+
+    Parameters
+    ----------
+    result : Laplacian
+        Of :func:`surface_laplacian`.
+    times : array_like, shape (T,)
+        DIC times (s).
+    smoothing : "gcv", None or float >= 1
+        Centre spacing in time (stages); "gcv": :func:`irdic.numerics.temporal.gcv_temporal` among
+        :data:`TIME_CANDIDATES` on the series of the points that have a Laplacian at every time; None: unchanged.
+    c, R0 : float
+        Temporal IMQ kernel (the fields stage's ``c_time``, ``R0_time``).
+
+    Returns
+    -------
+    (Laplacian, k)
+        ``k`` the spacing used (1.0: unchanged). Points without a Laplacian at
+        some time keep their per-time values.
+
+    Notes
+    -----
+    The IR noise is white in time, so the per-time Laplacians' errors are
+    independent between times and the regression ``W`` (T, T) gives
+    ``var_t = Σ_j W_tj² var_j``. Second derivatives in space carry the
+    noise amplified by ``1/H²``; the temperature changes slowly against the
+    DIC rate on most tests, so the time regression removes most of that
+    noise at a small temporal bias.
+    """
+    from ..numerics.temporal import TemporalInterpolant, gcv_temporal
+
+    t = float_array(times, "times")
+    lap, std = result.laplacian, result.std
+    full = np.isfinite(lap).all(axis=0) & np.isfinite(std).all(axis=0)
+    if smoothing is None or t.size < 4 or not full.any():
+        return result, 1.0
+    k = gcv_temporal(t, lap[:, full], c=c, R0=R0, candidates=TIME_CANDIDATES)[0] if smoothing == "gcv" \
+        else float(smoothing)
+    if k <= 1.0:
+        return result, 1.0
+    W = TemporalInterpolant(t, c=c, R0=R0, smoothing=k).weights(t)
+    lap, std = lap.copy(), std.copy()
+    lap[:, full] = W @ result.laplacian[:, full]
+    std[:, full] = np.sqrt((W ** 2) @ result.std[:, full] ** 2)
+    log.info("temperature Laplacian: regressed in time, centres every %.3g stages", k)
+    return result._replace(laplacian=lap, std=std), k

@@ -44,7 +44,8 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
         flds, pts = open_store(i["fields"]), open_store(i["points"])
         psi = flds["surface_parameter"].values if "surface_parameter" in flds else None
         sep = pixel_pitch(pts.sel(point=flds["point"].values), psi) if psi is not None else None
-        ds = heat_dataset(flds, pts, m, c=f["c_space"], R0=f["R0_space"], separation=sep)
-        write_dataset(ds, o["store"], stage="heat", params={"material": m, "c_space": f["c_space"],
-                                                            "R0_space": f["R0_space"]},
+        kernel = {k: f[k] for k in ("c_space", "R0_space", "c_time", "R0_time")}
+        ds = heat_dataset(flds, pts, m, c=f["c_space"], R0=f["R0_space"], c_t=f["c_time"], R0_t=f["R0_time"],
+                          separation=sep)
+        write_dataset(ds, o["store"], stage="heat", params={"material": m, **kernel},
                       inputs=[os.fspath(i["fields"]), os.fspath(i["points"])])

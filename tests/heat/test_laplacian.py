@@ -159,3 +159,27 @@ def test_synthetic_specimens_on_their_material_grid(name):
     true = temperature_laplacian(sp, s[None], h[None], t)
     rms, _ = _relative(res.laplacian, true, edge_distance(psi) > 3)
     assert rms < 0.03, rms
+
+
+def test_regression_in_time_cuts_the_noise_and_propagates_the_std():
+    """A tube heating linearly in time (Laplacian ∝ t) with 0.05 K noise: the time regression's error is far
+    below each time's, and its std still describes it."""
+    from irdic.heat import smooth_in_time
+
+    psi, x, theta, true = _tube(T=1)
+    t = np.arange(0.0, 20.0, 0.5)
+    ramp = 0.5 + t / 20.0
+    th = 20.0 + ramp[:, None] * (theta[0] - 20.0)
+    x = np.repeat(x, t.size, axis=0)
+    tr = ramp[:, None] * true[0]
+    noisy = th + np.random.default_rng(7).normal(0, 0.05, th.shape)
+    inner = edge_distance(psi) > 3
+    each = surface_laplacian(psi, noisy, x, spacing=8)
+    smooth, k = smooth_in_time(each, t)
+    assert k > 2
+    e0, e1 = (each.laplacian - tr)[:, inner], (smooth.laplacian - tr)[:, inner]
+    assert np.sqrt(np.mean(e1 ** 2)) < 0.7 * np.sqrt(np.mean(e0 ** 2))  # centres every 4 of 40 times: ~0.6
+    z = np.abs(e1) / smooth.std[:, inner]
+    assert 0.55 < np.mean(z < 1) < 0.8 and np.mean(z < 2) > 0.88
+    same, k1 = smooth_in_time(each, t, None)
+    assert k1 == 1.0 and same is each

@@ -24,7 +24,7 @@ def test_demo_experiments_have_a_steel_material(cfg):
     for name in ("halfshell", "tube"):
         m = out["experiments"][name]["material"]
         assert (m["density"], m["specific_heat"], m["conductivity"]) == (7850, 470, 50)
-        assert m["laplacian_smoothing"] == "auto" and m["cooling"] is None
+        assert m["laplacian_smoothing"] == "auto" and m["laplacian_smoothing_time"] == "gcv" and m["cooling"] is None
     assert stage_paths(out)["experiments"]["tube"]["heat"].name == "heat.zarr"
 
 
