@@ -18,6 +18,7 @@ include: "workflow/rules/ingest.smk"
 include: "workflow/rules/calibrate.smk"
 include: "workflow/rules/couple.smk"
 include: "workflow/rules/fields.smk"
+include: "workflow/rules/heat.smk"
 include: "workflow/rules/report.smk"
 
 

@@ -14,6 +14,9 @@ Examples
     irdic fields --points results/tube/points.zarr \\
         --calibration results/setups/lab/calibration.zarr --out results/tube/fields.zarr \\
         --set fields.c_space=1.2 --set fields.temperature_smoothing=gcv
+    irdic heat --fields results/tube/fields.zarr --points results/tube/points.zarr \\
+        --out results/tube/heat.zarr --density 7850 --specific-heat 470 --conductivity 50 \\
+        --loss-time-constant 60
     irdic figures --points results/tube/points.zarr --fields results/tube/fields.zarr \\
         --out results/tube/figures --experiment tube
     irdic export --points results/tube/points.zarr --fields results/tube/fields.zarr --out results/tube
@@ -116,7 +119,7 @@ def describe_store(path) -> str:
 #: the configuration section whose keys ``--set`` may change, per command (schema node, when it differs)
 SECTIONS = {"demo": ("demo", None), "ingest-ir": ("ir", "ir_source"), "ingest-dic": ("dic", "dic_source"),
             "calibrate": ("calibration", None), "couple": ("interpolation", None), "fields": ("fields", None),
-            "export": ("export", None)}
+            "heat": ("material", None), "export": ("export", None)}
 
 _SET_HELP = ("set a parameter as in config.yaml, e.g. {example}; repeatable; checked by the configuration "
              "schema (irdic/schemas/config.schema.yaml lists every key, its default and unit)")
@@ -174,6 +177,7 @@ def _parser() -> argparse.ArgumentParser:
                            help="FLIR files: replaces the camera's reflected apparent temperature (°C)")
 
     _stage_parsers(add_parser)
+    _heat_parser(add_parser)
     _output_parsers(add_parser)
     return p
 
@@ -202,6 +206,30 @@ def _stage_parsers(add_parser) -> None:
     s.add_argument("--temperature-smoothing", help="none (default), gcv or a number >= 1")
     s.add_argument("--dic", default=None, help="dic.zarr: its testing machine signals at the DIC times")
     s.add_argument("--machine", default=None, help="machine.zarr: the machine record at the DIC times")
+
+
+def _heat_parser(add_parser) -> None:
+    s = add_parser("heat", "heat source and the terms of the local heat balance -> heat.zarr",
+                   description="The heat source s = rho c (dTheta/dt + (Theta - Theta0)/tau) - k Laplacian(Theta) "
+                   "of a thin wall at the DIC points (docs/heat.md); the material as in an experiment's material "
+                   "block (--set material.cooling=[t0,t1] etc.).")
+    s.add_argument("--fields", required=True, help="fields.zarr")
+    s.add_argument("--points", required=True, help="points.zarr")
+    s.add_argument("--out", required=True, help="heat.zarr to write")
+    s.add_argument("--density", type=float, help="kg/m^3")
+    s.add_argument("--specific-heat", dest="specific_heat", type=float, help="J/(kg K)")
+    s.add_argument("--conductivity", type=float, help="W/(m K)")
+    s.add_argument("--loss-time-constant", dest="loss_time_constant", help="s, none or auto (needs material.cooling)")
+
+
+def _time_constant(text):
+    """``--loss-time-constant``: a number (s), none or auto (checked by the schema)."""
+    if text in ("none", "auto"):
+        return None if text == "none" else "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise ConfigError(f"--loss-time-constant must be a number (s), none or auto, got {text!r}") from None
 
 
 def _output_parsers(add_parser) -> None:
@@ -395,6 +423,14 @@ def _dispatch(args) -> None:
             flags["temperature_smoothing"] = _smoothing(args.temperature_smoothing)
         fields.run({"points": args.points, "calibration": args.calibration, "dic": args.dic,
                     "machine": args.machine}, {"store": args.out}, threads=args.threads, **_section(args, flags))
+    elif args.command == "heat":
+        from .stages import heat
+
+        flags = _given(args, "density", "specific_heat", "conductivity")
+        if args.loss_time_constant is not None:
+            flags["loss_time_constant"] = _time_constant(args.loss_time_constant)
+        heat.run({"fields": args.fields, "points": args.points}, {"store": args.out}, threads=args.threads,
+                 **_section(args, flags))
     print(describe_store(args.out))
 
 

@@ -25,8 +25,8 @@ __all__ = ["code_hash", "stage_modules", "module_imports", "STAGES"]
 _ROOT = Path(__file__).resolve().parent
 
 #: the stages, each with its entry module irdic.stages.<stage>
-STAGES = ("demo", "ingest_ir", "ingest_dic", "ingest_machine", "calibrate", "couple", "fields", "figures", "export",
-          "report")
+STAGES = ("demo", "ingest_ir", "ingest_dic", "ingest_machine", "calibrate", "couple", "fields", "heat", "figures",
+          "export", "report")
 
 
 def _module_file(name: str, root: Path) -> Path | None:

@@ -131,6 +131,17 @@ def _where(error: jsonschema.ValidationError) -> str:
     return ".".join(parts) if parts else "(top level)"
 
 
+def _alternative(schema: dict) -> str:
+    """One alternative of a ``oneOf`` in words: ``'auto'``, ``null``, ``a number > 0``."""
+    if "const" in schema:
+        return repr(schema["const"])
+    if schema.get("type") == "null":
+        return "null"
+    bound = next((f" {op} {schema[k]}" for k, op in (("exclusiveMinimum", ">"), ("minimum", ">="))
+                  if k in schema), "")
+    return f"a {schema.get('type', 'value')}{bound}"
+
+
 def _message(error: jsonschema.ValidationError) -> str:
     where = _where(error)
     if error.validator == "additionalProperties" and isinstance(error.instance, dict):
@@ -151,6 +162,8 @@ def _message(error: jsonschema.ValidationError) -> str:
     if error.validator == "anyOf":
         alts = [repr(a["const"]) if "const" in a else f"a {a.get('type', 'value')}" for a in error.validator_value]
         return f"{where}: {_clip(repr(error.instance))} is not {' or '.join(alts)}"
+    if error.validator == "oneOf":
+        return f"{where}: {_clip(repr(error.instance))} is not {' or '.join(_alternative(s) for s in error.validator_value)}"
     if error.validator == "enum":
         return f"{where}: {_clip(repr(error.instance))} is not one of {', '.join(map(repr, error.validator_value))}"
     return f"{where}: {_clip(error.message)}"
@@ -205,6 +218,7 @@ def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) 
                 raise ConfigError(
                     f"experiments.{name}.dic.columns: format table needs the column names of {', '.join(missing)}"
                 )
+        _check_material(name, exp.get("material"))
         machine = exp.get("machine")
         if machine is not None:
             bad = [k for k in machine["columns"] if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k)]
@@ -227,6 +241,18 @@ def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) 
             except (TypeError, ValueError, OverflowError):
                 raise ConfigError(f"setups.{name}.seeds: marker ID {key!r} is not an integer") from None
     return config
+
+
+def _check_material(name: str, material) -> None:
+    """The checks of an experiment's ``material`` block that the schema cannot express."""
+    if material is None:
+        return
+    cooling = material.get("cooling")
+    if material["loss_time_constant"] == "auto" and cooling is None:
+        raise ConfigError(f"experiments.{name}.material.loss_time_constant: auto needs material.cooling: [t0, t1], "
+                          "a window of DIC times (s) without heat sources, e.g. a natural cooling after unloading")
+    if cooling is not None and not cooling[1] > cooling[0]:
+        raise ConfigError(f"experiments.{name}.material.cooling: expected [t0, t1] with t1 > t0 (s), got {cooling}")
 
 
 def load_config(path: str | os.PathLike) -> dict:

@@ -36,6 +36,8 @@ def stage_paths(config: Mapping) -> dict:
         out["experiments"][e] = {k: r / e / f"{k}.zarr" for k in ("dic", "ir", "points", "fields")}
         if config["experiments"][e].get("machine"):
             out["experiments"][e]["machine"] = r / e / "machine.zarr"
+        if config["experiments"][e].get("material"):
+            out["experiments"][e]["heat"] = r / e / "heat.zarr"
     root = r.resolve()
     for section, entries in out.items():
         for name, paths in entries.items():
@@ -50,7 +52,7 @@ def stage_paths(config: Mapping) -> dict:
     return out
 
 
-STAGES = ("demo", "ingest", "calibrate", "couple", "fields", "figures", "export", "report")
+STAGES = ("demo", "ingest", "calibrate", "couple", "fields", "heat", "figures", "export", "report")
 
 
 def _in_demo(config: Mapping, path) -> bool:
@@ -216,8 +218,23 @@ def _fields(config, paths, threads):
         _chunked(fields, config, inputs, p["fields"], p["points"], threads, config["fields"])
 
 
+def _heat(config, paths, threads):
+    from .stages import heat
+
+    for name, e in config["experiments"].items():
+        p = paths["experiments"][name]
+        if "heat" in p:  # only experiments with a material block
+            heat.run({"fields": p["fields"], "points": p["points"]}, {"store": p["heat"]}, threads=threads,
+                     fields_settings=config["fields"], **e["material"])
+
+
+def _heat_store(p):
+    """An experiment's heat.zarr when it has a material block and the store was written, else None."""
+    return p["heat"] if "heat" in p and Path(p["heat"]).exists() else None
+
+
 def _figures(config, paths, threads):
-    from .plot import FIGURES
+    from .plot import FIGURES, HEAT_FIGURE
     from .stages import figures
 
     for name, e in config["experiments"].items():
@@ -225,7 +242,9 @@ def _figures(config, paths, threads):
         have_fields = Path(p["fields"]).exists()
         folder = Path(p["points"]).parent / "figures"
         names = [n for n in FIGURES if n not in ("strain", "load") or have_fields]
-        figures.run({"points": p["points"], "fields": p["fields"] if have_fields else None},
+        heat = _heat_store(p) if have_fields else None
+        names += [HEAT_FIGURE] if heat is not None else []
+        figures.run({"points": p["points"], "fields": p["fields"] if have_fields else None, "heat": heat},
                     {n: folder / f"{n}.png" for n in names}, threads=threads, experiment=name,
                     times=e["report"]["times"], points=e["report"]["points"])
 
@@ -236,7 +255,9 @@ def _export(config, paths, threads):
     for name, e in config["experiments"].items():
         p = paths["experiments"][name]
         folder = Path(p["points"]).parent
-        export.run({"points": p["points"], "fields": p["fields"] if Path(p["fields"]).exists() else None},
+        have_fields = Path(p["fields"]).exists()
+        export.run({"points": p["points"], "fields": p["fields"] if have_fields else None,
+                    "heat": _heat_store(p) if have_fields else None},
                    {"paraview": folder / "paraview", "csv": folder / "points.csv"}, threads=threads,
                    experiment=name, points=e["report"]["points"], **config["export"])
 
@@ -249,4 +270,4 @@ def _report(config, paths, threads):
 
 
 _RUNNERS = {"demo": _demo, "ingest": _ingest, "calibrate": _calibrate, "couple": _couple, "fields": _fields,
-            "figures": _figures, "export": _export, "report": _report}
+            "heat": _heat, "figures": _figures, "export": _export, "report": _report}

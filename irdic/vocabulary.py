@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 
 __all__ = ["TIME", "POINT", "COMPONENT", "AXIS", "I", "J", "PRINCIPAL", "PARAM", "COMPONENTS", "PIXEL_AXES",
-           "Status", "STATUS_MEANINGS", "status_attrs", "POINTS_ATTRS", "FIELDS_ATTRS", "cf_attrs",
+           "Status", "STATUS_MEANINGS", "status_attrs", "POINTS_ATTRS", "FIELDS_ATTRS", "HEAT_ATTRS", "cf_attrs",
            "COORD_ATTRS", "SERIES_ATTRS", "DATASET_ATTRS", "series_attrs", "allowed_dataset_attr"]
 
 #: dimension names of the stores
@@ -107,11 +107,24 @@ FIELDS_ATTRS: dict[str, dict[str, str]] = {
     "time": {"units": "s"},
 }
 
-_STORES = {"points": POINTS_ATTRS, "fields": FIELDS_ATTRS}
+#: units and long names of the variables of ``heat.zarr`` (heat stage; the balance of docs/heat.md)
+HEAT_ATTRS: dict[str, dict[str, str]] = {
+    "heat_source": {"units": "W/m3", "long_name": "heat source s = heat_storage + heat_losses - heat_conduction, "
+                    "averaged through the wall's thickness (plastic dissipation plus thermoelastic coupling)"},
+    "temperature_laplacian": {"units": "K/mm2", "long_name": "Laplace-Beltrami operator of the temperature on the "
+                              "current surface"},
+    "heat_storage": {"units": "W/m3", "long_name": "heat stored, rho c times the material temperature rate"},
+    "heat_losses": {"units": "W/m3", "long_name": "face losses, rho c (temperature - reference temperature) / "
+                    "loss_time_constant"},
+    "heat_conduction": {"units": "W/m3", "long_name": "heat brought in by in-plane conduction, k times the "
+                        "temperature Laplacian"},
+}
+
+_STORES = {"points": POINTS_ATTRS, "fields": FIELDS_ATTRS, "heat": HEAT_ATTRS}
 
 
 def cf_attrs(store: str, name: str) -> dict:
-    """A copy of the CF attributes of variable ``name`` of ``store`` (``"points"`` or ``"fields"``)."""
+    """A copy of the CF attributes of variable ``name`` of ``store`` (``"points"``, ``"fields"`` or ``"heat"``)."""
     return dict(_STORES[store][name])
 
 
@@ -172,7 +185,12 @@ DATASET_ATTRS: frozenset[str] = frozenset(
        "ir_noise_k", "ir_noise_temporal_k", "ir_noise_spatial_k", "ir_quantisation_k",
        "ir_noise_gain_temperature", "ir_noise_gain_gradient_per_px", "ir_noise_gain_rate_per_s", "dic_noise_mm",
        "footprint_px", "ir_noise_gain_temperature_footprint",
-       "uncertainty_notes"]
+       "uncertainty_notes",
+       # the heat stage's material and choices (irdic.heat)
+       "material_density", "material_specific_heat", "material_conductivity", "material_reference_temperature",
+       "loss_time_constant_s", "loss_time_constant_std_s", "loss_time_constant_chosen", "laplacian_spacing_chosen",
+       "laplacian_smoothing_time_chosen",
+       "laplacian_noise_k"]
     + [f"{o}_{w}" for o in ("temperature_smoothing", "temperature_smoothing_space", "surface_smoothing")
        for w in ("chosen", "reason")]
     + [f"count_{s.name.lower()}" for s in Status])

@@ -3,7 +3,8 @@
 Inputs
 ------
 - ``points``: ``results/<experiment>/points.zarr``;
-- ``fields`` (when the workflow has a fields rule): ``results/<experiment>/fields.zarr``.
+- ``fields`` (when the workflow has a fields rule): ``results/<experiment>/fields.zarr``;
+- ``heat`` (experiments with a material block): ``results/<experiment>/heat.zarr`` (the heat source).
 
 Outputs
 -------

@@ -3,12 +3,13 @@
 Inputs
 ------
 - ``points``: ``results/<experiment>/points.zarr``;
-- ``fields`` (when the workflow has a fields rule): ``results/<experiment>/fields.zarr``.
+- ``fields`` (when the workflow has a fields rule): ``results/<experiment>/fields.zarr``;
+- ``heat`` (rule heat_figure): ``results/<experiment>/heat.zarr``.
 
 Outputs
 -------
 - one PNG per figure, named by figure (``temperature``, ``gradient``, ``rate``,
-  ``history``, and ``strain``, ``load`` with fields):
+  ``history``, and ``strain``, ``load`` with fields; ``heat`` with heat.zarr):
   ``results/<experiment>/figures/<name>.png``.
 
 Params

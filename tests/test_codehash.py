@@ -72,10 +72,11 @@ def test_an_edit_reruns_exactly_the_stages_that_import_it(pkg):
     _edit(pkg / "footprint" / "visibility.py")
     changed = {s for s in before if before[s] != ch.code_hash(s)}
     assert changed == {"couple"}
-    # the fields stage's noise probes extrapolate as the couple stage does: both re-run
+    # the fields stage's noise probes extrapolate as the couple stage does: both re-run, and the heat stage,
+    # which takes the IR pixel's size on the surface from the same module as the fields stage
     mid = {stage: ch.code_hash(stage) for stage in ch.STAGES}
     _edit(pkg / "footprint" / "extrapolation.py")
-    assert {s for s in mid if mid[s] != ch.code_hash(s)} == {"couple", "fields"}
+    assert {s for s in mid if mid[s] != ch.code_hash(s)} == {"couple", "fields", "heat"}
     after = {stage: ch.code_hash(stage) for stage in ch.STAGES}
     _edit(pkg / "io" / "irbis.py")
     changed = {s for s in after if after[s] != ch.code_hash(s)}

@@ -183,7 +183,9 @@ def test_bad_arguments(stores, tmp_path):
         plot_history(points, tmp_path / "x.png", point_ids=[*range(1000, 1007), 1010, 1011])
     with pytest.raises(ConfigError, match="arrows must be an integer in 2 .. 200, got 0"):
         plot_gradient(points, tmp_path / "x.png", arrows=0)
-    with pytest.raises(ConfigError, match="unknown figure.*'heat'"):
+    with pytest.raises(ConfigError, match="unknown figure.*'entropy'"):
+        plot_experiment(points, tmp_path, names=["entropy"])
+    with pytest.raises(DataError, match="needs heat.zarr"):  # the heat figure without the heat store
         plot_experiment(points, tmp_path, names=["heat"])
     with pytest.raises(DataError, match="nothing to draw"):
         plot_temperature(points.assign(x=points["x"] * np.nan), tmp_path / "x.png")

@@ -91,6 +91,8 @@ def test_demo_runs_end_to_end(run):
         flds = open_store(work / "results" / exp / "fields.zarr")
         assert flds.attrs["irdic_stage"] == "fields"
         assert flds.temperature_gradient.dims == ("time", "point", "component")
+        heat = open_store(work / "results" / exp / "heat.zarr")
+        assert heat.attrs["irdic_stage"] == "heat" and heat.heat_source.dims == ("time", "point")
     cal = open_store(work / "results" / "setups" / "lab" / "calibration.zarr")
     assert float(cal["rms_px"]) < 0.05
     true_M = open_store(work / "resources" / "demo" / "setup" / "truth.zarr")["projection_matrix"].values
@@ -118,25 +120,30 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["calibration"]["distortion"] = "k1"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"calibrate", "couple", "fields", "all", "figures", "export", "report_html"}
+    assert _planned(res) == {"calibrate", "couple", "fields", "heat", "heat_figure", "all", "figures", "export",
+                             "report_html"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["ir"]["time_offset"] = 0.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
     # the tube's machine record is also put on the IR frame times (machine.zarr): it follows the IR series
-    assert _planned(res) == {"ingest_ir", "ingest_machine", "couple", "fields", "all", "figures", "export",
-                             "report_html"}
+    assert _planned(res) == {"ingest_ir", "ingest_machine", "couple", "fields", "heat", "heat_figure", "all", "figures",
+                             "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["interpolation"]["c_space"] = 1.5
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"couple", "fields", "all", "figures", "export", "report_html"}
+    assert _planned(res) == {"couple", "fields", "heat", "heat_figure", "all", "figures", "export", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["fields"]["temperature_smoothing"] = "gcv"
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"fields", "all", "figures", "export", "report_html"}
+    assert _planned(res) == {"fields", "heat", "heat_figure", "all", "figures", "export", "report_html"}
+    changed = copy.deepcopy(cfg)
+    changed["experiments"]["tube"]["material"]["loss_time_constant"] = 30.0
+    res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
+    assert _planned(res) == {"heat", "heat_figure", "export", "all", "report_html"}
     changed = copy.deepcopy(cfg)
     changed["experiments"]["tube"]["report"] = {"times": [1.0], "points": []}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"figures", "report_html", "all"}  # the page shows the new figures
+    assert _planned(res) == {"figures", "heat_figure", "report_html", "all"}  # the page shows the new figures
     changed = copy.deepcopy(cfg)
     changed["export"] = {"paraview_every": 2}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
@@ -147,7 +154,7 @@ def test_parameter_change_reruns_only_dependent_stages(run):
 def test_figures_exports_and_report(run):
     work, cfg = run
     for exp in ("halfshell", "tube"):
-        for name in ("temperature", "gradient", "rate", "history", "strain"):
+        for name in ("temperature", "gradient", "rate", "history", "strain", "heat"):
             assert (work / "results" / exp / "figures" / f"{name}.png").stat().st_size > 10_000
         assert (work / "results" / exp / "paraview" / "points.pvd").exists()
         assert (work / "results" / exp / "points.csv").stat().st_size > 1_000
@@ -214,7 +221,7 @@ def test_every_store_describes_itself(run):
 def test_default_run_writes_the_html_report_with_captions(run):
     work, _ = run
     page = (work / "results" / "report.html").read_text(encoding="utf-8")
-    assert page.count("<img") == 1 + 2 * 6  # the calibration and six figures per experiment
+    assert page.count("<img") == 1 + 2 * 7  # the calibration and seven figures per experiment (heat included)
     assert "Temperature (°C) at the DIC points of experiment tube at t = " in page
     assert "extrapolated from the specimen mask edge" in page
 

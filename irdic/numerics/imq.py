@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.distance import cdist
 
-__all__ = ["imq", "imq_dr", "imq_matrix", "imq_scaled_inverse", "imq_planar", "REGRESSION_RATIO", "regression_R0"]
+__all__ = ["imq", "imq_dr", "imq_matrix", "imq_scaled_inverse", "imq_planar", "imq_planar_hessian", "REGRESSION_RATIO", "regression_R0"]
 
 # Kernel width of a regression relative to its centre spacing, c R0_eff / H.
 # Flat kernels approximate smooth fields well with few centres: tangents of a
@@ -145,6 +145,35 @@ def imq_planar(dx, dy, c, R0, derivatives):
     m1 = np.multiply(t, dx)
     np.multiply(t, dy, out=q)
     return m, m1, q
+
+
+def imq_planar_hessian(dx, dy, c, R0):
+    """Second derivatives of the IMQ kernel for planar offsets ``(dx, dy) = xi - Psi_k``.
+
+    Parameters
+    ----------
+    dx, dy : ndarray
+        Offsets (mm), broadcastable shapes.
+    c : float
+        Shape parameter.
+    R0 : float
+        Distance normalisation (mm).
+
+    Returns
+    -------
+    m11, m12, m22 : ndarray
+        ``d²m/dxi1²``, ``d²m/dxi1 dxi2``, ``d²m/dxi2²`` (1/mm²).
+
+    Notes
+    -----
+    With ``s = (c² + r²)^(-1/2)``, ``r² = (dx² + dy²) / R0²``:
+    ``d²m/dxi_a dxi_b = -c s³ δ_ab / R0² + 3 c s⁵ dx_a dx_b / R0⁴``.
+    """
+    dx, dy = np.asarray(dx, dtype=float), np.asarray(dy, dtype=float)
+    s2 = 1.0 / (c * c + (dx * dx + dy * dy) / (R0 * R0))
+    s3 = c * s2 * np.sqrt(s2) / (R0 * R0)
+    s5 = 3.0 * s3 * s2 / (R0 * R0)
+    return s5 * dx * dx - s3, s5 * dx * dy, s5 * dy * dy - s3
 
 
 def regression_R0(c, H):

@@ -8,14 +8,17 @@ from typing import Mapping
 
 from ..errors import ConfigError
 from .fields import plot_gradient, plot_rate, plot_strain, plot_temperature
+from .heat import plot_heat
 from .history import plot_history, plot_load
 
-__all__ = ["plot_experiment", "FIGURES"]
+__all__ = ["plot_experiment", "FIGURES", "HEAT_FIGURE"]
 
 log = logging.getLogger(__name__)
 
 #: figures of :func:`plot_experiment`, by name (the strain figure needs fields.zarr)
 FIGURES = ("temperature", "gradient", "rate", "history", "strain", "load")
+#: the heat source's figure, drawn when asked for (it needs heat.zarr merged into ``fields``)
+HEAT_FIGURE = "heat"
 
 
 def plot_experiment(points, outdir, *, fields=None, times=None, point_ids=None, experiment=None,
@@ -48,9 +51,10 @@ def plot_experiment(points, outdir, *, fields=None, times=None, point_ids=None, 
         if names is None:
             names = [n for n in FIGURES if n not in ("strain", "load") or fields is not None]
         paths = {n: Path(outdir) / f"{n}.png" for n in names}
-    unknown = [n for n in names if n not in FIGURES]
+    unknown = [n for n in names if n not in FIGURES + (HEAT_FIGURE,)]
     if unknown:
-        raise ConfigError(f"unknown figure(s) {', '.join(map(repr, unknown))}; known: {', '.join(FIGURES)}")
+        raise ConfigError(f"unknown figure(s) {', '.join(map(repr, unknown))}; known: "
+                          f"{', '.join(FIGURES + (HEAT_FIGURE,))}")
     done = {}
     for n in names:
         p = paths[n]
@@ -64,6 +68,8 @@ def plot_experiment(points, outdir, *, fields=None, times=None, point_ids=None, 
             done[n] = plot_history(points, p, fields=fields, point_ids=point_ids, experiment=experiment)
         elif n == "load":
             done[n] = plot_load(points, p, fields=fields, point_ids=point_ids, experiment=experiment)
+        elif n == HEAT_FIGURE:
+            done[n] = plot_heat(points, p, fields=fields, times=times, experiment=experiment)
         else:
             done[n] = plot_strain(fields, p, points=points, times=times, experiment=experiment)
         log.info("figure %s -> %s", n, p)

@@ -11,7 +11,7 @@ from ..errors import ConfigError
 from ..logs import stage_logging
 from ..threads import stage_threads
 
-__all__ = ["stage_context", "paths", "optional_path", "open_optional"]
+__all__ = ["stage_context", "paths", "optional_path", "open_optional", "with_heat"]
 
 
 @contextlib.contextmanager
@@ -62,3 +62,13 @@ def open_optional(path):
     from ..store import open_store
 
     return open_store(path) if path is not None and Path(path).exists() else None
+
+
+def with_heat(fields, heat):
+    """``fields`` with the variables of ``heat.zarr`` (heat source, Laplacian, the balance's terms) beside
+    its own; ``fields`` alone when there is no heat store."""
+    if heat is None or fields is None:
+        return fields
+    return fields.merge(heat.drop_vars([c for c in heat.coords if c not in ("time", "point")]),
+                        join="left", combine_attrs="override")
+

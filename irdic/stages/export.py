@@ -6,7 +6,7 @@ import os
 from typing import Mapping
 
 from ..store import open_store
-from .common import open_optional, optional_path, paths, stage_context
+from .common import open_optional, optional_path, paths, stage_context, with_heat
 from ..parameters import settings
 
 __all__ = ["run"]
@@ -20,7 +20,8 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     Parameters
     ----------
     inputs : mapping
-        ``points``: ``points.zarr``; ``fields`` (optional): ``fields.zarr``.
+        ``points``: ``points.zarr``; ``fields`` (optional): ``fields.zarr``; ``heat``
+        (optional, with ``fields``): ``heat.zarr``, whose variables join the fields'.
     outputs : mapping
         ``paraview``: folder of the time series; ``csv``: the table.
     log : path-like, optional
@@ -39,12 +40,12 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     from ..export import write_csv, write_paraview
     from ..selection import select_points
 
-    i = paths(inputs, "export", "inputs", ("points",), ("fields",))
+    i = paths(inputs, "export", "inputs", ("points",), ("fields", "heat"))
     o = paths(outputs, "export", "outputs", ("paraview", "csv"))
     with stage_context("export", log, threads):
         p = settings("export", params)
         pts = open_store(i["points"])
-        fields = open_optional(optional_path(i, "fields"))
+        fields = with_heat(open_optional(optional_path(i, "fields")), open_optional(optional_path(i, "heat")))
         ids = "all" if p["csv_points"] == "all" else select_points(
             pts, list(points) if points else None, name=f"experiments.{experiment}.report.points")
         write_paraview(pts, o["paraview"], fields=fields, dtype=p["paraview_precision"], every=p["paraview_every"])

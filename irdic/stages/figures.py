@@ -6,7 +6,7 @@ import os
 from typing import Mapping
 
 from ..store import open_store
-from .common import open_optional, optional_path, paths, stage_context
+from .common import open_optional, optional_path, paths, stage_context, with_heat
 
 __all__ = ["run"]
 
@@ -18,9 +18,10 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     Parameters
     ----------
     inputs : mapping
-        ``points``: ``points.zarr``; ``fields`` (optional): ``fields.zarr``.
+        ``points``: ``points.zarr``; ``fields`` (optional): ``fields.zarr``; ``heat`` (optional,
+        with ``fields``): ``heat.zarr``, for the heat figure.
     outputs : mapping
-        PNG path of each figure by name (keys of :data:`irdic.plot.FIGURES`).
+        PNG path of each figure by name (keys of :data:`irdic.plot.FIGURES`, or ``heat``).
     log : path-like, optional
         Log file (Snakemake's ``log:``).
     threads : int, optional
@@ -34,10 +35,10 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     from ..plot import plot_experiment
     from ..selection import select_points, select_times
 
-    i = paths(inputs, "figures", "inputs", ("points",), ("fields",))
+    i = paths(inputs, "figures", "inputs", ("points",), ("fields", "heat"))
     with stage_context("figures", log, threads):
         pts = open_store(i["points"])
-        fields = open_optional(optional_path(i, "fields"))
+        fields = with_heat(open_optional(optional_path(i, "fields")), open_optional(optional_path(i, "heat")))
         key = f"experiments.{experiment}.report"
         t = pts["time"].values
         sel_t = t[select_times(t, list(times) if times else None, name=f"{key}.times")]

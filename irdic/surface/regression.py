@@ -21,7 +21,8 @@ from ..validation import float_array, positive, psi_array
 from .parametrisation import MIN_POINTS, median_spacing
 
 __all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "gradient_risk_spatial", "SURFACE_CANDIDATES",
-           "GRADIENT_CANDIDATES", "GRADIENT_MIN_PARAMETERS"]
+           "GRADIENT_CANDIDATES", "GRADIENT_MIN_PARAMETERS", "LAPLACIAN_CANDIDATES", "laplacian_risk_spatial",
+           "hessian_operator"]
 
 #: Centre spacing factors GCV tries for the DIC surface. Wider than the default of
 #: :func:`gcv_spatial`: the displacement of a static or uniformly strained specimen
@@ -40,6 +41,10 @@ GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0
 #: The fewest parameters (centres and the 3 monomials) of a candidate beyond 12 spacings that the
 #: gradient-risk criterion judges (the demo tube: 18 at 12 spacings, chosen; 9-12 at 16-20, not resolved)
 GRADIENT_MIN_PARAMETERS = 16
+
+#: Centre spacing factors the Laplacian-risk criterion tries (:func:`laplacian_risk_spatial`): a second
+#: derivative's noise grows like σ / H², so its best spacing is wider than the gradient's; 3 is the pilot.
+LAPLACIAN_CANDIDATES = (5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 24.0, 32.0)
 
 log = logging.getLogger(__name__)
 
@@ -188,8 +193,10 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
     return best[0], table
 
 
-def _gradient_risks(p, F, h, c, R0, rows, nj, candidates):
-    """``(k, n_parameters, risk)`` of each candidate that fits (Notes of :func:`gradient_risk_spatial`)."""
+def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None):
+    """``(k, n_parameters, risk)`` of each candidate that fits (Notes of :func:`gradient_risk_spatial`);
+    ``operator(p, design, c, R0)`` the derivative whose risk counts (default the gradient's)."""
+    operator = _gradient_operator if operator is None else operator
     n, ns = p.shape[0], F.shape[1]
     pilot = None
     table = []
@@ -202,7 +209,7 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates):
         if k > 12.0 and Qm.shape[1] < GRADIENT_MIN_PARAMETERS:
             break  # wider spacings have fewer still
         coef = Qm.T @ F
-        M = _gradient_operator(p, design, c, R0)[rows]
+        M = operator(p, design, c, R0)[rows]
         g = M @ coef
         if pilot is None:
             # the residual r_i has variance σ² (1 - H_ii), H = Q Qᵀ; summed over the judged points
@@ -307,6 +314,13 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     noise, 2-decimal exports) GCV's flat curve chose 5-8 spacings and a
     7.8 % gradient error; see benchmarks/README.md.
     """
+    return _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, "gradient",
+                        _gradient_operator, 2)
+
+
+def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, what, operator, copies):
+    """The spacing of least estimated risk of the derivative ``operator`` (its ``copies`` row blocks per point)
+    and the table of :func:`gradient_risk_spatial` / :func:`laplacian_risk_spatial`."""
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
@@ -315,15 +329,65 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     p, F, judged = _one_per_separation(p, F, judged, separation, h_all)
     p, F, h, judged = _judged_patch(p, F, max_points, judged)
     n = p.shape[0]
-    rows = np.ones(2 * n, bool) if judged is None else np.r_[judged, judged]
-    nj = int(rows.sum()) // 2
+    rows = np.ones(copies * n, bool) if judged is None else np.tile(judged, copies)
+    nj = int(rows.sum()) // copies
     if nj == 0:
-        raise DataError("gradient_risk_spatial: no point is judged (judged is all False)")
-    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates)
+        raise DataError(f"{what}_risk_spatial: no point is judged (judged is all False)")
+    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator)
     if not table:
-        raise DataError(f"gradient_risk_spatial: no candidate spacing fits {n} points (too few points)")
+        raise DataError(f"{what}_risk_spatial: no candidate spacing fits {n} points (too few points)")
     table = [(k * h / h_all, n_par, r) for k, n_par, r in table]
     best = min(table, key=lambda r: r[2])
-    log.info("spatial gradient risk: centre spacing %.3g x %.3g mm (%d parameters, judged on %d points %.3g mm "
-             "apart); %s", best[0], h_all, best[1], n, h, ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
+    log.info("spatial %s risk: centre spacing %.3g x %.3g mm (%d parameters, judged on %d points %.3g mm "
+             "apart); %s", what, best[0], h_all, best[1], n, h, ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
     return best[0], table
+
+
+def hessian_operator(pts, design, c, R0):
+    """``M`` (5, n, p): ``M[j] Qᵀ F`` is the regression's d/dΨ1, d/dΨ2, d²/dΨ1², d²/dΨ1dΨ2, d²/dΨ2²
+    (rows ``j`` = 0..4, units of ``F`` per mm or mm²) at the points ``pts`` (n, 2), from the QR ``design``
+    of :func:`ls_design`."""
+    from ..numerics.imq import imq_planar_hessian
+
+    centres, R0k, ctr, _, Rm = design
+    dx, dy = pts[:, None, 0] - centres[None, :, 0], pts[:, None, 1] - centres[None, :, 1]
+    _, m1, m2 = imq_planar(dx, dy, c, R0k, True)
+    zero = np.zeros((pts.shape[0], 3))
+    cols = [np.concatenate([m1, monomials(pts, ctr, R0, 1)], axis=1),
+            np.concatenate([m2, monomials(pts, ctr, R0, 2)], axis=1)]
+    cols += [np.concatenate([m, zero], axis=1) for m in imq_planar_hessian(dx, dy, c, R0k)]
+    B = np.stack(cols)
+    return np.stack([scipy.linalg.solve_triangular(Rm, b.T, trans="T", check_finite=False).T for b in B])
+
+
+def _laplacian_operator(p, design, c, R0):
+    """``M`` (n, p) with ``M Qᵀ F`` the regression's parameter Laplacian ``∂²/∂Ψ1² + ∂²/∂Ψ2²`` (1/mm²)."""
+    from ..numerics.imq import imq_planar_hessian
+
+    centres, R0k, _, _, Rm = design
+    m11, _, m22 = imq_planar_hessian(p[:, None, 0] - centres[None, :, 0], p[:, None, 1] - centres[None, :, 1], c, R0k)
+    B = np.concatenate([m11 + m22, np.zeros((p.shape[0], 3))], axis=1)
+    return scipy.linalg.solve_triangular(Rm, B.T, trans="T", check_finite=False).T
+
+
+def laplacian_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=LAPLACIAN_CANDIDATES,
+                           max_points=GCV_MAX_POINTS, judged=None, separation=None):
+    """Choose the spatial regression's centre spacing by the estimated mean squared error of its Laplacian.
+
+    The criterion of :func:`gradient_risk_spatial` (same parameters and
+    returns, ``risk`` in data units² / mm⁴) with the derivative ``∂²f/∂Ψ1² +
+    ∂²f/∂Ψ2²`` in place of the gradient.
+
+    Notes
+    -----
+    The surface Laplacian differs from the parameter one by the metric and
+    the Christoffel terms, which on a specimen of nearly isometric
+    parameters (the best-fit plane of a shallow patch, the unwrapped
+    cylinder) change the operator by a factor close to one and add a small
+    first-derivative term: the spacing that minimises the parameter
+    Laplacian's risk minimises the surface one's. A second derivative weighs
+    noise by the fourth power of its wavenumber, so the risk keeps falling
+    to wider spacings than the gradient's (:data:`LAPLACIAN_CANDIDATES`).
+    """
+    return _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, "Laplacian",
+                        _laplacian_operator, 1)

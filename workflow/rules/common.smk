@@ -81,6 +81,14 @@ def experiment_results(wildcards):
     return out
 
 
+def export_inputs(wildcards):
+    """experiment_results, and heat.zarr when the workflow has a heat rule and the experiment a material block."""
+    out = experiment_results(wildcards)
+    if workflow.is_rule("heat") and wildcards.experiment in heat_experiments():
+        out["heat"] = f"{RESULTS}/{wildcards.experiment}/heat.zarr"
+    return out
+
+
 def fields_inputs(wildcards):
     """points.zarr, calibration, dic.zarr (its signals) and machine.zarr when the experiment has a machine record."""
     e = config["experiments"][wildcards.experiment]
@@ -99,7 +107,14 @@ def report_figures():
     out = [f"{RESULTS}/setups/{s}/calibration.png" for s in SETUPS]
     for e in EXPERIMENTS:
         out += [f"{RESULTS}/{e}/figures/{name}.png" for name in figure_names()]
+        if e in heat_experiments() and workflow.is_rule("heat"):
+            out.append(f"{RESULTS}/{e}/figures/heat.png")
     return out
+
+
+def heat_experiments():
+    """The experiments with a material block: the heat rule runs for them (heat.zarr)."""
+    return [e for e in EXPERIMENTS if config["experiments"][e].get("material")]
 
 
 def all_outputs():
@@ -110,6 +125,8 @@ def all_outputs():
             out.append(f"{RESULTS}/{e}/machine.zarr")
         out += [f"{RESULTS}/{e}/figures/{name}.png" for name in figure_names()]
         out += [f"{RESULTS}/{e}/paraview", f"{RESULTS}/{e}/points.csv"]
+        if e in heat_experiments():
+            out += [f"{RESULTS}/{e}/heat.zarr", f"{RESULTS}/{e}/figures/heat.png"]
     out.append(f"{RESULTS}/report.html")
     return out
 

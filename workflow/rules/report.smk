@@ -35,7 +35,7 @@ rule figures:
 
 rule export:
     input:
-        unpack(experiment_results),
+        unpack(export_inputs),
     output:
         paraview=directory(f"{RESULTS}/{{experiment}}/paraview"),
         csv=f"{RESULTS}/{{experiment}}/points.csv",
