@@ -162,7 +162,10 @@ def test_bad_config_is_reported_with_the_key(tmp_path):
     cfg["calibration"]["polarty"] = "dark"
     res = _snakemake(tmp_path, "-n", config=cfg)
     assert res.returncode != 0
-    assert "calibration.polarty: unknown key" in res.stderr + res.stdout
+    # the message is the last thing on the screen, alone: no stack lines after it
+    last = res.stderr.strip().splitlines()[-1]
+    assert last.startswith("irdic: error: invalid configuration: calibration.polarty: unknown key"), res.stderr
+    assert 'File "' not in res.stderr and "Traceback" not in res.stderr
 
 
 def test_rules_are_thin_and_logged():
@@ -251,3 +254,6 @@ def test_a_failing_stage_shows_the_irdic_message_without_a_traceback(tmp_path):
     line = next(ln for ln in res.stderr.splitlines() if ln.startswith("irdic ingest-ir failed: "))
     assert "frame_1.csv" in line and line.split("failed: ", 1)[1] in log
     assert "Traceback" not in res.stderr
+    # after Snakemake's job report and summary, the irdic message comes last, alone on its line
+    tail = res.stderr.rstrip().splitlines()
+    assert tail[-1] == line and tail[-2] == "", tail[-4:]
