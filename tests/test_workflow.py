@@ -168,6 +168,18 @@ def test_bad_config_is_reported_with_the_key(tmp_path):
     assert 'File "' not in res.stderr and "Traceback" not in res.stderr
 
 
+def test_nested_command_line_numbers_are_accepted(tmp_path):
+    """`--config execution="{chunk_frames: 2}"`: Snakemake passes "2" as a string; it reads as the number."""
+    cfg = _config(tmp_path)
+    res = _snakemake(tmp_path, "-n", "--quiet", "rules", "--config", "execution={chunk_frames: 2}", config=cfg)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "couple_chunk" in _planned(res)
+    res = _snakemake(tmp_path, "-n", "--config", "execution={chunk_frames: eight}", config=cfg)
+    assert res.returncode != 0
+    assert res.stderr.strip().splitlines()[-1] == ("irdic: error: invalid configuration: execution.chunk_frames: "
+                                                   "'eight' is not of type 'integer'")
+
+
 def test_rules_are_thin_and_logged():
     """Every rule has a log and a benchmark; common.smk imports os and uses no other rule file's names."""
     import re

@@ -16,6 +16,8 @@ from irdic.stages.inputs import list_inputs
 STARTED = time.time()
 # a configuration error ends the run with its one-line message, without stack lines
 with irdic.logs.exit_on_error():
+    # --config hands nested values over as strings: numbers where the schema wants them
+    irdic.config.command_line_values(config, dict(workflow.config_settings.config))
     irdic.config.validate_config(config)
     # outputs must stay inside the results folder whatever the names (links included)
     irdic.pipeline.stage_paths(config)
