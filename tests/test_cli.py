@@ -183,6 +183,8 @@ def test_ingest_refuses_to_overwrite_a_users_folder_or_file(demo, tmp_path, caps
     # its own store is replaced, as before
     assert main(["ingest-ir", str(demo / "demo/tube/ir"), str(tmp_path / "ir.zarr")]) == 0
     assert main(["ingest-ir", str(demo / "demo/tube/ir"), str(tmp_path / "ir.zarr")]) == 0
+    # and nothing beside it once done: no lock file, no temporary
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["ir.zarr", "victim", "notes.txt"]), list(tmp_path.iterdir())
 
 
 def _raiser(exc):

@@ -104,6 +104,8 @@ def test_demo_runs_end_to_end(run):
     assert (work / "results" / "setups" / "lab" / "calibration.png").stat().st_size > 10_000
     for log in ("logs/tube/ingest_ir.log", "logs/setups/lab/calibrate.log", "logs/demo.log"):
         assert "done" in (work / "results" / log).read_text()
+    # writers remove their lock files: none beside the stores after a complete run
+    assert not [p for p in work.rglob(".*.lock") if ".snakemake" not in p.parts]
 
 
 def test_nothing_to_do_after_a_run(run):
