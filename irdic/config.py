@@ -22,8 +22,8 @@ import yaml
 
 from .errors import ConfigError
 
-__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config", "command_line_values", "MAX_ALIAS_NODES",
-           "MAX_REPR"]
+__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config", "command_line_values", "non_defaults",
+           "METHOD_SECTIONS", "MAX_ALIAS_NODES", "MAX_REPR"]
 
 SCHEMA_PATH = Path(str(resources.files("irdic") / "schemas" / "config.schema.yaml"))
 
@@ -386,6 +386,34 @@ def command_line_values(config: dict, given: dict) -> dict:
     if isinstance(config, dict) and isinstance(given, dict):
         walk(config, given, schema)
     return config
+
+
+#: sections of the method's parameters (the others name inputs and outputs)
+METHOD_SECTIONS = ("demo", "calibration", "interpolation", "fields", "execution", "export")
+
+
+def non_defaults(config: dict) -> dict:
+    """``{"section.key": value}`` of the method's parameters that differ from the schema's defaults.
+
+    Parameters
+    ----------
+    config : dict
+        A validated configuration (:func:`validate_config`).
+    """
+    out = {}
+
+    def walk(prefix, given, default):
+        for key in sorted(given, key=str):
+            value, ref = given[key], default.get(key) if isinstance(default, dict) else None
+            if isinstance(value, dict) and isinstance(ref, dict):
+                walk(f"{prefix}{key}.", value, ref)
+            elif value != ref:
+                out[f"{prefix}{key}"] = value
+
+    for section in METHOD_SECTIONS:
+        if isinstance(config.get(section), dict):
+            walk(f"{section}.", config[section], validate_section(section, {}))
+    return out
 
 
 def get(config: dict, dotted: str, default: Any = None) -> Any:

@@ -142,8 +142,29 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["export"] = {"paraview_every": 2}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"export", "all"}
+    assert _planned(res) == {"export", "all", "report_html"}  # the page's header lists the non-default parameters
     _snakemake(work, "-n", config=cfg)  # leave the config as the run had it
+
+
+def test_an_edited_demo_file_reruns_what_reads_it(run):
+    """The demo's files are real inputs of the ingest rules (the demo is a checkpoint), not just its manifest."""
+    work, cfg = run
+    frame = sorted((work / "resources" / "demo" / "tube" / "ir").iterdir())[3]
+    before = frame.stat()
+    try:
+        os.utime(frame, ns=(before.st_atime_ns, before.st_mtime_ns + 10**12))  # edited after the run
+        res = _snakemake(work, "-n", config=cfg)  # (with --quiet rules, an mtime-only change prints no summary)
+        assert res.returncode == 0, res.stderr[-3000:]
+        planned = {ln.split()[1].rstrip(":") for ln in (res.stdout + res.stderr).splitlines()
+                   if ln.startswith(("rule ", "localrule ", "checkpoint "))}
+        # the tube's IR series and what depends on it; the half-shell and the calibration are untouched
+        assert planned == {"ingest_ir", "ingest_machine", "couple", "fields", "all", "figures", "export",
+                           "report_html"}, planned
+        assert f"Updated input files: resources/demo/tube/ir/{frame.name}" in res.stdout + res.stderr
+        res = _snakemake(work, "-n", "results/halfshell/points.zarr", config=cfg)
+        assert "Nothing to be done" in res.stdout + res.stderr
+    finally:
+        os.utime(frame, ns=(before.st_atime_ns, before.st_mtime_ns))
 
 
 def test_figures_exports_and_report(run):
@@ -234,6 +255,13 @@ def test_default_run_writes_the_html_report_with_captions(run):
     assert page.count("<img") == 1 + 2 * 6  # the calibration and six figures per experiment
     assert "Temperature (°C) at the DIC points of experiment tube at t = " in page
     assert "extrapolated from the specimen mask edge" in page
+    # this configuration's run: titled with it, a table of contents, the calibration captioned, a header
+    assert "<h1>irdic results of config.yaml</h1>" in page and "<ol class='toc'>" in page
+    heads = [ln.split(">")[1].split("<")[0] for ln in page.splitlines() if ln.startswith("<h2 id=")]
+    assert heads == ["setup lab", "experiment halfshell", "experiment tube"]
+    assert "<b>calibration</b>: IR image of the reference object" in page
+    assert "<code>demo.scale: &quot;tiny&quot;</code>" in page  # the non-default parameters
+    assert "fields.zarr: temperature_smoothing auto → " in page  # what auto chose, with why
 
 
 def test_missing_input_folders_are_named_by_their_keys_all_at_once(tmp_path):

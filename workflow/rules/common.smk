@@ -50,9 +50,11 @@ def _in_demo(path):
 
 
 def raw_files(path):
-    """Input files for a configured path: the demo manifest, or the files themselves."""
+    """Input files for a configured path: its files (in the demo: once the demo checkpoint wrote them)."""
     if _in_demo(path):
-        return [DEMO_MANIFEST]
+        checkpoints.demo.get()
+        with irdic.logs.exit_on_error():
+            return [DEMO_MANIFEST] + [str(f) for f in list_inputs(path)]
     with irdic.logs.exit_on_error():
         return [str(f) for f in list_inputs(path)]
 
@@ -112,6 +114,14 @@ def report_figures():
     out = [f"{RESULTS}/setups/{s}/calibration.png" for s in SETUPS]
     for e in EXPERIMENTS:
         out += [f"{RESULTS}/{e}/figures/{name}.png" for name in figure_names()]
+    return out
+
+
+def report_stores():
+    """The stores whose ``auto`` choices the page's header lists: calibrations and fields."""
+    out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
+    if workflow.is_rule("fields"):
+        out += [f"{RESULTS}/{e}/fields.zarr" for e in EXPERIMENTS]
     return out
 
 
