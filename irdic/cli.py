@@ -258,11 +258,14 @@ def _output_parsers(add_parser) -> None:
     s = add_parser("run", "run all stages of a configuration without Snakemake",
                    description="Run every stage (demo, ingest, calibrate, couple, fields, figures, export, "
                    "report) for every setup and experiment of a configuration, in order, without Snakemake. "
-                   "Unlike Snakemake it re-runs every stage. Outputs go to the configuration's results folder; "
-                   "the output paths are printed as JSON.")
+                   "A job whose inputs, parameters and code are unchanged since it wrote its outputs is skipped "
+                   "(records in RESULTS/.irdic/runs); --force runs every job. Outputs go to the configuration's "
+                   "results folder; the output paths are printed as JSON.")
     s.add_argument("--config", default="config/config.yaml", help="configuration file (default: config/config.yaml)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
                    help=_SET_HELP.format(example="interpolation.c_space=2.5 or experiments.s07.ir.time_offset=0.2"))
+    s.add_argument("--force", action="store_true",
+                   help="run every stage, also those whose inputs, parameters and code are unchanged")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -376,14 +379,16 @@ def _dispatch(args) -> None:
                 config = _with_settings(config, args.settings)
             except ConfigError as exc:
                 raise ConfigError(f"{args.config} with --set: {exc}") from None
-        paths = run(config, threads=args.threads)
+        paths = run(config, threads=args.threads, force=args.force, name=args.config)
         print(json.dumps(paths, default=str, indent=2))
         return
     if args.command == "report":
         from .stages import report
 
         out = Path(args.out) if args.out else Path(args.results) / "report.html"
-        report.run({"results": args.results}, {"html": out}, threads=args.threads)
+        root = Path(args.results)
+        stores = sorted(root.glob("setups/*/calibration.zarr")) + sorted(root.glob("*/fields.zarr"))
+        report.run({"results": args.results, "stores": stores}, {"html": out}, threads=args.threads)
         print(out)
         return
     if args.command == "demo":

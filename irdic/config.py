@@ -10,6 +10,7 @@ The Snakemake workflow, the CLI and the Python API all call this one function.
 from __future__ import annotations
 
 import copy
+import math
 import os
 import re
 from importlib import resources
@@ -21,7 +22,8 @@ import yaml
 
 from .errors import ConfigError
 
-__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config", "MAX_ALIAS_NODES", "MAX_REPR"]
+__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config", "command_line_values", "non_defaults",
+           "METHOD_SECTIONS", "MAX_ALIAS_NODES", "MAX_REPR"]
 
 SCHEMA_PATH = Path(str(resources.files("irdic") / "schemas" / "config.schema.yaml"))
 
@@ -339,6 +341,108 @@ def validate_section(section: str, values: dict, *, schema_node: str | None = No
             msgs.append(_message(e))
         raise ConfigError("invalid configuration: " + "; ".join(msgs))
     return data
+
+
+def _types(node: dict, defs: dict) -> set[str]:
+    """JSON types a schema node allows (through ``$ref``, ``anyOf`` and ``oneOf``)."""
+    if "$ref" in node:
+        node = {**defs[node["$ref"].rsplit("/", 1)[-1]], **{k: v for k, v in node.items() if k != "$ref"}}
+    t = node.get("type")
+    out = {t} if isinstance(t, str) else set(t or ())
+    for sub in node.get("anyOf", []) + node.get("oneOf", []):
+        out |= _types(sub, defs)
+    return out
+
+
+def _child(node: dict, key, defs: dict) -> dict | None:
+    """The schema node of ``key`` inside the object node ``node``."""
+    if "$ref" in node:
+        node = defs[node["$ref"].rsplit("/", 1)[-1]]
+    sub = node.get("properties", {}).get(key)
+    if sub is None and isinstance(node.get("additionalProperties"), dict):
+        sub = node["additionalProperties"]
+    return sub
+
+
+def _typed(text: str, types: set[str]):
+    """``text`` as the number, boolean or null the schema wants, or ``text`` when it is none of them."""
+    low = text.strip().lower()
+    if "null" in types and low in ("null", "~", "none", ""):
+        return None
+    if "boolean" in types and low in ("true", "false"):
+        return low == "true"
+    for kind, parse in (("integer", int), ("number", float)):
+        if kind in types:
+            try:
+                value = parse(text)
+            except ValueError:
+                continue
+            if kind == "number" and not math.isfinite(value):
+                continue  # NaN or inf: the schema's message for a string is clearer than a silent NaN
+            return value
+    return text
+
+
+def command_line_values(config: dict, given: dict) -> dict:
+    """``config`` with the strings of ``given`` typed as the schema wants them (in place).
+
+    Snakemake's ``--config section="{key: 8}"`` hands nested values over as
+    strings. Where the schema wants a number (or a boolean or null) and a
+    value given on the command line is a string that reads as one, the value
+    in ``config`` becomes that number; every other value, and everything from
+    configuration files, is left for :func:`validate_config` to check.
+
+    Parameters
+    ----------
+    config : dict
+        The merged configuration (files and command line).
+    given : dict
+        The values given on the command line, nested as in ``config``.
+    """
+    schema = load_schema()
+    defs = schema["$defs"]
+
+    def walk(cfg, cli, node):
+        for key, value in cli.items():
+            sub = _child(node, key, defs) if node else None
+            if sub is None or not isinstance(cfg, dict) or key not in cfg:
+                continue
+            if isinstance(value, dict) and isinstance(cfg[key], dict):
+                walk(cfg[key], value, sub)
+            elif isinstance(value, str) and isinstance(cfg[key], str) and "string" not in _types(sub, defs):
+                cfg[key] = _typed(cfg[key], _types(sub, defs))
+
+    if isinstance(config, dict) and isinstance(given, dict):
+        walk(config, given, schema)
+    return config
+
+
+#: sections of the method's parameters (the others name inputs and outputs)
+METHOD_SECTIONS = ("demo", "calibration", "interpolation", "fields", "execution", "export")
+
+
+def non_defaults(config: dict) -> dict:
+    """``{"section.key": value}`` of the method's parameters that differ from the schema's defaults.
+
+    Parameters
+    ----------
+    config : dict
+        A validated configuration (:func:`validate_config`).
+    """
+    out = {}
+
+    def walk(prefix, given, default):
+        for key in sorted(given, key=str):
+            value, ref = given[key], default.get(key) if isinstance(default, dict) else None
+            if isinstance(value, dict) and isinstance(ref, dict):
+                walk(f"{prefix}{key}.", value, ref)
+            elif value != ref:
+                out[f"{prefix}{key}"] = value
+
+    for section in METHOD_SECTIONS:
+        if isinstance(config.get(section), dict):
+            walk(f"{section}.", config[section], validate_section(section, {}))
+    return out
 
 
 def get(config: dict, dotted: str, default: Any = None) -> Any:

@@ -9,18 +9,21 @@ it also limits BLAS and OpenMP to the threads the stage was given
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import logging
 import os
+import re
 import sys
 import time
 import warnings
+from pathlib import Path
 from typing import Callable, Iterator
 
 from .errors import IrdicError
 from .threads import stage_threads
 
-__all__ = ["stage_logging", "configure", "Progress"]
+__all__ = ["stage_logging", "configure", "Progress", "failures", "show_last", "exit_on_error"]
 
 _FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
 
@@ -63,9 +66,87 @@ def stage_logging(log_path: str | os.PathLike | None, stage: str, *,
             warnings.simplefilter("default")
             yield logger
     except IrdicError as exc:
-        logger.error("%s failed: %s", stage, exc)
-        raise SystemExit(f"irdic {stage} failed: {exc}") from None
+        line = _one_line(exc)
+        logger.error("%s failed: %s", stage, line)
+        raise SystemExit(f"irdic {stage} failed: {line}") from None
     logger.info("irdic %s: done", stage)
+
+
+def _one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (a screen shows it alone, a log keeps it on one line)."""
+    return " ".join(str(exc).split())
+
+
+#: The line :func:`stage_logging` writes to a rule's log when its stage fails.
+_FAILED = re.compile(r" ERROR +irdic: (?P<stage>\S+) failed: (?P<message>.*)$")
+
+
+def failures(log_dir: str | os.PathLike, *, since: float) -> list[str]:
+    """The one-line messages of the stages that failed, from the rule logs under ``log_dir``.
+
+    Parameters
+    ----------
+    log_dir : path
+        The results folder's ``logs`` (each rule logs there, :func:`stage_logging`).
+    since : float
+        Epoch seconds; logs last written before (an earlier run's) are ignored.
+
+    Returns
+    -------
+    list of str
+        ``irdic <stage> failed: <message>``, one per failed stage, in the order of the log paths.
+    """
+    out = []
+    root = Path(log_dir)
+    if not root.is_dir():
+        return out
+    for path in sorted(root.rglob("*.log")):
+        try:
+            if path.stat().st_mtime < since:
+                continue
+            lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        except OSError:
+            continue
+        for ln in reversed(lines):
+            m = _FAILED.search(ln)
+            if m:
+                out.append(f"irdic {m['stage']} failed: {m['message']}")
+                break
+    return out
+
+
+def show_last(lines: list[str]) -> None:
+    """Print ``lines`` to stderr when the process exits: after everything Snakemake prints.
+
+    Snakemake reports a failed job with its rule, inputs and a summary
+    after the ``onerror`` handler has run; printing at interpreter exit puts
+    the irdic messages last on the screen, each alone on its line, once
+    Snakemake has released its locks.
+    """
+    if not lines:
+        return
+
+    def emit():
+        sys.stderr.flush()
+        sys.stderr.write("\n" + "\n".join(lines) + "\n")
+        sys.stderr.flush()
+
+    atexit.register(emit)
+
+
+@contextlib.contextmanager
+def exit_on_error() -> Iterator[None]:
+    """Turn an :class:`~irdic.errors.IrdicError` into its one-line message and exit status 1.
+
+    For code that Snakemake runs while it reads the workflow (configuration
+    checks in ``workflow/rules/common.smk``): Snakemake would print the
+    error with stack lines; a ``SystemExit`` ends it with the message alone.
+    """
+    try:
+        yield
+    except IrdicError as exc:
+        sys.stderr.write(f"irdic: error: {_one_line(exc)}\n")
+        raise SystemExit(1) from None
 
 
 class Progress:

@@ -9,7 +9,8 @@ writer of the same output once its process is known to be gone.
 Replacing an output never exposes a mix: the old directory is exchanged with
 the new one in one step (two renames where the system cannot) and deleted
 only afterwards. Jobs writing the same output take turns through a lock file
-``.<name>.lock`` next to it. Only irdic's own outputs are ever replaced: an
+``.<name>.lock`` next to it, which exists only while a writer holds or waits
+for it: the last writer removes it. Only irdic's own outputs are ever replaced: an
 irdic zarr store (it carries ``irdic_stage`` or :data:`COMPLETE_ATTR`), a
 folder carrying :data:`OUTPUT_MARK`, or an empty folder; anything else is
 refused.
@@ -20,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
+import fcntl
 import glob
 import json
 import os
@@ -31,8 +33,6 @@ import time
 import uuid
 from pathlib import Path
 from typing import Iterator
-
-import filelock
 
 from .errors import DataError
 
@@ -202,24 +202,64 @@ def _swap_in(tmp: Path, final: Path) -> None:
     _remove(aside)
 
 
+def _lock_path(final: Path) -> Path:
+    return final.with_name(f".{final.name}.lock")
+
+
+def _try_lock(path: Path) -> int | None:
+    """An open descriptor holding ``path``'s exclusive lock, or None when another writer holds it.
+
+    A lock file is removed by its holder on release (:func:`_unlock`), so a
+    writer that waited on the old file may find it gone or replaced once it
+    gets the lock: the lock counts only when ``path`` still names the file
+    locked, otherwise the caller tries again.
+    """
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    try:
+        now = os.stat(path)
+    except FileNotFoundError:
+        now = None
+    held = os.fstat(fd)
+    if now is None or (now.st_ino, now.st_dev) != (held.st_ino, held.st_dev):
+        os.close(fd)  # the holder before us removed it: lock the file now at the path
+        return _try_lock(path)
+    return fd
+
+
+def _unlock(path: Path, fd: int) -> None:
+    """Remove the lock file while still holding it, then release: no ``.*.lock`` stays behind."""
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(path)
+    os.close(fd)
+
+
 @contextlib.contextmanager
 def _writer_lock(final: Path, timeout: float | None) -> Iterator[None]:
-    """Hold the lock of ``final`` so that two jobs writing it take turns."""
+    """Hold the lock of ``final`` (``.<name>.lock`` beside it) so that two jobs writing it take turns.
+
+    The lock file exists only while a writer holds it or waits for it.
+    """
     timeout = LOCK_TIMEOUT_S if timeout is None else timeout
-    lock = filelock.FileLock(os.fspath(final.with_name(f".{final.name}.lock")))
-    try:
-        lock.acquire(timeout=timeout)
-    except filelock.Timeout:
-        others = sorted(p.name for p in final.parent.glob(f".{glob.escape(final.name)}.tmp-*"))
-        who = f" (its temporary: {others[0]})" if others else ""
-        raise DataError(
-            f"{final}: another job has been writing this output for over {timeout:g} s{who}; "
-            "wait for it to finish, or stop it, then run again"
-        ) from None
+    path = _lock_path(final)
+    deadline = time.monotonic() + timeout
+    while (fd := _try_lock(path)) is None:
+        if time.monotonic() >= deadline:
+            others = sorted(p.name for p in final.parent.glob(f".{glob.escape(final.name)}.tmp-*"))
+            who = f" (its temporary: {others[0]})" if others else ""
+            raise DataError(
+                f"{final}: another job has been writing this output for over {timeout:g} s{who}; "
+                "wait for it to finish, or stop it, then run again"
+            )
+        time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
     try:
         yield
     finally:
-        lock.release()
+        _unlock(path, fd)
 
 
 @contextlib.contextmanager

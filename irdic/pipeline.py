@@ -2,12 +2,15 @@
 
 :func:`run` calls the same stage entries as the Snakemake scripts and the
 command line (``irdic.stages.<stage>.run``), with the paths of
-:func:`stage_paths` and the sections of a validated configuration; there is
-no caching (use the workflow for that).
+:func:`stage_paths` and the sections of a validated configuration. A job
+whose inputs, parameters and code are unchanged since it wrote its outputs is
+skipped (:class:`irdic.runs.Ledger`, records under ``<results>/.irdic/runs``);
+``force=True`` runs every job.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import Mapping
@@ -99,7 +102,8 @@ def check_inputs(config: Mapping) -> None:
                           f"directory {os.getcwd()}): " + "; ".join(problems))
 
 
-def run(config: Mapping, *, stages: tuple[str, ...] = STAGES, threads: int | None = None) -> dict:
+def run(config: Mapping, *, stages: tuple[str, ...] = STAGES, threads: int | None = None,
+        force: bool = False, name: str | None = None) -> dict:
     """Run the configured stages for every setup and experiment, in order.
 
     Parameters
@@ -112,6 +116,12 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES, threads: int | Non
     threads : int, optional
         CPU threads for BLAS/OpenMP in every stage; default all cores this
         process may use.
+    force : bool
+        Run every job, also those whose inputs, parameters and code are
+        unchanged since their last run (skipped otherwise).
+    name : str, optional
+        What the configuration is called on the report page (its file);
+        default "configuration".
 
     Returns
     -------
@@ -123,32 +133,50 @@ def run(config: Mapping, *, stages: tuple[str, ...] = STAGES, threads: int | Non
         raise ConfigError(f"unknown stage(s) {sorted(unknown)}; expected {', '.join(STAGES)}")
     if {"ingest", "calibrate"} & set(stages):  # the only stages that read the raw exports
         check_inputs(config)
+    from .runs import Ledger
+
+    ledger = Ledger(config["results"], force=force)
+    runners = {**_RUNNERS, "report": functools.partial(_report, title=name or "configuration")}
     with stage_threads(threads) as n:
         paths = stage_paths(config)
         for stage in STAGES:
             if stage in stages:
-                _RUNNERS[stage](config, paths, n)
+                runners[stage](config, paths, n, ledger)
     return paths
 
 
-def _demo(config, paths, threads):
+def _raw(path) -> list:
+    """The files of a configured raw input (folder, glob or file): what a job reads from it."""
+    from .ingest.inputs import list_inputs
+
+    return list_inputs(path)
+
+
+def _demo(config, paths, threads, ledger):
+    from .codehash import code_hash
     from .stages import demo
 
     d = config["demo"]
     manifest = Path(d["outdir"]) / "manifest.yaml"
-    if d["enabled"] and not manifest.exists():
-        demo.run({}, {"manifest": manifest}, threads=threads,
-                 **{k: v for k, v in d.items() if k not in ("enabled", "outdir")})
+    settings = {k: v for k, v in d.items() if k not in ("enabled", "outdir")}
+    if d["enabled"]:
+        # regenerated when its settings or code change; an edited demo file is an input change of ingest
+        ledger.run("demo", code_hash("demo"), settings, [], [manifest],
+                   lambda: demo.run({}, {"manifest": manifest}, threads=threads, **settings))
 
 
-def _calibrate(config, paths, threads):
+def _calibrate(config, paths, threads, ledger):
+    from .codehash import code_hash
     from .stages import calibrate
 
     for name, s in config["setups"].items():
         p = paths["setups"][name]
-        calibrate.run({"markers": s["markers"]["path"], "target": s["target_image"]["path"]},
-                      {"store": p["calibration"], "figure": p["figure"]}, threads=threads,
-                      target_format=s["target_image"]["format"], seeds=s["seeds"], **config["calibration"])
+        params = dict(target_format=s["target_image"]["format"], seeds=s["seeds"], **config["calibration"])
+        inputs = {"markers": s["markers"]["path"], "target": s["target_image"]["path"]}
+        outputs = {"store": p["calibration"], "figure": p["figure"]}
+        ledger.run(f"calibrate/{name}", code_hash("calibrate"), params,
+                   _raw(inputs["markers"]) + _raw(inputs["target"]), outputs.values(),
+                   lambda: calibrate.run(inputs, outputs, threads=threads, **params))
 
 
 def _source(section: Mapping) -> tuple[dict, dict]:
@@ -157,18 +185,22 @@ def _source(section: Mapping) -> tuple[dict, dict]:
     return {"source": rest.pop("path")}, rest
 
 
-def _ingest(config, paths, threads):
+def _ingest(config, paths, threads, ledger):
+    from .codehash import code_hash
     from .stages import ingest_dic, ingest_ir, ingest_machine
 
     for name, e in config["experiments"].items():
         p = paths["experiments"][name]
-        src, rest = _source(e["dic"])
-        ingest_dic.run(src, {"store": p["dic"]}, threads=threads, **rest)
-        src, rest = _source(e["ir"])
-        ingest_ir.run(src, {"store": p["ir"]}, threads=threads, **rest)
+        stages = [("dic", ingest_dic, {}), ("ir", ingest_ir, {})]
         if e.get("machine"):  # optional: no schema default
-            src, rest = _source(e["machine"])
-            ingest_machine.run({**src, "ir": p["ir"]}, {"store": p["machine"]}, threads=threads, **rest)
+            stages.append(("machine", ingest_machine, {"ir": p["ir"]}))
+        for kind, stage, extra in stages:
+            src, rest = _source(e[kind])
+            out = {"store": p[kind]}
+            ledger.run(f"ingest_{kind}/{name}", code_hash(f"ingest_{kind}"), {**src, **rest},
+                       _raw(src["source"]) + list(extra.values()), out.values(),
+                       lambda stage=stage, src=src, rest=rest, extra=extra, out=out:
+                       stage.run({**src, **extra}, out, threads=threads, **rest))
 
 
 def _chunked(stage, config, inputs, store, times_of, threads, params):
@@ -196,17 +228,22 @@ def _n_times(store) -> int:
     return int(open_store(store).sizes["time"])
 
 
-def _couple(config, paths, threads):
+def _couple(config, paths, threads, ledger):
+    from .codehash import code_hash
     from .stages import couple
 
     for name, e in config["experiments"].items():
         p = paths["experiments"][name]
         cal = paths["setups"][e["setup"]]["calibration"]
-        _chunked(couple, config, {"dic": p["dic"], "ir": p["ir"], "calibration": cal}, p["points"],
-                 p["dic"], threads, config["interpolation"])
+        inputs = {"dic": p["dic"], "ir": p["ir"], "calibration": cal}
+        params = {**config["interpolation"], "chunk_frames": config.get("execution", {}).get("chunk_frames", 0)}
+        ledger.run(f"couple/{name}", code_hash("couple"), params, inputs.values(), [p["points"]],
+                   lambda inputs=inputs, p=p: _chunked(couple, config, inputs, p["points"], p["dic"], threads,
+                                                       config["interpolation"]))
 
 
-def _fields(config, paths, threads):
+def _fields(config, paths, threads, ledger):
+    from .codehash import code_hash
     from .stages import fields
 
     for name, e in config["experiments"].items():
@@ -215,17 +252,25 @@ def _fields(config, paths, threads):
                   "dic": p["dic"]}
         if "machine" in p:
             inputs["machine"] = p["machine"]
-        _chunked(fields, config, inputs, p["fields"], p["points"], threads, config["fields"])
+        params = {**config["fields"], "chunk_frames": config.get("execution", {}).get("chunk_frames", 0)}
+        ledger.run(f"fields/{name}", code_hash("fields"), params, inputs.values(), [p["fields"]],
+                   lambda inputs=inputs, p=p: _chunked(fields, config, inputs, p["fields"], p["points"], threads,
+                                                       config["fields"]))
 
 
-def _heat(config, paths, threads):
+def _heat(config, paths, threads, ledger):
+    from .codehash import code_hash
     from .stages import heat
 
     for name, e in config["experiments"].items():
         p = paths["experiments"][name]
-        if "heat" in p:  # only experiments with a material block
-            heat.run({"fields": p["fields"], "points": p["points"]}, {"store": p["heat"]}, threads=threads,
-                     fields_settings=config["fields"], **e["material"])
+        if "heat" not in p:  # only experiments with a material block
+            continue
+        inputs = {"fields": p["fields"], "points": p["points"]}
+        params = {"fields_settings": config["fields"], **e["material"]}
+        ledger.run(f"heat/{name}", code_hash("heat"), params, inputs.values(), [p["heat"]],
+                   lambda inputs=inputs, p=p, params=params:
+                   heat.run(inputs, {"store": p["heat"]}, threads=threads, **params))
 
 
 def _heat_store(p):
@@ -233,7 +278,8 @@ def _heat_store(p):
     return p["heat"] if "heat" in p and Path(p["heat"]).exists() else None
 
 
-def _figures(config, paths, threads):
+def _figures(config, paths, threads, ledger):
+    from .codehash import code_hash
     from .plot import FIGURES, HEAT_FIGURE
     from .stages import figures
 
@@ -244,29 +290,52 @@ def _figures(config, paths, threads):
         names = [n for n in FIGURES if n not in ("strain", "load") or have_fields]
         heat = _heat_store(p) if have_fields else None
         names += [HEAT_FIGURE] if heat is not None else []
-        figures.run({"points": p["points"], "fields": p["fields"] if have_fields else None, "heat": heat},
-                    {n: folder / f"{n}.png" for n in names}, threads=threads, experiment=name,
-                    times=e["report"]["times"], points=e["report"]["points"])
+        inputs = {"points": p["points"], "fields": p["fields"] if have_fields else None, "heat": heat}
+        outputs = {n: folder / f"{n}.png" for n in names}
+        params = dict(experiment=name, times=e["report"]["times"], points=e["report"]["points"])
+        ledger.run(f"figures/{name}", code_hash("figures"), params, [v for v in inputs.values() if v],
+                   outputs.values(),
+                   lambda inputs=inputs, outputs=outputs, params=params:
+                   figures.run(inputs, outputs, threads=threads, **params))
 
 
-def _export(config, paths, threads):
+def _export(config, paths, threads, ledger):
+    from .codehash import code_hash
     from .stages import export
 
     for name, e in config["experiments"].items():
         p = paths["experiments"][name]
         folder = Path(p["points"]).parent
         have_fields = Path(p["fields"]).exists()
-        export.run({"points": p["points"], "fields": p["fields"] if have_fields else None,
-                    "heat": _heat_store(p) if have_fields else None},
-                   {"paraview": folder / "paraview", "csv": folder / "points.csv"}, threads=threads,
-                   experiment=name, points=e["report"]["points"], **config["export"])
+        inputs = {"points": p["points"], "fields": p["fields"] if have_fields else None,
+                  "heat": _heat_store(p) if have_fields else None}
+        outputs = {"paraview": folder / "paraview", "csv": folder / "points.csv"}
+        params = dict(experiment=name, points=e["report"]["points"], **config["export"])
+        ledger.run(f"export/{name}", code_hash("export"), params, [v for v in inputs.values() if v],
+                   outputs.values(),
+                   lambda inputs=inputs, outputs=outputs, params=params:
+                   export.run(inputs, outputs, threads=threads, **params))
 
 
-def _report(config, paths, threads):
+def _report(config, paths, threads, ledger, title="configuration"):
+    from .codehash import code_hash
     from .stages import report
 
+    from .config import non_defaults
+    from .plot import FIGURES, HEAT_FIGURE
+
     results = Path(config["results"])
-    report.run({"results": results}, {"html": results / "report.html"}, threads=threads)
+    # exactly this configuration's setups and experiments (a results folder may hold others)
+    figures = [paths["setups"][s]["figure"] for s in config["setups"]]
+    for name in config["experiments"]:
+        folder = Path(paths["experiments"][name]["points"]).parent / "figures"
+        figures += [folder / f"{n}.png" for n in (*FIGURES, HEAT_FIGURE) if (folder / f"{n}.png").exists()]
+    stores = [paths["setups"][s]["calibration"] for s in config["setups"]]
+    stores += [paths["experiments"][e]["fields"] for e in config["experiments"]]
+    params = {"title": title, "settings": non_defaults(config)}
+    ledger.run("report", code_hash("report"), params, [*figures, *stores], [results / "report.html"],
+               lambda: report.run({"figures": figures, "stores": stores}, {"html": results / "report.html"},
+                                  threads=threads, **params))
 
 
 _RUNNERS = {"demo": _demo, "ingest": _ingest, "calibrate": _calibrate, "couple": _couple, "fields": _fields,

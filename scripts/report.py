@@ -1,8 +1,9 @@
-"""Snakemake script: every figure of the results folder -> results/report.html.
+"""Snakemake script: the figures of this configuration's setups and experiments -> results/report.html.
 
 Inputs
 ------
-- ``figures``: the PNGs (Snakemake's bookkeeping; the page collects them from ``params.results``).
+- ``figures``: the PNGs the page shows, in pipeline order (calibrations, then each experiment's figures);
+- ``stores``: the calibration and fields stores (the ``auto`` choices in the page's header).
 
 Outputs
 -------
@@ -10,10 +11,11 @@ Outputs
 
 Params
 ------
-- ``results``: the results folder.
+- ``title``: the configuration file(s);
+- ``settings``: the configuration's non-default parameters.
 """
 
 from irdic.stages import report
 
-report.run({"results": snakemake.params.results}, snakemake.output, log=snakemake.log[0],  # noqa: F821
-           threads=snakemake.threads)  # noqa: F821
+report.run(snakemake.input, snakemake.output, title=snakemake.params.title,  # noqa: F821
+           settings=snakemake.params.settings, log=snakemake.log[0], threads=snakemake.threads)  # noqa: F821

@@ -12,11 +12,29 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 # IRDIC_SAMPLES points elsewhere (a checkout whose parent folder has no shared/samples)
 SAMPLES = Path(os.environ.get("IRDIC_SAMPLES", ROOT.parent / "shared" / "samples"))
+#: the real files whose licences allow shipping them (each folder with its licence), read first
+SHIPPED = ROOT / "tests" / "data"
+
+
+class _Samples:
+    """``samples / "irb"``: that folder of real files, from ``tests/data`` or else ``../shared/samples``.
+
+    A folder found in neither skips the test that asks for it, naming both
+    places (files without a licence to ship, such as ``irbis-text``, are only
+    in ``../shared/samples``).
+    """
+
+    def __init__(self, roots):
+        self.roots = tuple(roots)
+
+    def __truediv__(self, folder: str) -> Path:
+        for root in self.roots:
+            if (root / folder).is_dir():
+                return root / folder
+        pytest.skip(f"real sample folder {folder!r} found neither in {SHIPPED} nor in {SAMPLES}")
 
 
 @pytest.fixture(scope="session")
-def samples() -> Path:
-    """The folder of real sample exports (``../shared/samples``); skip when absent."""
-    if not SAMPLES.is_dir():
-        pytest.skip(f"real sample files not found at {SAMPLES}")
-    return SAMPLES
+def samples() -> _Samples:
+    """The real sample exports: ``samples / "<folder>" / "<file>"`` (see :class:`_Samples`)."""
+    return _Samples((SHIPPED, SAMPLES))

@@ -189,3 +189,31 @@ def test_stage_paths_stay_inside_results(cfg, tmp_path):
     (tmp_path / "results" / "tube").symlink_to(tmp_path / "elsewhere")
     with pytest.raises(ConfigError, match=r"experiments\.tube: output .* would lie outside the results folder"):
         stage_paths(c)
+
+
+def test_command_line_strings_become_the_numbers_the_schema_wants():
+    """Snakemake's --config gives nested values as strings: typed where the schema wants a number, bool or null."""
+    from irdic.config import command_line_values
+
+    given = {"execution": {"chunk_frames": "8"}, "interpolation": {"c_space": "2.5", "method": "rbf"},
+             "fields": {"temperature_smoothing": "null", "c_time": "nan"}, "calibration": {"refine": "false"},
+             "experiments": {"s07": {"ir": {"time_offset": "-0.25", "path": "123"}}}}
+    cfg = {"setups": {}, "execution": {"chunk_frames": "8"},
+           "interpolation": {"c_space": "2.5", "method": "rbf"},
+           "fields": {"temperature_smoothing": "null", "c_time": "nan"}, "calibration": {"refine": "false"},
+           "experiments": {"s07": {"setup": "lab", "ir": {"time_offset": "-0.25", "path": "123"}}}}
+    command_line_values(cfg, given)
+    assert cfg["execution"]["chunk_frames"] == 8 and isinstance(cfg["execution"]["chunk_frames"], int)
+    assert cfg["interpolation"] == {"c_space": 2.5, "method": "rbf"}
+    assert cfg["fields"]["temperature_smoothing"] is None
+    assert cfg["fields"]["c_time"] == "nan"  # not a silent NaN: the schema refuses the string
+    assert cfg["calibration"]["refine"] is False
+    assert cfg["experiments"]["s07"]["ir"] == {"time_offset": -0.25, "path": "123"}  # a path stays a string
+    # values from files are not touched (only those given on the command line)
+    other = {"execution": {"chunk_frames": "8"}}
+    command_line_values(other, {})
+    assert other["execution"]["chunk_frames"] == "8"
+    # a string that is no number still gets the schema's message
+    bad = {"execution": {"chunk_frames": "eight"}}
+    command_line_values(bad, {"execution": {"chunk_frames": "eight"}})
+    assert bad["execution"]["chunk_frames"] == "eight"

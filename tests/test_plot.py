@@ -215,7 +215,9 @@ def test_load_figure_against_force_displacement_and_torque(stores, tmp_path):
 
     points, fields = stores
     f = _with_signals(fields)
-    assert [lab for _, lab in load_signals(f)] == ["Kraft (kN)", "Weg (mm)", "machine_torque (N*m)"]
+    # the standard name first, the record's own name in brackets: one language on the axes
+    assert [lab for _, lab in load_signals(f)] == ["force (Kraft) [kN]", "displacement (Weg) [mm]",
+                                                    "torque (machine_torque) [N*m]"]
     img = _check_png(plot_load(points, tmp_path / "load.png", fields=f, point_ids=[1000], experiment="fab"),
                      min_ink=0.08)
     assert img.shape[1] > 1000  # three columns of panels
@@ -231,7 +233,7 @@ def test_load_figure_prefers_the_complete_signal(stores):
     f = _with_signals(fields, names=("force", "machine_force", "cycles"), units=("N", "N", ""),
                       kinds=("value_element", "machine", "value_element"), standard=("force", "force", "cycles"))
     # the DIC force misses a stage, the machine's does not; cycles are no load axis
-    assert [lab for _, lab in load_signals(f)] == ["machine_force (N)"]
+    assert [lab for _, lab in load_signals(f)] == ["force (machine_force) [N]"]
 
 
 def test_noise_dominated_tells_a_smooth_field_from_noise():

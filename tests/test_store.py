@@ -23,8 +23,8 @@ def test_write_dataset_roundtrip_with_provenance(tmp_path):
     assert ds.attrs["irdic_stage"] == "test"
     assert ds.attrs["irdic_parameters"] == '{"c": 2.0}'
     assert ds.attrs[COMPLETE_ATTR] is True
-    # no temporary sibling left behind (the writers' lock file stays, empty)
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".s.zarr.lock", "s.zarr"]
+    # no temporary sibling and no lock file left behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.zarr"]
 
 
 def test_write_dataset_replaces_existing(tmp_path):
@@ -91,7 +91,7 @@ def test_framestore_interrupted_leaves_nothing(tmp_path):
         with FrameStore(tmp_path / "ir.zarr", "temperature", 3, ("v", "u"), {"v": np.arange(2), "u": np.arange(2)}) as fs:
             fs.write(0, 0.0, np.zeros((2, 2)))
             raise RuntimeError("killed")
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".ir.zarr.lock", "ir.zarr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ir.zarr"]
     assert open_store(tmp_path / "ir.zarr").attrs["irdic_stage"] == "old"
 
 
@@ -103,7 +103,7 @@ def test_framestore_checks(tmp_path):
     with pytest.raises(DataError, match="never written"):
         fs.close()
     fs.abort()
-    assert [p.name for p in tmp_path.iterdir()] == [".ir.zarr.lock"]
+    assert [p.name for p in tmp_path.iterdir()] == []
 
 
 def test_killed_stage_leaves_no_store_and_the_next_run_cleans_up(tmp_path):
@@ -137,7 +137,7 @@ def test_killed_stage_leaves_no_store_and_the_next_run_cleans_up(tmp_path):
     with pytest.raises(DataError, match="not found"):
         open_store(tmp_path / "ir.zarr")
     write_dataset(_ds(), tmp_path / "ir.zarr", stage="rerun")
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".ir.zarr.lock", "ir.zarr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ir.zarr"]
 
 
 # --------------------------------------------------------------------------- data safety
@@ -272,7 +272,7 @@ def test_two_writers_take_turns(tmp_path):
         _, err = p.communicate(timeout=180)
         assert p.returncode == 0, err
     assert np.all(open_store(path)["a"].values == 8.0)
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".s.zarr.lock", "s.zarr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.zarr"]
 
 
 def test_second_writer_times_out_clearly(tmp_path):
@@ -341,3 +341,63 @@ def test_a_store_written_in_parts_equals_one_written_whole(tmp_path):
     a, b = open_store(tmp_path / "whole.zarr"), open_store(tmp_path / "parts.zarr")
     xr.testing.assert_identical(a.drop_attrs(), b.drop_attrs())
     assert b.attrs["note"] == "first" and b.attrs["irdic_stage"] == a.attrs["irdic_stage"]
+
+
+_LOCK_WORKER = """
+import os, sys, time
+from pathlib import Path
+from irdic import outputs
+final, marker, n = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3])
+for _ in range(n):
+    with outputs._writer_lock(final, 60):
+        fd = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY)  # FileExistsError: two holders at once
+        time.sleep(0.001)
+        os.close(fd)
+        os.unlink(marker)
+"""
+
+
+def test_lock_files_are_removed_and_writers_still_exclude_each_other(tmp_path):
+    """Each holder removes the lock file on release; three processes taking it 150 times each never overlap
+    (a waiter that got the lock of a removed file tries again on the file now at the path)."""
+    import subprocess
+    import sys
+
+    final = tmp_path / "s.zarr"
+    procs = [subprocess.Popen([sys.executable, "-c", _LOCK_WORKER, str(final), str(tmp_path / "holder"), "150"],
+                              stderr=subprocess.PIPE, text=True) for _ in range(3)]
+    for p in procs:
+        _, err = p.communicate(timeout=180)
+        assert p.returncode == 0, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_waiter_that_locked_a_removed_lock_file_does_not_count_as_holder(tmp_path, monkeypatch):
+    """The race of removing lock files: B opens the lock file, its holder removes it and C creates and
+    locks a new one; B's lock on the removed file must not let B in beside C."""
+    import fcntl
+    import os
+
+    from irdic import outputs
+
+    path = tmp_path / ".s.zarr.lock"
+    real_flock = fcntl.flock
+    other = {}
+
+    def flock_after_the_holder_left(fd, op):
+        if not other:  # between B's open and B's flock: the holder removes the file, C takes a new one
+            os.unlink(path)
+            other["fd"] = None
+            other["fd"] = outputs._try_lock(path)
+            assert other["fd"] is not None
+        return real_flock(fd, op)
+
+    monkeypatch.setattr(outputs.fcntl, "flock", flock_after_the_holder_left)
+    path.touch()
+    assert outputs._try_lock(path) is None  # C holds the file now at the path: B must wait
+    monkeypatch.setattr(outputs.fcntl, "flock", real_flock)
+    outputs._unlock(path, other["fd"])
+    fd = outputs._try_lock(path)
+    assert fd is not None
+    outputs._unlock(path, fd)
+    assert not path.exists()

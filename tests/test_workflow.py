@@ -106,6 +106,8 @@ def test_demo_runs_end_to_end(run):
     assert (work / "results" / "setups" / "lab" / "calibration.png").stat().st_size > 10_000
     for log in ("logs/tube/ingest_ir.log", "logs/setups/lab/calibrate.log", "logs/demo.log"):
         assert "done" in (work / "results" / log).read_text()
+    # writers remove their lock files: none beside the stores after a complete run
+    assert not [p for p in work.rglob(".*.lock") if ".snakemake" not in p.parts]
 
 
 def test_nothing_to_do_after_a_run(run):
@@ -147,8 +149,32 @@ def test_parameter_change_reruns_only_dependent_stages(run):
     changed = copy.deepcopy(cfg)
     changed["export"] = {"paraview_every": 2}
     res = _snakemake(work, "-n", "--quiet", "rules", config=changed)
-    assert _planned(res) == {"export", "all"}
+    assert _planned(res) == {"export", "all", "report_html"}  # the page's header lists the non-default parameters
     _snakemake(work, "-n", config=cfg)  # leave the config as the run had it
+
+
+def test_an_edited_demo_file_reruns_what_reads_it(run):
+    """The demo's files are real inputs of the ingest rules (the demo is a checkpoint), not just its manifest."""
+    work, cfg = run
+    frame = sorted((work / "resources" / "demo" / "tube" / "ir").iterdir())[3]
+    before, content = frame.stat(), frame.read_bytes()
+    try:
+        # edited after the run (Snakemake compares the checksum of a newer input: the bytes must change)
+        frame.write_bytes(content + b"\n")
+        os.utime(frame, ns=(before.st_atime_ns, before.st_mtime_ns + 10**12))
+        res = _snakemake(work, "-n", config=cfg)  # (with --quiet rules, an mtime-only change prints no summary)
+        assert res.returncode == 0, res.stderr[-3000:]
+        planned = {ln.split()[1].rstrip(":") for ln in (res.stdout + res.stderr).splitlines()
+                   if ln.startswith(("rule ", "localrule ", "checkpoint "))}
+        # the tube's IR series and what depends on it; the half-shell and the calibration are untouched
+        assert planned == {"ingest_ir", "ingest_machine", "couple", "fields", "all", "figures", "export",
+                           "report_html"}, planned
+        assert f"Updated input files: resources/demo/tube/ir/{frame.name}" in res.stdout + res.stderr
+        res = _snakemake(work, "-n", "results/halfshell/points.zarr", config=cfg)
+        assert "Nothing to be done" in res.stdout + res.stderr
+    finally:
+        frame.write_bytes(content)
+        os.utime(frame, ns=(before.st_atime_ns, before.st_mtime_ns))
 
 
 def test_figures_exports_and_report(run):
@@ -169,7 +195,22 @@ def test_bad_config_is_reported_with_the_key(tmp_path):
     cfg["calibration"]["polarty"] = "dark"
     res = _snakemake(tmp_path, "-n", config=cfg)
     assert res.returncode != 0
-    assert "calibration.polarty: unknown key" in res.stderr + res.stdout
+    # the message is the last thing on the screen, alone: no stack lines after it
+    last = res.stderr.strip().splitlines()[-1]
+    assert last.startswith("irdic: error: invalid configuration: calibration.polarty: unknown key"), res.stderr
+    assert 'File "' not in res.stderr and "Traceback" not in res.stderr
+
+
+def test_nested_command_line_numbers_are_accepted(tmp_path):
+    """`--config execution="{chunk_frames: 2}"`: Snakemake passes "2" as a string; it reads as the number."""
+    cfg = _config(tmp_path)
+    res = _snakemake(tmp_path, "-n", "--quiet", "rules", "--config", "execution={chunk_frames: 2}", config=cfg)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "couple_chunk" in _planned(res)
+    res = _snakemake(tmp_path, "-n", "--config", "execution={chunk_frames: eight}", config=cfg)
+    assert res.returncode != 0
+    assert res.stderr.strip().splitlines()[-1] == ("irdic: error: invalid configuration: execution.chunk_frames: "
+                                                   "'eight' is not of type 'integer'")
 
 
 def test_rules_are_thin_and_logged():
@@ -224,6 +265,13 @@ def test_default_run_writes_the_html_report_with_captions(run):
     assert page.count("<img") == 1 + 2 * 7  # the calibration and seven figures per experiment (heat included)
     assert "Temperature (°C) at the DIC points of experiment tube at t = " in page
     assert "extrapolated from the specimen mask edge" in page
+    # this configuration's run: titled with it, a table of contents, the calibration captioned, a header
+    assert "<h1>irdic results of config.yaml</h1>" in page and "<ol class='toc'>" in page
+    heads = [ln.split(">")[1].split("<")[0] for ln in page.splitlines() if ln.startswith("<h2 id=")]
+    assert heads == ["setup lab", "experiment halfshell", "experiment tube"]
+    assert "<b>calibration</b>: IR image of the reference object" in page
+    assert "<code>demo.scale: &quot;tiny&quot;</code>" in page  # the non-default parameters
+    assert "fields.zarr: temperature_smoothing auto → " in page  # what auto chose, with why
 
 
 def test_missing_input_folders_are_named_by_their_keys_all_at_once(tmp_path):
@@ -258,3 +306,6 @@ def test_a_failing_stage_shows_the_irdic_message_without_a_traceback(tmp_path):
     line = next(ln for ln in res.stderr.splitlines() if ln.startswith("irdic ingest-ir failed: "))
     assert "frame_1.csv" in line and line.split("failed: ", 1)[1] in log
     assert "Traceback" not in res.stderr
+    # after Snakemake's job report and summary, the irdic message comes last, alone on its line
+    tail = res.stderr.rstrip().splitlines()
+    assert tail[-1] == line and tail[-2] == "", tail[-4:]

@@ -86,6 +86,16 @@ def plot_detections(detections, target_image, path) -> Path:
 FAINT_SNR = 10.0
 
 
+#: caption of the calibration figure (drawn under it and stored in the PNG for the report page)
+CAPTION = ("IR image of the reference object with every marker of the DIC export. Green circles: markers used "
+           "for the projection matrix; red: outliers (leave-one-out residual above calibration.outlier_factor "
+           "times the median); orange crosses: markers not found in the image, at their reprojected position; "
+           "magenta squares: detections that match no marker. Arrows: reprojection residuals (detected minus "
+           "reprojected), magnified as the scale bar says. The title gives the markers used, the RMS and largest "
+           "residual (px), the focal length and the camera centre in the DIC frame: an RMS well below 0.1 px "
+           "and a plausible camera position mean the calibration can be trusted.")
+
+
 def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25.0) -> Path:
     """The target image with detections, marker IDs and scaled residual vectors.
 
@@ -159,7 +169,7 @@ def plot_calibration(cal_ds, target_image, path, *, vector_length_px: float = 25
         ax.text(0.99, 0.01, "outliers: " + ", ".join(flagged), transform=ax.transAxes, ha="right", va="bottom",
                 color="red", fontsize=7, bbox=dict(facecolor="black", alpha=0.5, lw=0))
     ax.legend(loc="upper right", fontsize=7, framealpha=0.6)
-    return save_figure(fig, path)
+    return save_figure(fig, path, caption=CAPTION)
 
 
 def _scale_bar(ax, big, scale):

@@ -198,7 +198,13 @@ def load_signals(fields) -> list[tuple[int, str]]:
             picks.append(max(cands, key=lambda j: (count[j], -j)))
     if not picks:
         picks = [j for j in range(n) if std[j] not in ("time", "cycles") and count[j] > 0][:2]
-    return [(j, f"{names[j]} ({unit[j]})" if unit[j] else names[j]) for j in picks]
+    return [(j, _label(std[j], names[j], unit[j])) for j in picks]
+
+
+def _label(standard: str, name: str, unit: str) -> str:
+    """``force (Kraft) [kN]``: the standard name, the record's own name in brackets when it differs, the unit."""
+    text = f"{standard} ({name})" if standard and standard != name else name
+    return f"{text} [{unit}]" if unit else text
 
 
 def plot_load(points, path, *, fields=None, point_ids=None, experiment=None):

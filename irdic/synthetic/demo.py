@@ -2,7 +2,7 @@
 
 :func:`make_demo` writes::
 
-    outdir/setup/markers.txt          84 marker centres (ID; x; y; z in mm, DIC frame)
+    outdir/setup/markers.txt          83 marker centres (ID; x; y; z in mm, DIC frame)
     outdir/setup/target.txt           IRBIS text, full 1024 x 768 frame of the open-book target, 0.04 K noise
     outdir/setup/seeds.yaml           approximate pixel positions (true +- 2 px) of 8 markers
     outdir/setup/truth.zarr           true camera and per-marker truth

@@ -65,6 +65,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._geometry import hit_points, nearest, ray_plane_y, ray_vertical_cylinder
+from .loads import hardening_stress
 
 __all__ = [
     "Specimen", "HalfShell", "Tube", "Hit", "smoothstep",
@@ -388,7 +389,7 @@ class Tube(Specimen):
                  phi_max_deg=25.0, load=(0.5, 5.5), unload_torque=(6.5, 7.5), phi_recovery_deg=2.0,
                  unload_force=(7.5, 8.5), u_recovery=0.2, T0=22.5, Q=4.0, tau_c=6.0, beta=0.5,
                  gamma=0.04, Z_c=30.0, clamp_radius=24.0, clamp_length=40.0, T_clamp=24.5,
-                 T_background=20.0, E=210000.0, G=81000.0):
+                 T_background=20.0, E=210000.0, G=81000.0, yield_stress=300.0, hardening=1000.0):
         self.R, self.R_inner, self.axis_z = float(R), float(R_inner), float(axis_z)
         self.L, self.Z_b = float(L), float(Z_b)
         self.u_max, self.phi_max = float(u_max), math.radians(phi_max_deg)
@@ -399,6 +400,7 @@ class Tube(Specimen):
         self.clamp_radius, self.clamp_length = float(clamp_radius), float(clamp_length)
         self.T_clamp, self.T_background = float(T_clamp), float(T_background)
         self.E, self.G = float(E), float(G)
+        self.yield_stress, self.hardening = float(yield_stress), float(hardening)
         self._xg, self._wg = np.polynomial.legendre.leggauss(20)
 
     def describe(self) -> dict:
@@ -423,29 +425,45 @@ class Tube(Specimen):
         return 1.0 + u / self.L, du / self.L
 
     def axial_force(self, t):
-        """Axial force of the testing machine, N (linear elastic proxy).
+        """Axial force of the testing machine, N (elastic-plastic proxy).
 
         Notes
         -----
-        ``F = E A eps``, ``A = pi (R^2 - R_inner^2)`` (reference section, mm^2),
-        ``eps = u / L`` (grip displacement over the free length), ``E`` in
-        N/mm^2 (steel-like 210 GPa). Only the demo's signals use it; the
-        kinematics do not depend on it.
+        ``F = A sigma(eps)``, ``A = pi (R^2 - R_inner^2)`` (reference section,
+        mm^2), ``eps = u / L`` (grip displacement over the free length), with
+        the stress of a steel-like bar of linear kinematic hardening
+        (:func:`irdic.synthetic.loads.hardening_stress`: ``E`` = 210 GPa, yield stress 300 MPa,
+        hardening modulus 1 GPa). The 2 mm stretch is plastic: about 58 kN at
+        the peak, and the 0.2 mm push back reverses the yield (about
+        -50 kN), the range of a 100 kN machine. Only the demo's signals use
+        it; the kinematics do not depend on it.
         """
-        u, _ = self.axial_displacement(t)
-        return self.E * math.pi * (self.R**2 - self.R_inner**2) * u / self.L
+        S1, _, _ = smoothstep(t, *self.load)
+        S2, _, _ = smoothstep(t, *self.unload_force)
+        sigma = hardening_stress(self.u_max * S1 / self.L, self.u_recovery * S2 / self.L, self.E,
+                                  self.yield_stress, self.hardening)
+        return math.pi * (self.R**2 - self.R_inner**2) * sigma
 
     def torque(self, t):
-        """Torque of the testing machine, N m (linear elastic proxy).
+        """Torque of the testing machine, N m (elastic-plastic proxy).
 
         Notes
         -----
-        ``T = G J gamma / R`` with the surface shear strain ``gamma = R phi / L``
-        and ``J = pi / 2 (R^4 - R_inner^4)`` (mm^4), i.e. ``T = G J phi / L``
-        in N mm, divided by 1000 for N m; ``G`` in N/mm^2 (81 GPa).
+        ``T = tau(gamma) 2 pi R_m^2 w`` of the thin wall (mean radius ``R_m``,
+        thickness ``w``; the shear stress uniform across it once plastic),
+        with the surface shear strain ``gamma = R phi / L`` and the shear
+        stress of :func:`irdic.synthetic.loads.hardening_stress` with ``G``, the von Mises shear
+        yield stress ``yield_stress / sqrt(3)`` and hardening
+        ``hardening / 3``: about 510 N m at the 25 deg peak and, the 2 deg
+        twisted back reversing the yield, about -340 N m after. N mm divided
+        by 1000 for N m.
         """
-        phi, _ = self.twist(t)
-        return self.G * 0.5 * math.pi * (self.R**4 - self.R_inner**4) * phi / self.L / 1000.0
+        S1, _, _ = smoothstep(t, *self.load)
+        S2, _, _ = smoothstep(t, *self.unload_torque)
+        tau = hardening_stress(self.R * self.phi_max * S1 / self.L, self.R * self.phi_recovery * S2 / self.L,
+                                self.G, self.yield_stress / math.sqrt(3.0), self.hardening / 3.0)
+        r_m, w = 0.5 * (self.R + self.R_inner), self.R - self.R_inner
+        return tau * 2.0 * math.pi * r_m**2 * w / 1000.0
 
     def radius(self, t):
         """Current outer radius ``R / sqrt(lam_z)`` (mm)."""

@@ -2,26 +2,38 @@
 
 import os
 import re
+import time
 
 import irdic.chunks
 import irdic.config
+import irdic.logs
 import irdic.pipeline
 from irdic.codehash import code_hash
 import irdic.plot
 from irdic.synthetic.experiments import n_stages as demo_stages
 from irdic.ingest.inputs import list_inputs
 
-irdic.config.validate_config(config)
-# outputs must stay inside the results folder whatever the names (links included)
-irdic.pipeline.stage_paths(config)
-# every missing input folder at once, named by its key, before Snakemake's input functions meet the first
-irdic.pipeline.check_inputs(config)
+STARTED = time.time()
+# a configuration error ends the run with its one-line message, without stack lines
+with irdic.logs.exit_on_error():
+    # --config hands nested values over as strings: numbers where the schema wants them
+    irdic.config.command_line_values(config, dict(workflow.config_settings.config))
+    irdic.config.validate_config(config)
+    # outputs must stay inside the results folder whatever the names (links included)
+    irdic.pipeline.stage_paths(config)
+    # every missing input folder at once, named by its key, before Snakemake's input functions meet the first
+    irdic.pipeline.check_inputs(config)
 
 RESULTS = config["results"]
 DEMO = config["demo"]
 SETUPS = list(config["setups"])
 EXPERIMENTS = list(config["experiments"])
 DEMO_MANIFEST = f"{DEMO['outdir']}/manifest.yaml"
+
+
+onerror:
+    # the failed stages' one-line messages, last on the screen (after Snakemake's job report)
+    irdic.logs.show_last(irdic.logs.failures(f"{RESULTS}/logs", since=STARTED))
 
 
 wildcard_constraints:
@@ -38,10 +50,13 @@ def _in_demo(path):
 
 
 def raw_files(path):
-    """Input files for a configured path: the demo manifest, or the files themselves."""
+    """Input files for a configured path: its files (in the demo: once the demo checkpoint wrote them)."""
     if _in_demo(path):
-        return [DEMO_MANIFEST]
-    return [str(f) for f in list_inputs(path)]
+        checkpoints.demo.get()
+        with irdic.logs.exit_on_error():
+            return [DEMO_MANIFEST] + [str(f) for f in list_inputs(path)]
+    with irdic.logs.exit_on_error():
+        return [str(f) for f in list_inputs(path)]
 
 
 def experiment_files(kind):
@@ -117,6 +132,14 @@ def heat_experiments():
     return [e for e in EXPERIMENTS if config["experiments"][e].get("material")]
 
 
+def report_stores():
+    """The stores whose ``auto`` choices the page's header lists: calibrations and fields."""
+    out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
+    if workflow.is_rule("fields"):
+        out += [f"{RESULTS}/{e}/fields.zarr" for e in EXPERIMENTS]
+    return out
+
+
 def all_outputs():
     out = [f"{RESULTS}/setups/{s}/calibration.zarr" for s in SETUPS]
     for e in EXPERIMENTS:
@@ -146,7 +169,8 @@ def planned_chunks(experiment):
         name = os.path.relpath(path, DEMO["outdir"]).split(os.sep)[0]
         n = demo_stages(name, DEMO["scale"]) or 1
     else:
-        n = len(list_inputs(path))
+        with irdic.logs.exit_on_error():
+            n = len(list_inputs(path))
     return irdic.chunks.n_chunks(n, frames)
 
 

@@ -1,7 +1,9 @@
 # The bundled synthetic demo: raw exports in real formats plus the analytic truth.
+# A checkpoint: the ingest and calibrate rules take the files it wrote as their inputs
+# (raw_files in common.smk), so editing one of them re-runs what reads it.
 
 
-rule demo:
+checkpoint demo:
     output:
         manifest=DEMO_MANIFEST,
     params:

@@ -59,10 +59,12 @@ rule export:
 rule report_html:
     input:
         figures=report_figures(),
+        stores=report_stores(),
     output:
         html=f"{RESULTS}/report.html",
     params:
-        results=lambda wc, output: os.path.dirname(output.html),
+        title=", ".join(os.path.relpath(f) for f in workflow.configfiles) or "the workflow's configuration",
+        settings=irdic.config.non_defaults(config),
         code=code_hash("report"),
     log:
         f"{RESULTS}/logs/report.log",
