@@ -57,8 +57,9 @@ def optional_path(items: Mapping, name: str):
     return v if v else None
 
 
-def open_optional(path):
-    """The store at ``path``, or None when no path is given or nothing is there (fields.zarr is optional)."""
+def open_optional(path, kind: str | None = None):
+    """The store at ``path`` (of ``kind``, see :func:`irdic.store.open_store`), or None when no path is given or
+    nothing is there (fields.zarr is optional)."""
     from ..store import open_store
 
-    return open_store(path) if path is not None and Path(path).exists() else None
+    return open_store(path, kind) if path is not None and Path(path).exists() else None

@@ -357,7 +357,8 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     i = paths(inputs, "couple", "inputs", ("dic", "ir", "calibration"))
     o = paths(outputs, "couple", "outputs", ("store",))
     with stage_context("couple", log, threads):
-        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), chunk=chunk, **params)
+        ds = couple(open_store(i["dic"], "ingest-dic"), open_store(i["ir"], "ingest-ir"),
+                    open_store(i["calibration"], "calibrate"), chunk=chunk, **params)
         write_dataset(ds, o["store"], stage="couple", params=params,
                       inputs=[os.fspath(i[k]) for k in ("dic", "ir", "calibration")],
                       encoding={"temperature": {"chunks": (1, ds.sizes["point"])}})
@@ -369,7 +370,7 @@ def run_gather(inputs: Mapping[str, Sequence[str | os.PathLike]], outputs: Mappi
     o = paths(outputs, "couple", "outputs", ("store",))
     parts = [os.fspath(q) for q in paths(inputs, "couple-gather", "inputs", ("chunks",))["chunks"]]
     with stage_context("couple-gather", log, threads):
-        stores = [open_store(q) for q in parts]
+        stores = [open_store(q, "couple") for q in parts]
         # the status counts of the record, one chunk's status at a time
         counts = {}
         for c in stores:

@@ -43,6 +43,7 @@ from ..gradient import material_rate, surface_gradient
 from ..noise import auto_smoothing
 from ..vocabulary import COMPONENTS, cf_attrs
 from .common import optional_path, paths, stage_context
+from .identity import fields_inputs
 from .footprint_fields import footprint_temperatures, paper_value, pixel_pitch, window_extras
 from .parameters import settings
 from .uncertainty import Window, uncertainties, uncertainty_notes
@@ -579,9 +580,9 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     o = paths(outputs, "fields", "outputs", ("store",))
     dic, machine = optional_path(i, "dic"), optional_path(i, "machine")
     with stage_context("fields", log, threads):
-        ds = fields(open_store(i["points"]), open_store(i["calibration"]), chunk=chunk, **params)
-        sig = signals_at(ds["time"].values, dic=open_store(dic) if dic is not None else None,
-                         machine=open_store(machine) if machine is not None else None)
+        points, calibration, dic_ds, machine_ds = fields_inputs(i["points"], i["calibration"], dic, machine)
+        ds = fields(points, calibration, chunk=chunk, **params)
+        sig = signals_at(ds["time"].values, dic=dic_ds, machine=machine_ds)
         if sig is not None:
             ds = ds.merge(sig.drop_vars("time"))
         inputs_used = [os.fspath(i["points"]), os.fspath(i["calibration"])]
@@ -595,6 +596,5 @@ def run_gather(inputs: Mapping[str, Sequence[str | os.PathLike]], outputs: Mappi
     o = paths(outputs, "fields", "outputs", ("store",))
     parts = [os.fspath(q) for q in paths(inputs, "fields-gather", "inputs", ("chunks",))["chunks"]]
     with stage_context("fields-gather", log, threads):
-        first, rest = gathered([open_store(q) for q in parts])
-        write_dataset(first, o["store"], stage="fields", params=params, append=rest,
-                      inputs=parts)
+        first, rest = gathered([open_store(q, "fields") for q in parts])
+        write_dataset(first, o["store"], stage="fields", params=params, append=rest, inputs=parts)

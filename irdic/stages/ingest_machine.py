@@ -35,6 +35,6 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     o = paths(outputs, "ingest_machine", "outputs", ("store",))
     with stage_context("ingest-machine", log, threads):
         ir = optional_path(i, "ir")
-        ir_times = open_store(ir)["time"].values if ir is not None else None
+        ir_times = open_store(ir, "ingest-ir")["time"].values if ir is not None else None
         ingest_machine(i["source"], o["store"], ir_times=ir_times,
                        **settings("machine_source", params, drop=("path",)))

@@ -11,6 +11,9 @@ import irdic.plot
 from irdic.synthetic.experiments import n_stages as demo_stages
 from irdic.stages.inputs import list_inputs
 
+# Snakemake's own YAML loader keeps the last of two equal keys: an experiment copied under its old name would vanish
+for _configfile in workflow.configfiles:
+    irdic.config.load_yaml(_configfile)
 irdic.config.validate_config(config)
 # outputs must stay inside the results folder whatever the names (links included)
 irdic.pipeline.stage_paths(config)
