@@ -40,6 +40,7 @@ import xarray as xr
 import zarr
 from zarr.codecs import BloscCodec
 
+from .chunk_errors import install as _install_chunk_errors
 from .errors import DataError, IrdicError
 from .outputs import COMPLETE_ATTR, atomic_directory, write_failure, zarr_group_attrs
 from .vocabulary import COORD_ATTRS
@@ -66,6 +67,7 @@ _BLOSC_SHUFFLE = {"noshuffle": 0, "shuffle": 1, "bitshuffle": 2}
 # Blosc would start a pool of its own threads when called from the main thread, beyond the threads a stage
 # was given; zarr sets the same on import, this keeps it true whatever imports come first.
 numcodecs.blosc.use_threads = False
+_install_chunk_errors()
 
 
 def _version() -> str:
@@ -269,6 +271,7 @@ class _CheckedStore(zarr.storage.LocalStore):
         self._absent = absent or {}
         self._arrays = arrays or set()
         self._sizes = sizes or {}
+        self.irdic_checked = True  # a chunk that fails to decode is named (irdic.chunk_errors)
 
     def with_read_only(self, read_only: bool = False):
         return type(self)(self.root, read_only=read_only, identity=self._identity, absent=self._absent,

@@ -577,7 +577,7 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     from ..signals import signals_at
 
     i = paths(inputs, "fields", "inputs", ("points", "calibration"), ("dic", "machine"))
-    o = paths(outputs, "fields", "outputs", ("store",))
+    o = paths(outputs, "fields", "outputs", ("store",), against=i)
     dic, machine = optional_path(i, "dic"), optional_path(i, "machine")
     with stage_context("fields", log, threads):
         points, calibration, dic_ds, machine_ds = fields_inputs(i["points"], i["calibration"], dic, machine)

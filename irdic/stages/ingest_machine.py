@@ -32,7 +32,7 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     from ..store import open_store
 
     i = paths(inputs, "ingest_machine", "inputs", ("source",), optional=("ir",))
-    o = paths(outputs, "ingest_machine", "outputs", ("store",))
+    o = paths(outputs, "ingest_machine", "outputs", ("store",), against=i)
     with stage_context("ingest-machine", log, threads):
         ir = optional_path(i, "ir")
         ir_times = open_store(ir, "ingest-ir")["time"].values if ir is not None else None
