@@ -22,8 +22,8 @@ import yaml
 
 from .errors import ConfigError
 
-__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config", "load_yaml", "check_folders", "check_finite",
-           "MAX_ALIAS_NODES", "MAX_REPR"]
+__all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config", "load_yaml", "check_folders",
+           "input_folder", "check_finite", "MAX_ALIAS_NODES", "MAX_REPR"]
 
 SCHEMA_PATH = Path(str(resources.files("irdic") / "schemas" / "config.schema.yaml"))
 
@@ -223,8 +223,8 @@ def _input_keys(config: dict) -> list[tuple[str, str]]:
     return keys
 
 
-def _folder_of(path: str) -> tuple[Path, bool]:
-    """The folder a configured input names and whether the input is that whole folder (a folder or a glob)."""
+def input_folder(path: str | os.PathLike) -> tuple[Path, bool]:
+    """An input path with links resolved (a glob as its folder), and whether it names a whole folder."""
     parts = Path(path).parts
     wild = [i for i, part in enumerate(parts) if any(ch in part for ch in "*?[")]
     if wild:
@@ -257,7 +257,7 @@ def check_folders(config: dict) -> None:
         raise ConfigError(f"results: the results folder {config['results']} ({results}) and demo.outdir "
                           f"{demo['outdir']} ({demo_dir}) overlap; give them separate folders")
     for key, path in _input_keys(config):
-        folder, whole = _folder_of(path)
+        folder, whole = input_folder(path)
         if demo_dir is not None and (folder == demo_dir or demo_dir in folder.parents):
             continue  # written by the demo stage, checked against results above
         inside = results == folder or results in folder.parents

@@ -20,7 +20,12 @@ Provenance attributes (all stores):
 ``irdic_created``      UTC time stamp, ISO 8601
 ``irdic_parameters``   JSON text of the parameters of the stage
 ``irdic_inputs``       JSON list of the input files or stores
-``irdic_chunks``       JSON: chunk files per array when the store was finished
+``irdic_chunks``       JSON: chunk files per array (and each one's size) when the store was finished
+
+A stage opens its inputs with the kind it expects (``open_store(path,
+"ingest-ir")``), so a store of another stage is refused by name; a chunk cut
+short or damaged in place raises :class:`~irdic.errors.DataError` naming the
+store, the variable and the chunk (:mod:`irdic.chunk_errors`).
 """
 
 from __future__ import annotations

@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 from typing import Iterator, Mapping
 
+from ..config import input_folder
 from ..errors import ConfigError
 from ..logs import stage_logging
 from ..threads import stage_threads
@@ -70,17 +71,6 @@ def open_optional(path, kind: str | None = None):
     return open_store(path, kind) if path is not None and Path(path).exists() else None
 
 
-
-def _real(path) -> tuple[Path, bool]:
-    """``path`` with links resolved (a glob as its folder), and whether it names a whole folder."""
-    parts = Path(path).parts
-    wild = [k for k, part in enumerate(parts) if any(ch in part for ch in "*?[")]
-    if wild:
-        return Path(os.path.realpath(Path(*parts[:wild[0]]) if wild[0] else ".")), True
-    p = Path(os.path.realpath(path))
-    return p, p.is_dir()
-
-
 def apart(inputs: Mapping, outputs: Mapping, stage: str) -> None:
     """Refuse outputs that overlap inputs, before the stage reads anything.
 
@@ -96,12 +86,12 @@ def apart(inputs: Mapping, outputs: Mapping, stage: str) -> None:
     for o_name, o_path in outputs.items():
         if not o_path or isinstance(o_path, (list, tuple)):
             continue
-        out, _ = _real(o_path)
+        out, _ = input_folder(o_path)
         for i_name, given in inputs.items():
             for one in (given if isinstance(given, (list, tuple)) else [given]):
                 if not one:
                     continue
-                inp, folder = _real(one)
+                inp, folder = input_folder(one)
                 if inp == out or out in inp.parents or (folder and inp in out.parents):
                     where = "is" if inp == out else "lies inside" if out in inp.parents else "contains"
                     raise ConfigError(f"stage {stage}: input {i_name} {one} {where} output {o_name} {o_path}; "
