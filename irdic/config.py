@@ -18,12 +18,14 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+import numpy as np
 import yaml
 
 from .errors import ConfigError
 
 __all__ = ["SCHEMA_PATH", "load_schema", "validate_config", "load_config", "command_line_values", "non_defaults",
-           "METHOD_SECTIONS", "MAX_ALIAS_NODES", "MAX_REPR"]
+           "load_yaml", "check_folders", "input_folder", "check_finite", "METHOD_SECTIONS", "MAX_ALIAS_NODES",
+           "MAX_REPR"]
 
 SCHEMA_PATH = Path(str(resources.files("irdic") / "schemas" / "config.schema.yaml"))
 
@@ -47,8 +49,18 @@ class _AliasBomb(yaml.YAMLError):
     """Raised by :class:`_ConfigLoader`; turned into a ConfigError naming the file."""
 
 
+class _DuplicateKey(yaml.YAMLError):
+    """Raised by :class:`_ConfigLoader` for a key given twice in one mapping."""
+
+
 class _ConfigLoader(yaml.SafeLoader):
-    """A SafeLoader that refuses recursive aliases and alias expansion bombs.
+    """A SafeLoader that refuses duplicate keys, recursive aliases and alias expansion bombs.
+
+    PyYAML keeps the last of two equal keys in a mapping: an experiment block
+    copied with its name left unchanged would replace the first one without a
+    word. Each mapping is therefore checked for keys that compare equal (after
+    construction: ``1`` and ``1.0`` are the same marker ID); merge keys
+    (``<<: *base``) may be overridden, as YAML intends.
 
     Aliases share the anchored node, so loading itself stays cheap; the cost
     comes later, when validation walks (and error messages print) the
@@ -76,6 +88,25 @@ class _ConfigLoader(yaml.SafeLoader):
                 n = 1
             self._expanded[key] = n
         return self._expanded[key]
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen: dict = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                line = key_node.start_mark.line + 1
+                try:
+                    first = seen.get(key)
+                except TypeError:  # an unhashable key: the constructor refuses it with its own message
+                    continue
+                seen.setdefault(key, line)
+                if first is not None:
+                    raise _DuplicateKey(f"line {line}: key {_clip(repr(key))} is given twice in the same mapping "
+                                        f"(first at line {first}); the second would silently replace the first, "
+                                        "rename or remove one")
+        return super().construct_mapping(node, deep)
 
     def compose_node(self, parent, index):
         if self.check_event(yaml.AliasEvent):
@@ -171,6 +202,90 @@ def _message(error: jsonschema.ValidationError) -> str:
     return f"{where}: {_clip(error.message)}"
 
 
+def _non_finite(value: Any, where: str) -> tuple[str, float] | None:
+    """``(dotted key, value)`` of the first NaN or infinite number in ``value`` (a loaded configuration), or None.
+
+    JSON Schema's ``type: number`` admits NaN and infinity, and every
+    comparison with NaN is false, so ``minimum`` does not catch it either.
+    """
+    if isinstance(value, float) and not np.isfinite(value):
+        return where, value
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, (list, tuple)):
+        items = enumerate(value)
+    else:
+        return None
+    for k, v in items:
+        found = _non_finite(v, f"{where}.{k}" if where else str(k))
+        if found is not None:
+            return found
+    return None
+
+
+def check_finite(config: Any, prefix: str = "") -> None:
+    """Raise :class:`ConfigError` naming the key of a NaN or infinite number in ``config``."""
+    found = _non_finite(config, prefix)
+    if found is not None:
+        raise ConfigError(f"{found[0] or '(top level)'}: {found[1]!r} is not a finite number; give a number (a lab "
+                          "script that failed to estimate it may have written .nan or .inf)")
+
+
+def _input_keys(config: dict) -> list[tuple[str, str]]:
+    """``(dotted key, path)`` of every raw input the configuration names."""
+    keys = []
+    for name, s in config.get("setups", {}).items():
+        keys += [(f"setups.{name}.{k}.path", s[k]["path"]) for k in ("markers", "target_image")]
+    for name, e in config.get("experiments", {}).items():
+        keys += [(f"experiments.{name}.{k}.path", e[k]["path"]) for k in ("dic", "ir", "machine") if e.get(k)]
+    return keys
+
+
+def input_folder(path: str | os.PathLike) -> tuple[Path, bool]:
+    """An input path with links resolved (a glob as its folder), and whether it names a whole folder."""
+    parts = Path(path).parts
+    wild = [i for i, part in enumerate(parts) if any(ch in part for ch in "*?[")]
+    if wild:
+        return Path(os.path.realpath(Path(*parts[:wild[0]]) if wild[0] else ".")), True
+    real = Path(os.path.realpath(path))
+    return real, real.is_dir()
+
+
+def _overlap(a: Path, b: Path) -> bool:
+    return a == b or a in b.parents or b in a.parents
+
+
+def check_folders(config: dict) -> None:
+    """Refuse a results folder that overlaps a raw-data folder, before anything runs.
+
+    irdic replaces what it writes under ``results``; a results folder inside
+    an export folder would add its stores to the series it reads, and an
+    export folder inside ``results`` could be replaced by a stage. Links are
+    followed. A single input file only must not lie inside ``results``.
+
+    Raises
+    ------
+    ConfigError
+        Naming both keys and the resolved folders.
+    """
+    results = Path(os.path.realpath(config["results"]))
+    demo = config.get("demo", {})
+    demo_dir = Path(os.path.realpath(demo["outdir"])) if demo.get("enabled") else None
+    if demo_dir is not None and _overlap(results, demo_dir):
+        raise ConfigError(f"results: the results folder {config['results']} ({results}) and demo.outdir "
+                          f"{demo['outdir']} ({demo_dir}) overlap; give them separate folders")
+    for key, path in _input_keys(config):
+        folder, whole = input_folder(path)
+        if demo_dir is not None and (folder == demo_dir or demo_dir in folder.parents):
+            continue  # written by the demo stage, checked against results above
+        inside = results == folder or results in folder.parents
+        if inside or (whole and folder in results.parents):
+            where = "lies inside" if inside else "contains"
+            raise ConfigError(f"{key}: the input {path} ({folder}) {where} the results folder {config['results']} "
+                              f"({results}); raw data and results must not overlap (irdic replaces what it "
+                              "writes under results), move one of them")
+
+
 def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) -> dict:
     """Check ``config`` against the schema and fill in defaults (in place).
 
@@ -195,6 +310,7 @@ def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) 
     """
     if not isinstance(config, dict):
         raise ConfigError(f"the configuration must be a mapping of keys to values, got {type(config).__name__}")
+    check_finite(config)
     schema = load_schema()
     cls = _fill_defaults(jsonschema.Draft202012Validator)
     validator = cls(schema)
@@ -237,11 +353,17 @@ def validate_config(config: dict, *, base_dir: str | os.PathLike | None = None) 
         seeds = setup.get("seeds", {})
         if seeds and len(seeds) < 6:
             raise ConfigError(f"setups.{name}.seeds: give at least 6 markers (got {len(seeds)}) or none")
+        ids: dict = {}
         for key in seeds:
             try:
-                int(key)
+                marker = int(key)
             except (TypeError, ValueError, OverflowError):
                 raise ConfigError(f"setups.{name}.seeds: marker ID {key!r} is not an integer") from None
+            if marker in ids:
+                raise ConfigError(f"setups.{name}.seeds: marker ID {marker} is given twice ({ids[marker]!r} and "
+                                  f"{key!r}); each marker has one seed position")
+            ids[marker] = key
+    check_folders(config)
     return config
 
 
@@ -257,8 +379,15 @@ def _check_material(name: str, material) -> None:
         raise ConfigError(f"experiments.{name}.material.cooling: expected [t0, t1] with t1 > t0 (s), got {cooling}")
 
 
-def load_config(path: str | os.PathLike) -> dict:
-    """Read a YAML configuration file and validate it (see :func:`validate_config`)."""
+def load_yaml(path: str | os.PathLike) -> Any:
+    """A YAML configuration file as loaded data, not yet validated.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing, not UTF-8, not YAML, holds a key twice in one
+        mapping (both lines named) or aliases that expand without bound.
+    """
     p = Path(path)
     try:
         with open(p, encoding="utf-8") as fh:
@@ -267,12 +396,19 @@ def load_config(path: str | os.PathLike) -> dict:
         raise ConfigError(f"{p}: configuration file not found") from None
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{p}: not a UTF-8 text file (byte {exc.start} cannot be decoded)") from None
-    except _AliasBomb as exc:
+    except (_AliasBomb, _DuplicateKey) as exc:
         raise ConfigError(f"{p}, {exc}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: not valid YAML ({_clip(str(exc), 2 * MAX_REPR)})") from None
     except RecursionError:
         raise ConfigError(f"{p}: not valid YAML (nested too deeply)") from None
+    return data
+
+
+def load_config(path: str | os.PathLike) -> dict:
+    """Read a YAML configuration file and validate it (see :func:`validate_config`)."""
+    p = Path(path)
+    data = load_yaml(p)
     if data is None:
         raise ConfigError(f"{p}: configuration file is empty")
     try:
@@ -333,6 +469,7 @@ def validate_section(section: str, values: dict, *, schema_node: str | None = No
         raise KeyError(name)
     cls = _fill_defaults(jsonschema.Draft202012Validator)
     data = copy.deepcopy(values)
+    check_finite(data, section)
     errors = list(cls({"$defs": schema["$defs"], **node}).iter_errors(data))
     if errors:
         msgs = []

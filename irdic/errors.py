@@ -18,6 +18,7 @@ __all__ = [
     "ConfigError",
     "CalibrationError",
     "GeometryError",
+    "OutputError",
     "IrdicWarning",
 ]
 
@@ -73,6 +74,10 @@ class CalibrationError(IrdicError):
 
 class GeometryError(IrdicError):
     """A geometric construction failed (folded parametrisation, degenerate metric, ...)."""
+
+
+class OutputError(IrdicError):
+    """An output cannot be written (disk full, quota, permissions); the output is named, an older one is kept."""
 
 
 class IrdicWarning(UserWarning):

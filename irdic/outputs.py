@@ -34,7 +34,7 @@ import uuid
 from pathlib import Path
 from typing import Iterator
 
-from .errors import DataError
+from .errors import DataError, OutputError
 
 __all__ = [
     "atomic_directory",
@@ -262,6 +262,23 @@ def _writer_lock(final: Path, timeout: float | None) -> Iterator[None]:
         _unlock(path, fd)
 
 
+def write_failure(exc: BaseException, tmp: Path, final: Path) -> OutputError | None:
+    """The :class:`OutputError` naming ``final`` for an OSError of writing ``tmp`` (disk full, quota), else None.
+
+    An OSError that names a file outside the output (an input being read)
+    keeps its own message.
+    """
+    if not isinstance(exc, OSError):
+        return None
+    name = exc.filename
+    if name is not None:
+        p = Path(os.fsdecode(name)) if isinstance(name, (str, bytes, os.PathLike)) else None
+        if p is None or not (p in (tmp, final) or tmp in p.parents or final in p.parents):
+            return None
+    kept = f"the previous {final.name} is kept" if final.exists() else f"nothing was written to {final}"
+    return OutputError(f"{final}: writing failed ({exc.strerror or exc}); {kept}")
+
+
 @contextlib.contextmanager
 def atomic_directory(path: str | os.PathLike, *, lock_timeout: float | None = None) -> Iterator[Path]:
     """Yield a temporary sibling of ``path``; move it to ``path`` on success.
@@ -301,6 +318,9 @@ def atomic_directory(path: str | os.PathLike, *, lock_timeout: float | None = No
                                               encoding="utf-8")
             _check_replaceable(final)  # something may have appeared while we were computing
             _swap_in(tmp, final)
-        except BaseException:
+        except BaseException as exc:
             shutil.rmtree(tmp, ignore_errors=True)
+            failure = write_failure(exc, tmp, final)
+            if failure is not None:
+                raise failure from exc
             raise

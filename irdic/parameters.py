@@ -12,7 +12,7 @@ import copy
 from functools import lru_cache
 from typing import Mapping
 
-from .config import load_schema
+from .config import check_finite, load_schema
 from .errors import ConfigError
 
 __all__ = ["schema_defaults", "settings"]
@@ -53,6 +53,7 @@ def settings(section: str, params: Mapping, *, drop: tuple[str, ...] = ()) -> di
     ConfigError
         ``params`` holds a key the section does not know (a typo must not
         fall back to a default silently); the message lists the known keys.
+        A number is NaN or infinite (``section.key`` is named).
     """
     known = set(_properties(section)) - set(drop)
     unknown = sorted(set(params) - known)
@@ -60,5 +61,6 @@ def settings(section: str, params: Mapping, *, drop: tuple[str, ...] = ()) -> di
         raise ConfigError(f"{section}: unknown parameter(s) {', '.join(unknown)}; "
                           f"expected {', '.join(sorted(known))}")
     out = {k: v for k, v in schema_defaults(section).items() if k not in drop}
+    check_finite(dict(params), section)
     out.update(params)
     return out

@@ -20,7 +20,12 @@ Provenance attributes (all stores):
 ``irdic_created``      UTC time stamp, ISO 8601
 ``irdic_parameters``   JSON text of the parameters of the stage
 ``irdic_inputs``       JSON list of the input files or stores
-``irdic_chunks``       JSON: chunk files per array when the store was finished
+``irdic_chunks``       JSON: chunk files per array (and each one's size) when the store was finished
+
+A stage opens its inputs with the kind it expects (``open_store(path,
+"ingest-ir")``), so a store of another stage is refused by name; a chunk cut
+short or damaged in place raises :class:`~irdic.errors.DataError` naming the
+store, the variable and the chunk (:mod:`irdic.chunk_errors`).
 """
 
 from __future__ import annotations
@@ -40,8 +45,9 @@ import xarray as xr
 import zarr
 from zarr.codecs import BloscCodec
 
+from .chunk_errors import install as _install_chunk_errors
 from .errors import DataError, IrdicError
-from .outputs import COMPLETE_ATTR, atomic_directory, zarr_group_attrs
+from .outputs import COMPLETE_ATTR, atomic_directory, write_failure, zarr_group_attrs
 from .vocabulary import COORD_ATTRS
 
 __all__ = [
@@ -49,6 +55,7 @@ __all__ = [
     "provenance",
     "write_dataset",
     "open_store",
+    "STORE_KINDS",
     "FrameStore",
     "COMPLETE_ATTR",
     "CHUNKS_ATTR",
@@ -65,6 +72,7 @@ _BLOSC_SHUFFLE = {"noshuffle": 0, "shuffle": 1, "bitshuffle": 2}
 # Blosc would start a pool of its own threads when called from the main thread, beyond the threads a stage
 # was given; zarr sets the same on import, this keeps it true whatever imports come first.
 numcodecs.blosc.use_threads = False
+_install_chunk_errors()
 
 
 def _version() -> str:
@@ -115,11 +123,13 @@ def provenance(stage: str, params: Mapping | None = None, inputs: Sequence | Non
 
 
 def _chunk_manifest(root: Path) -> dict:
-    """``{array path: [chunk files present, chunks in the grid, absent chunk keys]}`` of a store.
+    """``{array path: [chunk files present, chunks in the grid, absent chunk keys, {chunk key: bytes}]}``.
 
     Chunks equal to the fill value are not written by zarr, so an absent
     chunk is only an error when it was present when the store was finished;
-    the few absent ones are listed to tell them apart.
+    the few absent ones are listed to tell them apart. The size of each
+    chunk file tells a chunk cut short (an interrupted copy) from a whole
+    one when it is read.
     """
     out = {}
     for dirpath, dirnames, filenames in os.walk(root):
@@ -137,7 +147,8 @@ def _chunk_manifest(root: Path) -> dict:
         enc = meta.get("chunk_key_encoding", {})
         if enc.get("name") != "default" or enc.get("configuration", {}).get("separator", "/") != "/":
             continue  # irdic writes the default encoding only; others are not checked
-        present = set(_chunk_keys(Path(dirpath)))
+        sizes = {k: os.path.getsize(os.path.join(dirpath, k)) for k in _chunk_keys(Path(dirpath))}
+        present = set(sizes)
         shape = meta["shape"]
         chunks = meta["chunk_grid"]["configuration"]["chunk_shape"]
         grid = [range(-(-s // c)) for s, c in zip(shape, chunks)]
@@ -145,7 +156,7 @@ def _chunk_manifest(root: Path) -> dict:
         absent = []
         if len(present) < n_grid:
             absent = sorted({"/".join(["c", *map(str, idx)]) for idx in itertools.product(*grid)} - present)
-        out[rel] = [len(present), n_grid, absent]
+        out[rel] = [len(present), n_grid, absent, sizes]
     return out
 
 
@@ -259,15 +270,17 @@ class _CheckedStore(zarr.storage.LocalStore):
     opened, and that a missing chunk was absent when the store was finished.
     """
 
-    def __init__(self, root, *, read_only: bool = True, identity=None, absent=None, arrays=None):
+    def __init__(self, root, *, read_only: bool = True, identity=None, absent=None, arrays=None, sizes=None):
         super().__init__(root, read_only=read_only)
         self._identity = identity
         self._absent = absent or {}
         self._arrays = arrays or set()
+        self._sizes = sizes or {}
+        self.irdic_checked = True  # a chunk that fails to decode is named (irdic.chunk_errors)
 
     def with_read_only(self, read_only: bool = False):
         return type(self)(self.root, read_only=read_only, identity=self._identity, absent=self._absent,
-                          arrays=self._arrays)
+                          arrays=self._arrays, sizes=self._sizes)
 
     def _array_of(self, key: str) -> str | None:
         # chunk keys are "<array>/c/<i>/<j>..." (or "<array>/c" for a 0-d array); indices are numbers
@@ -281,16 +294,40 @@ class _CheckedStore(zarr.storage.LocalStore):
                 f"{self.root}: store was replaced or removed while it was being read "
                 "(another job rewrote it); open it again"
             )
+        arr = self._array_of(key)
+        if arr is None:
+            return value
         if value is None:
-            arr = self._array_of(key)
-            if arr is not None and key[len(arr) + 1:] not in self._absent.get(arr, ()):
+            if key[len(arr) + 1:] not in self._absent.get(arr, ()):
                 raise DataError(f"{self.root}: variable {arr!r}: chunk {key} is missing; the store is damaged, "
                                 "run the stage that writes it again")
+        elif byte_range is None:
+            expected = self._sizes.get(arr, {}).get(key[len(arr) + 1:])
+            if expected is not None and len(value) != expected:
+                raise DataError(f"{self.root}: variable {arr!r}: chunk {key} holds {len(value)} bytes, {expected} "
+                                "when the store was finished (cut short by an interrupted copy?); the store is "
+                                "damaged, copy it again or run the stage that writes it again")
         return value
 
 
-def open_store(path: str | os.PathLike) -> xr.Dataset:
-    """Open a store written by irdic, refusing incomplete, damaged or foreign ones.
+#: What each stage's store holds, for messages when a store of another kind is handed to a stage
+STORE_KINDS = {"ingest-ir": "IR frames (ir.zarr)", "ingest-dic": "DIC points (dic.zarr)",
+               "ingest-machine": "a testing machine record (machine.zarr)", "calibrate": "a calibration "
+               "(calibration.zarr)", "couple": "point temperatures (points.zarr)", "fields": "fields (fields.zarr)",
+               "heat": "heat sources (heat.zarr)"}
+
+
+def _check_kind(p: Path, attrs: Mapping, kind: str | None) -> None:
+    """Refuse a store that another stage than ``kind`` wrote (``--dic ir.zarr``)."""
+    found = attrs.get("irdic_stage")
+    if kind is None or found is None or found == kind:
+        return
+    raise DataError(f"{p}: holds {STORE_KINDS.get(found, found)}, written by stage {found}; expected "
+                    f"{STORE_KINDS.get(kind, kind)}, written by stage {kind} (are two paths swapped?)")
+
+
+def open_store(path: str | os.PathLike, kind: str | None = None) -> xr.Dataset:
+    """Open a store written by irdic, refusing incomplete, damaged, foreign or mistaken ones.
 
     A store that opens is complete: the completion mark lists how many chunk
     files each array had when the store was finished, and they are counted
@@ -302,6 +339,9 @@ def open_store(path: str | os.PathLike) -> xr.Dataset:
     ----------
     path : path-like
         A zarr store written by :func:`write_dataset` or :class:`FrameStore`.
+    kind : str, optional
+        The stage whose store is expected (a key of :data:`STORE_KINDS`,
+        ``"ingest-ir"``); its ``irdic_stage`` attribute must say so.
 
     Returns
     -------
@@ -312,7 +352,8 @@ def open_store(path: str | os.PathLike) -> xr.Dataset:
     ------
     DataError
         The store does not exist, is not a zarr store, is incomplete, misses
-        chunks, or is replaced while it is read.
+        chunks, is replaced while it is read, or another stage than ``kind``
+        wrote it.
     """
     p = Path(path)
     if not p.exists():
@@ -325,13 +366,14 @@ def open_store(path: str | os.PathLike) -> xr.Dataset:
         raise DataError(
             f"{p}: store is incomplete (written by an interrupted job?); delete it and run the stage again"
         )
-    absent, arrays = {}, set()
+    _check_kind(p, attrs, kind)
+    absent, arrays, sizes = {}, set(), {}
     if CHUNKS_ATTR in attrs:  # stores of irdic versions before the manifest are trusted as they are
         try:
             manifest = json.loads(attrs[CHUNKS_ATTR])
         except (TypeError, ValueError):
             raise DataError(f"{p}: chunk manifest {CHUNKS_ATTR} is unreadable; run the stage again") from None
-        for arr, (n_present, _, missing) in manifest.items():
+        for arr, (n_present, _, missing, *chunk_sizes) in manifest.items():
             found = sum(1 for _ in _chunk_keys(p / arr))
             if found < n_present:
                 raise DataError(
@@ -340,7 +382,9 @@ def open_store(path: str | os.PathLike) -> xr.Dataset:
                 )
             absent[arr] = set(missing)
             arrays.add(arr)
-    store = _CheckedStore(p, identity=identity, absent=absent, arrays=arrays)
+            if chunk_sizes:  # stores of irdic versions before the chunk sizes are trusted as they are
+                sizes[arr] = chunk_sizes[0]
+    store = _CheckedStore(p, identity=identity, absent=absent, arrays=arrays, sizes=sizes)
     try:
         with warnings.catch_warnings():
             # Snakemake drops a .snakemake_timestamp file into directory outputs
@@ -504,14 +548,25 @@ class FrameStore:
         missing = np.flatnonzero(~self._written)
         if missing.size:
             raise DataError(f"{self.path}: frames {missing[:10].tolist()} were never written")
-        self._time[:] = self._time_buf
-        for k, arr in self._extra.items():
-            arr[:] = self._extra_buf[k]
-        self._root.attrs.update(self._attrs)
+        try:
+            self._time[:] = self._time_buf
+            for k, arr in self._extra.items():
+                arr[:] = self._extra_buf[k]
+            self._root.attrs.update(self._attrs)
+            _mark_complete(self._tmp)
+        except OSError as exc:
+            self._fail(exc)
         self._closed = True
-        _mark_complete(self._tmp)
         self._ctx.__exit__(None, None, None)
         return self.path
+
+    def _fail(self, exc: OSError):
+        """Discard the store and raise the error naming it (disk full while writing), or ``exc`` as it is."""
+        self.abort()
+        failure = write_failure(exc, self._tmp, self.path)
+        if failure is None:
+            raise exc
+        raise failure from exc
 
     def abort(self) -> None:
         """Discard everything written so far."""
@@ -526,5 +581,7 @@ class FrameStore:
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
             self.close()
+        elif isinstance(exc, OSError):
+            self._fail(exc)
         else:
             self.abort()

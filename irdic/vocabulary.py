@@ -43,7 +43,7 @@ class Status(enum.IntEnum):
     FACING_AWAY = 4
     #: outside the specimen mask, farther than max_extrapolation_px
     OUTSIDE_SPECIMEN_MASK = 5
-    #: DIC time outside the IR time span
+    #: DIC time outside the IR time span, or in a gap of the IR record (no IR frame within the temporal reach)
     TIME_OUTSIDE_IR_SPAN = 6
 
 

@@ -17,21 +17,27 @@ SHIPPED = ROOT / "tests" / "data"
 
 
 class _Samples:
-    """``samples / "irb"``: that folder of real files, from ``tests/data`` or else ``../shared/samples``.
+    """``samples / "irb" / "AA011400.irb"``: a real file, from ``tests/data`` or else ``../shared/samples``.
 
-    A folder found in neither skips the test that asks for it, naming both
-    places (files without a licence to ship, such as ``irbis-text``, are only
-    in ``../shared/samples``).
+    Each file is looked up in ``tests/data`` first (the files whose licences
+    allow shipping them), then in ``../shared/samples`` (the GPL FLIR
+    sequences and the unlicensed IRBIS exports are only there). A file found
+    in neither skips the test that asks for it, naming both places.
     """
 
-    def __init__(self, roots):
+    def __init__(self, roots, parts=()):
         self.roots = tuple(roots)
+        self.parts = tuple(parts)
 
-    def __truediv__(self, folder: str) -> Path:
+    def __truediv__(self, part: str):
+        parts = (*self.parts, part)
+        if not self.parts:
+            return _Samples(self.roots, parts)
         for root in self.roots:
-            if (root / folder).is_dir():
-                return root / folder
-        pytest.skip(f"real sample folder {folder!r} found neither in {SHIPPED} nor in {SAMPLES}")
+            if root.joinpath(*parts).exists():
+                return root.joinpath(*parts)
+        where = "/".join(parts)
+        pytest.skip(f"real sample file {where!r} found neither in {SHIPPED} nor in {SAMPLES}")
 
 
 @pytest.fixture(scope="session")

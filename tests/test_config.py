@@ -217,3 +217,104 @@ def test_command_line_strings_become_the_numbers_the_schema_wants():
     bad = {"execution": {"chunk_frames": "eight"}}
     command_line_values(bad, {"execution": {"chunk_frames": "eight"}})
     assert bad["execution"]["chunk_frames"] == "eight"
+
+
+# --- assumptions about the values: no key twice, no NaN, folders apart -------
+
+
+def test_experiment_given_twice_names_both_lines(tmp_path):
+    text = (ROOT / "config" / "config.yaml").read_text()
+    copied = text.replace("experiments:\n", "experiments:\n  tube:\n    setup: lab\n"
+                          "    dic: {path: resources/demo/tube/dic}\n    ir: {path: resources/demo/tube/ir}\n", 1)
+    (tmp_path / "c.yaml").write_text(copied)
+    lines = [i + 1 for i, line in enumerate(copied.splitlines()) if line.startswith("  tube:")]
+    first, second = lines
+    with pytest.raises(ConfigError, match=rf"c\.yaml, line {second}: key 'tube' is given twice in the same "
+                                          rf"mapping \(first at line {first}\)"):
+        load_config(tmp_path / "c.yaml")
+
+
+@pytest.mark.parametrize("seeds, message", [
+    ("{1: [1, 2], 2: [3, 4], 3: [5, 6], 4: [7, 8], 5: [9, 10], 1: [11, 12]}",
+     r"line 1: key 1 is given twice in the same mapping \(first at line 1\)"),
+    ("{1: [1, 2], 2: [3, 4], 3: [5, 6], 4: [7, 8], 5: [9, 10], '1': [11, 12]}",
+     r"setups\.lab\.seeds: marker ID 1 is given twice \(1 and '1'\)"),
+])
+def test_marker_seed_given_twice_is_refused(tmp_path, seeds, message):
+    (tmp_path / "s.yaml").write_text(f"seeds: {seeds}\n")
+    cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    with pytest.raises(ConfigError, match=message):
+        from irdic.config import load_yaml
+        cfg["setups"]["lab"]["seeds"] = load_yaml(tmp_path / "s.yaml")["seeds"]
+        validate_config(cfg)
+
+
+def test_merge_keys_may_be_overridden(tmp_path):
+    (tmp_path / "m.yaml").write_text("base: &b {c_space: 2.0, c_time: 1.0}\nother: {<<: *b, c_time: 3.0}\n")
+    from irdic.config import load_yaml
+
+    assert load_yaml(tmp_path / "m.yaml")["other"] == {"c_space": 2.0, "c_time": 3.0}
+
+
+@pytest.mark.parametrize("value", [".nan", ".inf", "-.inf"])
+def test_time_offset_nan_names_the_key(tmp_path, value):
+    text = (ROOT / "config" / "config.yaml").read_text().replace(
+        "    ir: {path: resources/demo/tube/ir}", f"    ir: {{path: resources/demo/tube/ir, time_offset: {value}}}")
+    (tmp_path / "c.yaml").write_text(text)
+    with pytest.raises(ConfigError, match=r"experiments\.tube\.ir\.time_offset: -?(nan|inf) is not a finite number"):
+        load_config(tmp_path / "c.yaml")
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda c: c["interpolation"].update(c_space=float("nan")), "interpolation.c_space"),
+    (lambda c: c["fields"].update(temperature_smoothing=float("inf")), "fields.temperature_smoothing"),
+    (lambda c: c["setups"]["lab"].update(seeds={i: [1.0 * i, float("nan") if i == 3 else 2.0] for i in range(6)}),
+     "setups.lab.seeds.3.1"),
+    (lambda c: c["experiments"]["tube"]["machine"].update(time_offset=float("nan")),
+     "experiments.tube.machine.time_offset"),
+])
+def test_non_finite_numbers_anywhere_name_the_key(cfg, edit, key):
+    edit(cfg)
+    with pytest.raises(ConfigError, match=re.escape(key) + r": -?(nan|inf) is not a finite number"):
+        validate_config(cfg)
+
+
+def test_stage_parameters_refuse_nan():
+    from irdic.parameters import settings
+
+    with pytest.raises(ConfigError, match=r"interpolation\.c_time: nan is not a finite number"):
+        settings("interpolation", {"c_time": float("nan")})
+
+
+def test_results_inside_a_raw_data_folder_is_refused(cfg, tmp_path):
+    raw = tmp_path / "raw" / "ir"
+    raw.mkdir(parents=True)
+    cfg["demo"]["enabled"] = False
+    cfg["experiments"]["tube"]["ir"]["path"] = str(raw)
+    cfg["results"] = str(raw / "results")
+    with pytest.raises(ConfigError, match=r"experiments\.tube\.ir\.path: the input .* contains the results folder"):
+        validate_config(cfg)
+
+
+@pytest.mark.parametrize("pattern", ["{results}/raw", "{results}/raw/*.csv", "{results}"])
+def test_raw_data_inside_results_is_refused(cfg, tmp_path, pattern):
+    results = tmp_path / "res"
+    cfg["demo"]["enabled"] = False
+    cfg["results"] = str(results)
+    cfg["experiments"]["halfshell"]["dic"]["path"] = pattern.format(results=results)
+    with pytest.raises(ConfigError, match=r"experiments\.halfshell\.dic\.path: the input .* (lies inside|contains) "
+                                          r"the results folder"):
+        validate_config(cfg)
+
+
+def test_results_in_demo_folder_is_refused(cfg):
+    cfg["results"] = "resources/demo/results"
+    with pytest.raises(ConfigError, match=r"results: the results folder resources/demo/results .* and demo\.outdir "
+                                          r"resources/demo .* overlap"):
+        validate_config(cfg)
+
+
+def test_results_beside_one_input_file_is_accepted(cfg, tmp_path):
+    cfg["results"] = str(tmp_path / "results")
+    cfg["experiments"]["tube"]["machine"]["path"] = str(tmp_path / "machine.csv")
+    validate_config(cfg)

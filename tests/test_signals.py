@@ -109,7 +109,7 @@ def test_machine_signals_at_the_ir_frame_times(tmp_path):
     t_ir = np.array([0.25, 0.5, 0.51, 1.3, 2.5, 2.75])  # 50 Hz-ish frames, two outside the record
     ir = xr.Dataset({"temperature": (("time", "v", "u"), np.zeros((t_ir.size, 2, 2), np.float32))},
                     coords={"time": t_ir, "v": [0, 1], "u": [0, 1]})
-    write_dataset(ir, tmp_path / "ir.zarr", stage="test")
+    write_dataset(ir, tmp_path / "ir.zarr", stage="ingest-ir")
     with pytest.warns(IrdicWarning, match=r"2 of 6 IR frame times \(0.25 s first\) lie outside"):
         stage.run({"source": p, "ir": tmp_path / "ir.zarr"}, {"store": tmp_path / "machine.zarr"}, columns=COLS,
                   time_offset=0.5)

@@ -108,7 +108,7 @@ def test_configured_offset_on_a_static_specimen_is_not_checked():
 
 
 def test_ingest_keeps_the_ir_clock_with_auto(tmp_path):
-    from irdic.stages.ingest_ir import ingest_ir
+    from irdic.ingest.ir import ingest_ir
     from irdic.store import open_store
     from irdic.synthetic.writers import write_irbis
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import logging
 import time as _time
+import warnings
 
 import numpy as np
 import xarray as xr
@@ -160,6 +161,7 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
     t_ir = ir["time"].values.astype(float)
     _check_sensor(calibration, u, v)
     pr = project_points(camera, dic, u, v)
+    _check_extent(pr)
     n_t, M, _ = pr.x.shape
     side = footprint_side(pr)  # from the record's first stage: the same in every chunk
     masks, facing = masks_and_facing(
@@ -177,6 +179,7 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
     theta, gu, gv, rate, edge, in_span, extrap, footprint = _interpolate(ir, t_dic, pr, masks, seen, p, require_span,
                                                                           side)
     theta_fp, fp_factor = footprint if footprint is not None else (None, None)
+    in_span = in_span & ~in_ir_gap(t_dic, t_ir, t_ir if record_times is None else record_times, p)
     status = _status(pr, facing, seen, in_span, extrap, theta)
     visible = status <= Status.EXTRAPOLATED_FROM_EDGE
     if theta_fp is not None:  # where no footprint sample was on the mask: the paper's value
@@ -206,6 +209,65 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
             ds[name] = (("time", "point"), a.astype(np.float32), cf_attrs("points", name))
         ds.attrs["ir_noise_gain_temperature_footprint"] = float(gain_fp)
     return ds
+
+
+#: A DIC time is covered by the IR record when an IR frame lies within the larger of the temporal kernel's
+#: width (c_time R0_time, s) and this many median IR frame steps: never on a regular record (a DIC time
+#: lies at most half a step from a frame), always across a stretch where the IR camera stopped recording
+GAP_STEPS = 1.5
+
+
+def in_ir_gap(t_dic: np.ndarray, t_ir: np.ndarray, record_times: np.ndarray, p: dict) -> np.ndarray:
+    """Which DIC times (n_t,) lie inside the IR time span but too far from every IR frame to interpolate.
+
+    The interpolant bridges such a gap with a smooth curve that no IR frame
+    supports; these times get ``TIME_OUTSIDE_IR_SPAN`` instead of a
+    temperature, and the run warns with their count.
+
+    Parameters
+    ----------
+    t_dic : ndarray, shape (n_t,)
+        DIC times, s.
+    t_ir : ndarray, shape (n_f,)
+        IR frame times at hand (the whole record or a time chunk's window), s, increasing.
+    record_times : ndarray
+        The whole record's IR frame times (its median step), s.
+    p : dict
+        ``interpolation`` settings (``c_time``, ``R0_time``).
+    """
+    if t_ir.size < 2:
+        return np.zeros(t_dic.shape, dtype=bool)
+    reach = max(float(p["c_time"]) * float(p["R0_time"]), GAP_STEPS * float(np.median(np.diff(record_times))))
+    k = np.clip(np.searchsorted(t_ir, t_dic), 1, t_ir.size - 1)
+    nearest = np.minimum(np.abs(t_dic - t_ir[k - 1]), np.abs(t_ir[k] - t_dic))
+    gap = (t_dic > t_ir[0]) & (t_dic < t_ir[-1]) & (nearest > reach)
+    if gap.any():
+        first = int(np.flatnonzero(gap)[0])
+        log.warning("couple: %d DIC time(s) lie in a gap of the IR record, farther than %.3g s from every IR frame "
+                    "(first t = %.4g s, %.3g s from the nearest frame); they get no temperature (status "
+                    "time_outside_ir_span)", int(gap.sum()), reach, t_dic[first], nearest[first])
+    return gap
+
+
+#: Fewest IR pixels that the DIC cloud of one time may span (u and v): a cloud in m instead of mm
+#: projects onto one pixel, a specimen seen at all spans tens
+MIN_EXTENT_PX = 3.0
+
+
+def _check_extent(pr: Projection) -> None:
+    """DataError when the DIC points of every time project onto a few pixels (coordinates not in mm)."""
+    pix = np.where((pr.valid & np.isfinite(pr.pix).all(axis=-1))[..., None], pr.pix, np.nan)
+    if not np.isfinite(pix).any():
+        return  # nothing in front of the camera: the frame coverage check says so
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        span = np.nanmax(pix, axis=1) - np.nanmin(pix, axis=1)  # (n_t, 2)
+        size = np.nanmax(np.nanmax(pr.x, axis=1) - np.nanmin(pr.x, axis=1), axis=-1)  # (n_t,)
+    widest = float(np.nanmax(span.min(axis=-1)))
+    if widest < MIN_EXTENT_PX and int(pr.valid.sum(axis=1).max()) >= 3:
+        raise DataError(f"the DIC points span at most {widest:.3g} px of the IR image (their cloud is "
+                        f"{np.nanmax(size):.4g} across in the DIC unit); are the DIC coordinates in m instead of "
+                        "mm? The calibration markers, and so the projection, are in mm")
 
 
 def _check_sensor(calibration: xr.Dataset, u: np.ndarray, v: np.ndarray) -> None:

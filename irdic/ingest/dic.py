@@ -24,7 +24,7 @@ from ..vocabulary import COORD_ATTRS, series_attrs
 from .inputs import as_files, frame_times, log_gaps
 from ..parameters import settings
 
-__all__ = ["ingest_dic"]
+__all__ = ["ingest_dic", "check_scale"]
 
 log = logging.getLogger(__name__)
 
@@ -153,6 +153,7 @@ def ingest_dic(source: str | os.PathLike | Sequence[str | os.PathLike], out: str
     never = missing.all(axis=0)
     if never.all():
         raise DataError(f"{files[0].parent}: no valid DIC point in any stage")
+    check_scale(x, [f.name for f in files])
     log.info("DIC: %d points, %d stages; %.2f %% of (stage, point) entries missing; %d points never valid",
              ids.size, len(stages), 100 * missing.mean(), int(never.sum()))
     data_vars = {
@@ -181,6 +182,44 @@ def ingest_dic(source: str | os.PathLike | Sequence[str | os.PathLike], out: str
                   inputs=[str(f) for f in files[:1000]], encoding={"x": {"chunks": (1, ids.size, 3)}})
     log_gaps("DIC", t, stage_numbers)
     return Path(out)
+
+
+#: Largest ratio of one stage's point-cloud size to the median stage's: a specimen does not grow or shrink
+#: 20-fold between two stages, a stage exported in m among stages in mm (1000x) or in inch (25.4x) does
+SCALE_RATIO = 20.0
+
+
+def check_scale(x: np.ndarray, names: Sequence[str]) -> None:
+    """Refuse a stage whose point cloud is far larger or smaller than the others (another length unit).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n_t, n_p, 3)
+        Coordinates of every stage, mm, NaN where missing.
+    names : sequence of str
+        The stages' file names, for the message.
+
+    Raises
+    ------
+    DataError
+        Naming the stage file and the ratio of its size (median distance of
+        its points from their median) to the median stage's.
+    """
+    size = np.full(x.shape[0], np.nan)
+    for i, xi in enumerate(x):
+        valid = xi[np.isfinite(xi).all(axis=1)]
+        if valid.shape[0] >= 3:
+            size[i] = np.median(np.linalg.norm(valid - np.median(valid, axis=0), axis=1))
+    ok = np.isfinite(size) & (size > 0)
+    if ok.sum() < 2:
+        return
+    ref = float(np.median(size[ok]))
+    ratio = np.where(ok, size / ref, 1.0)
+    k = int(np.argmax(np.maximum(ratio, 1 / ratio)))
+    if max(ratio[k], 1 / ratio[k]) > SCALE_RATIO:
+        raise DataError(f"{names[k]}: its point cloud is {ratio[k]:.4g} times the size of the other stages' "
+                        f"(median distance from the centre {size[k]:.4g} mm, median stage {ref:.4g} mm); a stage "
+                        "in another length unit (m or inch instead of mm)? Export every stage in one unit")
 
 
 def _read_stages(files: Sequence[Path], fmt: str, columns: dict | None) -> list[xr.Dataset]:

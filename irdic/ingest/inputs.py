@@ -150,8 +150,10 @@ def frame_times(
     if time_source == "frame_rate":
         if frame_rate is None or not frame_rate > 0:
             raise DataError(f"frame_rate must be a positive number of Hz, got {frame_rate!r}")
-        numbers = np.arange(n) if frame_numbers is None or any(f is None for f in frame_numbers) \
-            else np.asarray(frame_numbers, dtype=float)
+        if frame_numbers is None or any(f is None for f in frame_numbers):
+            numbers = _numbers_in_names(labels, what)
+        else:
+            numbers = np.asarray(frame_numbers, dtype=float)
         t = numbers / float(frame_rate)
     else:
         t = np.asarray(file_times, dtype=float)
@@ -166,6 +168,33 @@ def frame_times(
             f"{labels[i]} (t = {t[i]:.6g} s); check the file order or the time stamps"
         )
     return t
+
+
+def _numbers_in_names(labels: Sequence[str], what: str) -> np.ndarray:
+    """Frame positions from the numbers that end the file names (``stage_0012.csv``), first at 0.
+
+    A numbered series with a member missing (``stage_3`` deleted) keeps the
+    times of the others: the numbers, not the positions, count the frames.
+    Names without a number each, numbers that do not increase, or numbers
+    of which fewer than half step by one (not a count of frames) give the
+    positions ``0 .. n-1``, as before.
+    """
+    # "stack.npy[3]": frame 3 of a file; one-frame files ("frame_7.npy[0]") are numbered by their names
+    names = [name[:-3] if name.endswith("[0]") else name for name in labels]
+    found = [re.search(r"(\d+)\D*$", Path(name).stem) if "[" not in name else None for name in names]
+    positions = np.arange(len(labels), dtype=float)
+    if not found or any(m is None for m in found):
+        return positions
+    numbers = np.array([int(m.group(1)) for m in found], dtype=float)
+    steps = np.diff(numbers)
+    if (steps <= 0).any() or 2 * (steps == 1).sum() < steps.size:
+        return positions  # not a count of frames (a time stamp in ms, a date): the positions, as before
+    if (steps > 1).any():
+        k = int(np.flatnonzero(steps > 1)[0])
+        log.warning("%ss: %d numbers missing in the file names (first after %s); the frame rate counts the "
+                    "numbers, so the missing ones leave gaps in the time axis", what,
+                    int((steps - 1).sum()), labels[k])
+    return numbers - numbers[0]
 
 
 def log_gaps(what: str, t: np.ndarray, numbers: Sequence[int | None]) -> None:

@@ -389,6 +389,19 @@ def parse_slow(data: bytes, sep: bytes, mark: int, newline: int, first_line: int
 _TO_CELSIUS = {"degC": (1.0, 0.0), "K": (1.0, -273.15), "degF": (5.0 / 9.0, -32.0 * 5.0 / 9.0)}
 
 
+def _check_one_frame(raw: bytes, stop: int, newline: int, where) -> None:
+    """FormatError when a second ``[Data]`` section follows the matrix that ends at ``stop``.
+
+    Exports concatenated into one file (or a multi-frame text export) would
+    otherwise be read as their first frame alone.
+    """
+    again = _find_data_marker(raw, stop)
+    if again >= 0:
+        raise FormatError("a second [Data] section follows the first frame's matrix: the file holds more than "
+                          "one frame; irdic reads one frame per IRBIS text file, so export each frame to a file "
+                          "of its own", where, raw.count(bytes([newline]), 0, again) + 1)
+
+
 def parse_irbis(raw: bytes, path: str | os.PathLike | None = None, *,
                 celsius: bool = False) -> tuple[dict, np.ndarray]:
     """Parse the bytes of an IRBIS text export.
@@ -413,9 +426,8 @@ def parse_irbis(raw: bytes, path: str | os.PathLike | None = None, *,
     Raises
     ------
     FormatError
-        Missing ``[Data]``, malformed header, non-numeric cell (line and
-        column named), rows or columns that disagree with
-        ``ImageHeight``/``ImageWidth`` (line named), truncated file.
+        Missing ``[Data]``, malformed header, non-numeric cell (line, column), rows or columns that disagree
+        with ``ImageHeight``/``ImageWidth`` (line), truncated file, a second frame.
     """
     where = path if path is not None else "<bytes>"
     i = _find_data_marker(raw)
@@ -442,6 +454,7 @@ def parse_irbis(raw: bytes, path: str | os.PathLike | None = None, *,
     nxt = -1 if bracket < 0 else raw.find(bytes([newline]) + b"[", max(bracket - 1, start))
     if nxt >= 0:
         stop = nxt + 1
+        _check_one_frame(raw, stop, newline, where)
     elif stop > start and raw[stop - 1:stop] not in (b"\n", b"\r"):
         warnings.warn(f"{where}: the last data row has no line end; the file may be cut short and "
                       "its last value incomplete", IrdicWarning, stacklevel=3)

@@ -285,6 +285,26 @@ def _check_decoded_size(shape, dtype, file_size: int, path: Path) -> None:
         )
 
 
+def _all_series(series, file_size: int, p: Path) -> np.ndarray:
+    """The frames of every image series of a TIFF, in file order (pages written one by one are a series each).
+
+    Raises
+    ------
+    FormatError
+        The series differ in frame size or type: reading the first alone would drop the others silently.
+    """
+    shapes = {(tuple(int(n) for n in s.shape[-2:]), np.dtype(s.dtype), s.axes[-2:]) for s in series}
+    if len(shapes) > 1 or any(s.ndim not in (2, 3) for s in series):
+        listed = ", ".join(f"{tuple(int(n) for n in s.shape)} {np.dtype(s.dtype)}" for s in series[:4])
+        raise FormatError(f"holds {len(series)} image series of different shapes or types ({listed}"
+                          f"{', ...' if len(series) > 4 else ''}); expected frames of one size and type: save "
+                          "each series to a file of its own", p)
+    frames = sum(int(np.prod(s.shape[:-2])) for s in series)
+    (size, dtype, _), = shapes
+    _check_decoded_size((frames, *size), dtype, file_size, p)
+    return np.concatenate([s.asarray().reshape(-1, *size) for s in series])
+
+
 def read_tiff(
     path: str | os.PathLike,
     *,
@@ -344,7 +364,7 @@ def read_tiff(
             series = tif.series[0]
             axes = series.axes
             _check_decoded_size(series.shape, series.dtype, file_size, p)
-            arr = series.asarray()
+            arr = series.asarray() if len(tif.series) == 1 else _all_series(tif.series, file_size, p)
     except IrdicError:
         raise
     except Exception as exc:  # tifffile raises many types for damaged files

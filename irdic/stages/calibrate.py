@@ -38,7 +38,7 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     from ..calibration import calibrate_from_files
 
     i = paths(inputs, "calibrate", "inputs", ("markers", "target"))
-    o = paths(outputs, "calibrate", "outputs", ("store",), ("figure",))
+    o = paths(outputs, "calibrate", "outputs", ("store",), ("figure",), against=i)
     rest = dict(params)
     setup = {k: rest.pop(k) for k in ("target_format", "seeds") if k in rest}
     with stage_context("calibrate", log, threads):

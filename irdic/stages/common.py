@@ -7,11 +7,12 @@ import os
 from pathlib import Path
 from typing import Iterator, Mapping
 
+from ..config import input_folder
 from ..errors import ConfigError
 from ..logs import stage_logging
 from ..threads import stage_threads
 
-__all__ = ["stage_context", "paths", "optional_path", "open_optional", "with_heat"]
+__all__ = ["stage_context", "paths", "optional_path", "open_optional", "with_heat", "apart"]
 
 
 @contextlib.contextmanager
@@ -31,15 +32,18 @@ def stage_context(stage: str, log: str | os.PathLike | None, threads: int | None
             yield
 
 
-def paths(given, stage: str, what: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
+def paths(given, stage: str, what: str, required: tuple[str, ...], optional: tuple[str, ...] = (), *,
+          against: Mapping | None = None) -> dict:
     """The named paths of a stage's ``inputs`` or ``outputs``.
 
-    ``given`` is a mapping or a Snakemake ``Namedlist`` (``snakemake.input``).
+    ``given`` is a mapping or a Snakemake ``Namedlist`` (``snakemake.input``);
+    outputs are checked ``against`` the stage's inputs (:func:`apart`).
 
     Raises
     ------
     ConfigError
-        A required name is missing or an unknown one is given.
+        A required name is missing or an unknown one is given, or an output
+        overlaps an input.
     """
     items = dict(given.items()) if hasattr(given, "items") else dict(given)
     missing = [k for k in required if items.get(k) is None]
@@ -48,6 +52,8 @@ def paths(given, stage: str, what: str, required: tuple[str, ...], optional: tup
         raise ConfigError(f"stage {stage}: {what} must name {', '.join(required)}"
                           f"{' (optional: ' + ', '.join(optional) + ')' if optional else ''}; "
                           f"missing {missing or 'none'}, unknown {unknown or 'none'}")
+    if against is not None:
+        apart(against, items, stage)
     return items
 
 
@@ -57,11 +63,40 @@ def optional_path(items: Mapping, name: str):
     return v if v else None
 
 
-def open_optional(path):
-    """The store at ``path``, or None when no path is given or nothing is there (fields.zarr is optional)."""
+def open_optional(path, kind: str | None = None):
+    """The store at ``path`` (of ``kind``, see :func:`irdic.store.open_store`), or None when no path is given or
+    nothing is there (fields.zarr is optional)."""
     from ..store import open_store
 
-    return open_store(path) if path is not None and Path(path).exists() else None
+    return open_store(path, kind) if path is not None and Path(path).exists() else None
+
+
+def apart(inputs: Mapping, outputs: Mapping, stage: str) -> None:
+    """Refuse outputs that overlap inputs, before the stage reads anything.
+
+    An output inside an input folder would join the series it is made from
+    on the next run; an input inside an output would be deleted when the
+    output is replaced. Links are followed; a glob counts as its folder.
+
+    Raises
+    ------
+    ConfigError
+        Naming the stage, both paths and their roles.
+    """
+    for o_name, o_path in outputs.items():
+        if not o_path or isinstance(o_path, (list, tuple)):
+            continue
+        out, _ = input_folder(o_path)
+        for i_name, given in inputs.items():
+            for one in (given if isinstance(given, (list, tuple)) else [given]):
+                if not one:
+                    continue
+                inp, folder = input_folder(one)
+                if inp == out or out in inp.parents or (folder and inp in out.parents):
+                    where = "is" if inp == out else "lies inside" if out in inp.parents else "contains"
+                    raise ConfigError(f"stage {stage}: input {i_name} {one} {where} output {o_name} {o_path}; "
+                                      "inputs and outputs must not overlap (an output replaces what lies in "
+                                      "it, and an output in an input folder joins that input)")
 
 
 def with_heat(fields, heat):

@@ -32,10 +32,11 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     gathered by :func:`run_gather`).
     """
     i = paths(inputs, "couple", "inputs", ("dic", "ir", "calibration"))
-    o = paths(outputs, "couple", "outputs", ("store",))
+    o = paths(outputs, "couple", "outputs", ("store",), against=i)
     with stage_context("couple", log, threads):
         # results/<experiment>/ir.zarr: the experiment's name for messages about its configuration
-        ds = couple(open_store(i["dic"]), open_store(i["ir"]), open_store(i["calibration"]), chunk=chunk,
+        ds = couple(open_store(i["dic"], "ingest-dic"), open_store(i["ir"], "ingest-ir"),
+                    open_store(i["calibration"], "calibrate"), chunk=chunk,
                     experiment=Path(i["ir"]).parent.name, **params)
         write_dataset(ds, o["store"], stage="couple", params=params,
                       inputs=[os.fspath(i[k]) for k in ("dic", "ir", "calibration")],
@@ -48,6 +49,6 @@ def run_gather(inputs: Mapping[str, Sequence[str | os.PathLike]], outputs: Mappi
     o = paths(outputs, "couple", "outputs", ("store",))
     parts = [os.fspath(q) for q in paths(inputs, "couple-gather", "inputs", ("chunks",))["chunks"]]
     with stage_context("couple-gather", log, threads):
-        ds, rest = gathered_points([open_store(q) for q in parts])
+        ds, rest = gathered_points([open_store(q, "couple") for q in parts])
         write_dataset(ds, o["store"], stage="couple", params=params, inputs=parts, append=rest,
                       encoding={"temperature": {"chunks": (1, ds.sizes["point"])}})

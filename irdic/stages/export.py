@@ -6,6 +6,7 @@ import os
 from typing import Mapping
 
 from ..store import open_store
+from ..identity import same_points
 from .common import open_optional, optional_path, paths, stage_context, with_heat
 from ..parameters import settings
 
@@ -44,8 +45,11 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     o = paths(outputs, "export", "outputs", ("paraview", "csv"))
     with stage_context("export", log, threads):
         p = settings("export", params)
-        pts = open_store(i["points"])
-        fields = with_heat(open_optional(optional_path(i, "fields")), open_optional(optional_path(i, "heat")))
+        pts = open_store(i["points"], "couple")
+        fields = open_optional(optional_path(i, "fields"), "fields")
+        if fields is not None:
+            same_points(pts, i["points"], fields, i["fields"])
+        fields = with_heat(fields, open_optional(optional_path(i, "heat"), "heat"))
         ids = "all" if p["csv_points"] == "all" else select_points(
             pts, list(points) if points else None, name=f"experiments.{experiment}.report.points")
         write_paraview(pts, o["paraview"], fields=fields, dtype=p["paraview_precision"], every=p["paraview_every"])

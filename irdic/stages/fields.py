@@ -14,6 +14,7 @@ from typing import Mapping, Sequence
 from ..chunks import gathered
 from ..fields import fields
 from ..store import open_store, write_dataset
+from ..identity import fields_inputs
 from .common import optional_path, paths, stage_context
 
 __all__ = ["run", "run_gather", "fields"]
@@ -37,12 +38,12 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     from ..signals import signals_at
 
     i = paths(inputs, "fields", "inputs", ("points", "calibration"), ("dic", "machine"))
-    o = paths(outputs, "fields", "outputs", ("store",))
+    o = paths(outputs, "fields", "outputs", ("store",), against=i)
     dic, machine = optional_path(i, "dic"), optional_path(i, "machine")
     with stage_context("fields", log, threads):
-        ds = fields(open_store(i["points"]), open_store(i["calibration"]), chunk=chunk, **params)
-        sig = signals_at(ds["time"].values, dic=open_store(dic) if dic is not None else None,
-                         machine=open_store(machine) if machine is not None else None)
+        points, calibration, dic_ds, machine_ds = fields_inputs(i["points"], i["calibration"], dic, machine)
+        ds = fields(points, calibration, chunk=chunk, **params)
+        sig = signals_at(ds["time"].values, dic=dic_ds, machine=machine_ds)
         if sig is not None:
             ds = ds.merge(sig.drop_vars("time"))
         inputs_used = [os.fspath(i["points"]), os.fspath(i["calibration"])]
@@ -56,6 +57,6 @@ def run_gather(inputs: Mapping[str, Sequence[str | os.PathLike]], outputs: Mappi
     o = paths(outputs, "fields", "outputs", ("store",))
     parts = [os.fspath(q) for q in paths(inputs, "fields-gather", "inputs", ("chunks",))["chunks"]]
     with stage_context("fields-gather", log, threads):
-        first, rest = gathered([open_store(q) for q in parts])
+        first, rest = gathered([open_store(q, "fields") for q in parts])
         write_dataset(first, o["store"], stage="fields", params=params, append=rest,
                       inputs=parts)

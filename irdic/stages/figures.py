@@ -6,6 +6,7 @@ import os
 from typing import Mapping
 
 from ..store import open_store
+from ..identity import same_points
 from .common import open_optional, optional_path, paths, stage_context, with_heat
 
 __all__ = ["run"]
@@ -37,8 +38,11 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
 
     i = paths(inputs, "figures", "inputs", ("points",), ("fields", "heat"))
     with stage_context("figures", log, threads):
-        pts = open_store(i["points"])
-        fields = with_heat(open_optional(optional_path(i, "fields")), open_optional(optional_path(i, "heat")))
+        pts = open_store(i["points"], "couple")
+        fields = open_optional(optional_path(i, "fields"), "fields")
+        if fields is not None:
+            same_points(pts, i["points"], fields, i["fields"])
+        fields = with_heat(fields, open_optional(optional_path(i, "heat"), "heat"))
         key = f"experiments.{experiment}.report"
         t = pts["time"].values
         sel_t = t[select_times(t, list(times) if times else None, name=f"{key}.times")]

@@ -24,6 +24,6 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     ``threads`` the CPU threads of the stage (default all cores).
     """
     i = paths(inputs, "ingest_dic", "inputs", ("source",))
-    o = paths(outputs, "ingest_dic", "outputs", ("store",))
+    o = paths(outputs, "ingest_dic", "outputs", ("store",), against=i)
     with stage_context("ingest-dic", log, threads):
         ingest_dic(i["source"], o["store"], **params)

@@ -24,6 +24,6 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     ``threads`` the CPU threads of the stage (default all cores).
     """
     i = paths(inputs, "ingest_ir", "inputs", ("source",))
-    o = paths(outputs, "ingest_ir", "outputs", ("store",))
+    o = paths(outputs, "ingest_ir", "outputs", ("store",), against=i)
     with stage_context("ingest-ir", log, threads):
         ingest_ir(i["source"], o["store"], **params)

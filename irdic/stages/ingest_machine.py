@@ -32,9 +32,9 @@ def run(inputs: Mapping[str, str | os.PathLike], outputs: Mapping[str, str | os.
     from ..store import open_store
 
     i = paths(inputs, "ingest_machine", "inputs", ("source",), optional=("ir",))
-    o = paths(outputs, "ingest_machine", "outputs", ("store",))
+    o = paths(outputs, "ingest_machine", "outputs", ("store",), against=i)
     with stage_context("ingest-machine", log, threads):
         ir = optional_path(i, "ir")
-        ir_times = open_store(ir)["time"].values if ir is not None else None
+        ir_times = open_store(ir, "ingest-ir")["time"].values if ir is not None else None
         ingest_machine(i["source"], o["store"], ir_times=ir_times,
                        **settings("machine_source", params, drop=("path",)))

@@ -16,6 +16,9 @@ from irdic.ingest.inputs import list_inputs
 STARTED = time.time()
 # a configuration error ends the run with its one-line message, without stack lines
 with irdic.logs.exit_on_error():
+    # Snakemake's own YAML loader keeps the last of two equal keys: an experiment copied under its old name would vanish
+    for _configfile in workflow.configfiles:
+        irdic.config.load_yaml(_configfile)
     # --config hands nested values over as strings: numbers where the schema wants them
     irdic.config.command_line_values(config, dict(workflow.config_settings.config))
     irdic.config.validate_config(config)
