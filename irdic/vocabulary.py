@@ -175,7 +175,9 @@ SERIES_ATTRS: dict[str, tuple[str, ...]] = {
 #: and the fields stage's choices
 DATASET_ATTRS: frozenset[str] = frozenset(
     [a for v in SERIES_ATTRS.values() for a in v]
-    + ["source_columns", "experiment", "method", "correspondence", "settings", "n_markers", "n_detections",
+    + ["source_columns", "experiment", "method", "time_offset", "ir_time_offset", "ir_time_offset_std",
+       "ir_time_offset_source", "ir_time_offset_estimate", "ir_time_offset_estimate_std", "correspondence",
+       "settings", "n_markers", "n_detections",
        "n_used", "n_not_detected", "n_outside_image", "n_not_measured", "n_outliers", "n_unassigned",
        "not_detected_ids", "outlier_ids", "outside_image_ids", "not_measured_ids", "polarity", "noise_k",
        "marker_radius_mm", "dlt_rms_px", "sigma_px", "parametrisation", "surface_solver", "temperature_smoothing",

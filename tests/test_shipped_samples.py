@@ -30,6 +30,10 @@ def test_shipped_files_are_unchanged_copies(folder):
 
 def test_a_fresh_clone_reads_the_shipped_files_and_skips_only_the_unshipped(tmp_path):
     fresh = _Samples((SHIPPED, tmp_path / "no-shared-samples"))
-    assert fresh / "irb" == SHIPPED / "irb" and fresh / "dice" == SHIPPED / "dice"
-    with pytest.raises(pytest.skip.Exception, match="'irbis-text' found neither"):
-        fresh / "irbis-text"
+    assert fresh / "irb" / "AA011400.irb" == SHIPPED / "irb" / "AA011400.irb"
+    assert fresh / "dice" / "DICe_solution_0.txt" == SHIPPED / "dice" / "DICe_solution_0.txt"
+    with pytest.raises(pytest.skip.Exception, match="'irbis-text/GW_1_Z2_860.txt' found neither"):
+        fresh / "irbis-text" / "GW_1_Z2_860.txt"
+    # the GPL FLIR sequences are not shipped: looked up in ../shared/samples only
+    with pytest.raises(pytest.skip.Exception, match="'flir/SampleSEQ.seq' found neither"):
+        fresh / "flir" / "SampleSEQ.seq"

@@ -146,7 +146,7 @@ def test_info_and_report_show_the_clock(tmp_path):
     import xarray as xr
 
     from irdic.cli import describe_store
-    from irdic.report import write_report
+    from irdic.report import collect_figures, write_report
     from irdic.store import write_dataset
     from irdic.timing.summary import clock_summary
 
@@ -160,7 +160,7 @@ def test_info_and_report_show_the_clock(tmp_path):
     from PIL import Image
 
     Image.new("RGB", (4, 4)).save(tmp_path / "s07/figures/history.png")
-    page = write_report(tmp_path, tmp_path / "report.html").read_text()
+    page = write_report(collect_figures(tmp_path), tmp_path / "report.html", title="s07").read_text()
     assert "IR clock: time_offset 0.8115 s +- 0.021 s (estimated)" in page
 
 

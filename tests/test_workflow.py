@@ -167,8 +167,8 @@ def test_an_edited_demo_file_reruns_what_reads_it(run):
         planned = {ln.split()[1].rstrip(":") for ln in (res.stdout + res.stderr).splitlines()
                    if ln.startswith(("rule ", "localrule ", "checkpoint "))}
         # the tube's IR series and what depends on it; the half-shell and the calibration are untouched
-        assert planned == {"ingest_ir", "ingest_machine", "couple", "fields", "all", "figures", "export",
-                           "report_html"}, planned
+        assert planned == {"ingest_ir", "ingest_machine", "couple", "fields", "heat", "heat_figure", "all", "figures",
+                           "export", "report_html"}, planned
         assert f"Updated input files: resources/demo/tube/ir/{frame.name}" in res.stdout + res.stderr
         res = _snakemake(work, "-n", "results/halfshell/points.zarr", config=cfg)
         assert "Nothing to be done" in res.stdout + res.stderr
