@@ -44,11 +44,11 @@ def write_series(folder: Path, n: int, width: int, height: int) -> int:
     return sum(f.stat().st_size for f in folder.iterdir())
 
 
-def measure(fn):
-    """Wall and CPU time of a plain run (best of 3 each), then the tracemalloc peak of another run
+def measure(fn, repeats: int = 3):
+    """Wall and CPU time of a plain run (best of ``repeats`` each), then the tracemalloc peak of another run
     (tracemalloc slows allocation-heavy code several fold, so it is not timed)."""
     walls, cpus = [], []
-    for _ in range(3):
+    for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         fn()
         walls.append(time.perf_counter() - t0)

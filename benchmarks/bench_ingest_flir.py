@@ -30,9 +30,8 @@ import argparse
 import os
 import platform
 import shutil
+import sys
 import tempfile
-import time
-import tracemalloc
 import warnings
 from pathlib import Path
 
@@ -44,6 +43,9 @@ from irdic.ingest.ir import ingest_ir
 from irdic.parameters import schema_defaults
 from irdic.synthetic.writers import write_flir
 from irdic.threads import stage_threads
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_ingest import measure  # noqa: E402  (best wall and CPU time, then the tracemalloc peak)
 
 
 def write_record(path: Path, n: int, width: int, height: int) -> int:
@@ -57,21 +59,6 @@ def write_record(path: Path, n: int, width: int, height: int) -> int:
 
     write_flir(path, frames(), times=[1.7e9 + k / 50.0 for k in range(n)])
     return path.stat().st_size
-
-
-def measure(fn, repeats: int):
-    """Best wall and CPU time of ``repeats`` plain runs, then the tracemalloc peak of one more (not timed)."""
-    walls, cpus = [], []
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        walls.append(time.perf_counter() - t0)
-        cpus.append(time.process_time() - c0)
-    tracemalloc.start()
-    fn()
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
-    return min(walls), min(cpus), peak / 2**20
 
 
 def read_all(path: Path) -> None:
