@@ -10,6 +10,7 @@ The Snakemake workflow, the CLI and the Python API all call this one function.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import os
 import re
@@ -136,7 +137,13 @@ class _ConfigLoader(yaml.SafeLoader):
 
 
 def load_schema() -> dict:
-    """The configuration schema as a dict."""
+    """The configuration schema as a dict (a fresh copy: callers may change it)."""
+    return copy.deepcopy(_parsed_schema())
+
+
+@functools.lru_cache(maxsize=1)
+def _parsed_schema() -> dict:
+    # Parsing the YAML costs ~60 ms; each stage entry and config check asks for it.
     with open(SCHEMA_PATH, encoding="utf-8") as fh:
         return yaml.safe_load(fh)
 
