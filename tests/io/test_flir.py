@@ -403,6 +403,23 @@ def test_ingest_seq_with_overrides(tmp_path):
         assert '"emissivity": 0.9' in ds.attrs["irdic_parameters"]
 
 
+def test_ingest_stores_the_readers_values_bit_for_bit(tmp_path):
+    """The streamed ingest (plain arrays, no DataArray per frame) writes exactly what read_ir returns."""
+    from irdic.ingest.ir import ingest_ir
+    from irdic.store import open_store
+
+    c = counts_of(_scene(5, 30, 40, seed=2))
+    c[2, :3, :] = 0  # too cold to have a temperature: NaN pixels, counted, kept
+    path = write_flir(tmp_path / "rec.seq", counts=c, times=[1.7e9 + 0.02 * k for k in range(5)])
+    da = read_ir(path)
+    ds = open_store(ingest_ir(path, tmp_path / "ir.zarr"), "ingest-ir")
+    assert np.isnan(da.values[2, :3]).all()
+    np.testing.assert_array_equal(ds["temperature"].values, da.values)  # NaN where NaN, every bit elsewhere
+    np.testing.assert_array_equal(ds["u"].values, np.arange(40))
+    np.testing.assert_array_equal(ds["v"].values, np.arange(30))
+    np.testing.assert_allclose(ds["time"].values, da["time"].values, atol=1e-6)
+
+
 def test_ingest_refuses_bad_series(tmp_path):
     from irdic.ingest.ir import ingest_ir
     from irdic.synthetic.writers import write_irb
