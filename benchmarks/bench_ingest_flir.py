@@ -13,15 +13,18 @@ with :func:`irdic.synthetic.writers.write_flir`, then times on one thread:
   float32 array in memory.
 
 MB/s are file bytes per wall second and per CPU second of the process
-(``time.process_time``: the figure that stays meaningful on a shared
-machine); the peak is that of Python-allocated memory (tracemalloc, a run of
-its own). Streaming keeps the peak of ``read`` and ``ingest`` flat in the
-number of frames; ``fromfile`` holds the whole record.
+(``time.process_time``, kernel time included: the figure that stays
+meaningful on a shared machine); the peak is that of Python-allocated memory
+(tracemalloc, a run of its own). Streaming keeps the peak of ``read`` and
+``ingest`` flat in the number of frames; ``fromfile`` holds the whole record.
+``--store-dir`` puts ``ir.zarr`` elsewhere (``/dev/shm``: the ingest without
+the file system's cost of writing the chunk files).
 
 Usage::
 
     python benchmarks/bench_ingest_flir.py [--width 640 --height 480 --frames 100 1000]
     python benchmarks/bench_ingest_flir.py --quick   # 320 x 240, 50 and 200 frames
+    python benchmarks/bench_ingest_flir.py --frames 1000 --store-dir /dev/shm
 """
 
 from __future__ import annotations
@@ -86,7 +89,9 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=480)
     ap.add_argument("--frames", type=int, nargs="+", default=[100, 1000])
-    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--repeats", type=int, default=3, help="timed runs of each (the best counts)")
+    ap.add_argument("--store-dir", type=Path, default=None, help="folder of the ir.zarr written (default: "
+                    "the temporary folder of the .seq files)")
     ap.add_argument("--quick", action="store_true", help="320 x 240 px, 50 and 200 frames, one repeat")
     args = ap.parse_args()
     if args.quick:
@@ -94,10 +99,12 @@ def main() -> None:
     print(f"machine: {platform.machine()} {platform.processor() or ''}, python {platform.python_version()}")
     print(f"frame {args.width} x {args.height} px, uncompressed .seq; load average {os.getloadavg()[0]:.1f} "
           f"on {os.cpu_count()} cores")
-    print(f"{'frames':>6} {'MB':>6} | {'read MB/s':>9} {'/cpu':>6} {'peak MiB':>8} | {'ingest MB/s':>11} {'/cpu':>6} "
-          f"{'peak MiB':>8} | {'fromfile MB/s':>13} {'/cpu':>6} {'peak MiB':>8}")
     schema_defaults("ir_source")  # the configuration schema is parsed once per process: not part of any row
     root = Path(tempfile.mkdtemp(prefix="bench_ingest_flir_"))
+    stores = Path(tempfile.mkdtemp(prefix="bench_ingest_flir_", dir=args.store_dir)) if args.store_dir else root
+    print(f"ir.zarr written under {stores}")
+    print(f"{'frames':>6} {'MB':>6} | {'read MB/s':>9} {'/cpu':>6} {'peak MiB':>8} | {'ingest MB/s':>11} {'/cpu':>6} "
+          f"{'peak MiB':>8} | {'fromfile MB/s':>13} {'/cpu':>6} {'peak MiB':>8}")
     try:
         for n in args.frames:
             src = root / f"r{n}.seq"
@@ -106,15 +113,17 @@ def main() -> None:
             offsets = [h["offset"] + 64 + 2 * 32 + (128 if k == 0 else 0) + 2476 + 32 for k, h in enumerate(heads)]
             params = heads[0]["params"]
             rows = []
-            for fn in (lambda: read_all(src), lambda: ingest(src, root / f"ir{n}.zarr"),
+            for fn in (lambda: read_all(src), lambda: ingest(src, stores / f"ir{n}.zarr"),
                        lambda: fromfile(src, offsets, args.width, args.height, params)):
                 wall, cpu, peak = measure(fn, args.repeats)
                 rows.append(f"{mb / wall:>9.0f} {mb / cpu:>6.0f} {peak:>8.1f}")
-                shutil.rmtree(root / f"ir{n}.zarr", ignore_errors=True)
+                shutil.rmtree(stores / f"ir{n}.zarr", ignore_errors=True)
             print(f"{n:>6} {mb:>6.0f} | {rows[0]} | {rows[1]:>22} | {rows[2]:>24}")
             src.unlink()
     finally:
         shutil.rmtree(root, ignore_errors=True)
+        shutil.rmtree(stores, ignore_errors=True)
+    print(f"load average {os.getloadavg()[0]:.1f} at the end")
 
 
 if __name__ == "__main__":

@@ -490,6 +490,7 @@ class FrameStore:
                                       shuffle=_BLOSC_SHUFFLE[FRAME_BLOSC["shuffle"]], blocksize=0,
                                       typesize=dtype.itemsize)
         self._data_dir = self._tmp / name
+        self._folders: set[str] = set()
         self._time = root.create_array(
             "time", shape=(n_frames,), chunks=(n_frames,), dtype="float64", fill_value=np.nan,
             dimension_names=("time",),
@@ -526,13 +527,24 @@ class FrameStore:
             )
         if not 0 <= index < self.n_frames:
             raise DataError(f"{self.path}: frame index {index} outside 0..{self.n_frames - 1}")
-        chunk = self._data_dir / self._data.metadata.encode_chunk_key((index,) + (0,) * len(self.frame_shape))
-        chunk.parent.mkdir(parents=True, exist_ok=True)
-        chunk.write_bytes(self._blosc.encode(np.ascontiguousarray(frame, dtype=self._dtype)))
+        key = self._data.metadata.encode_chunk_key((index,) + (0,) * len(self.frame_shape))
+        self._make_folders(key.rpartition("/")[0])
+        (self._data_dir / key).write_bytes(self._blosc.encode(np.ascontiguousarray(frame, dtype=self._dtype)))
         self._time_buf[index] = time
         for k, v in extra.items():
             self._extra_buf[k][index] = v
         self._written[index] = True
+
+    def _make_folders(self, folder: str) -> None:
+        """Create the chunk folder ``folder`` (``c/7/0``) and those above it, each once (no failed mkdir calls)."""
+        if folder in self._folders:
+            return
+        head = folder.rpartition("/")[0]
+        if head:
+            self._make_folders(head)
+        with contextlib.suppress(FileExistsError):
+            os.mkdir(os.path.join(self._data_dir, folder))
+        self._folders.add(folder)
 
     def set_times(self, times: np.ndarray) -> None:
         """Set all frame times at once (s), e.g. when they are known only at the end."""

@@ -11,11 +11,13 @@ frame rate (:func:`irdic.ingest.inputs.frame_times`).
 from __future__ import annotations
 
 import contextlib
+import functools
+import itertools
 import logging
 import os
 import warnings
 from pathlib import Path
-from typing import Iterator, Mapping, Sequence
+from typing import Iterator, Mapping, NamedTuple, Sequence
 
 import numpy as np
 import xarray as xr
@@ -57,30 +59,62 @@ def _untimed_stacks():
         yield
 
 
+class _Frame(NamedTuple):
+    """One IR frame as the store takes it: what the series checks and writes, without a DataArray.
+
+    A DataArray per frame costs about as much as decoding a frame of a
+    binary record, so frames travel as plain arrays from the reader to the
+    store.
+    """
+
+    label: str
+    values: np.ndarray  #: (v, u) °C
+    v: np.ndarray  #: full-sensor rows (px)
+    u: np.ndarray  #: full-sensor columns (px)
+    time: float | None  #: s, None when the file gives none
+    frame_index: int | None  #: frame number in the recording
+    attrs: Mapping  #: the reader's attributes (those of the first frame describe the series)
+
+
+@functools.lru_cache(maxsize=8)
+def _sensor_axes(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(v, u)`` full-sensor pixel coordinates of a frame from (0, 0), shared by every frame (read-only)."""
+    v, u = np.arange(height, dtype=np.int64), np.arange(width, dtype=np.int64)
+    v.flags.writeable = u.flags.writeable = False
+    return v, u
+
+
 def _read_file(f: Path, ffmt: str) -> xr.DataArray:
     """One non-``.irb`` export, read and parsed (its values in memory)."""
     return _io.read_ir(f, format=ffmt).load()
 
 
-def _frames_of(f: Path, da: xr.DataArray) -> Iterator[tuple[str, xr.DataArray]]:
-    if "time" in da.dims:
-        for i in range(da.sizes["time"]):
-            yield f"{f.name}[{i}]", da.isel(time=i)
-    else:
-        yield f.name, da
+def _frames_of(f: Path, da: xr.DataArray) -> Iterator[_Frame]:
+    """The frames of one export read whole (a frame, or a stack along ``time``)."""
+    values = da.values
+    v, u = da["v"].values, da["u"].values
+    fi = da.attrs.get("frame_index")
+    fi = None if fi is None else int(fi)
+    if "time" not in da.dims:
+        t = float(da["time"]) if "time" in da.coords else None
+        yield _Frame(f.name, values, v, u, t, fi, da.attrs)
+        return
+    times = da["time"].values if "time" in da.coords else None
+    for i in range(values.shape[0]):
+        yield _Frame(f"{f.name}[{i}]", values[i], v, u, None if times is None else float(times[i]), fi, da.attrs)
 
 
 def _streamed(ffmt: str):
     """``(headers, frames)`` of a format read frame by frame (many frames per file), None for the others.
 
     ``headers(f, overrides)`` yields ``(time stamp or None, frame number)`` per frame without decoding
-    pixels; ``frames(f, overrides)`` yields the frames as DataArrays.
+    pixels; ``frames(f, overrides)`` yields ``(values, time, attrs)`` per frame, full-sensor pixels from (0, 0).
     """
     if ffmt == "irb":
         from ..io import irb
 
         return (lambda f, _o: ((irb.unix_time(h), int(h["frame_index"])) for h in irb.iter_irb_headers(f)),
-                lambda f, _o: irb.iter_irb_dataarrays(f))
+                lambda f, _o: irb.iter_irb_records(f))
     if ffmt == "flir":
         from ..io import flir
 
@@ -89,13 +123,13 @@ def _streamed(ffmt: str):
             flir.check_series(heads, f)
             return ((h["seconds"], h["frame_index"]) for h in heads)
 
-        return headers, flir.iter_flir_dataarrays
+        return headers, flir.iter_flir_records
     return None
 
 
 def _iter_ir_frames(files: Sequence[Path], formats: Sequence[str], threads: int = 1,
-                    overrides: Mapping | None = None) -> Iterator[tuple[str, xr.DataArray]]:
-    """Yield (label, frame DataArray with dims (v, u)) for every frame of the series, in file order.
+                    overrides: Mapping | None = None) -> Iterator[_Frame]:
+    """Yield every frame of the series, in file order.
 
     ``threads > 1``: up to ``2 threads`` files are read ahead in a thread
     pool (file parsers release the GIL in numpy and I/O). Files of many
@@ -105,8 +139,10 @@ def _iter_ir_frames(files: Sequence[Path], formats: Sequence[str], threads: int 
     from concurrent.futures import ThreadPoolExecutor
 
     def streamed(f, ffmt):
-        for i, frame in enumerate(_streamed(ffmt)[1](f, overrides)):
-            yield f"{f.name}[{i}]", frame
+        for i, (values, t, attrs) in enumerate(_streamed(ffmt)[1](f, overrides)):
+            fi = attrs.get("frame_index")
+            yield _Frame(f"{f.name}[{i}]", values, *_sensor_axes(*values.shape), t,
+                         None if fi is None else int(fi), attrs)
 
     if threads <= 1:
         for f, ffmt in zip(files, formats):
@@ -231,7 +267,7 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
             labels0, times0, numbers0 = zip(*stamps)
             frame_times(times0, numbers0, labels=labels0, what="IR frame", **p)
         it = _iter_ir_frames(files, formats, thread_budget(), overrides)
-        label0, first = next(it)
+        first = next(it)
         # the first frame's own values (frame_index, units of the DataArray, ...) would describe the whole store
         attrs = series_attrs("ir", first.attrs)
         attrs.update(provenance("ingest-ir", dict(format=fmt, **overrides, **dict(p, time_offset=offset)),
@@ -239,14 +275,14 @@ def ingest_ir(source: str | os.PathLike | Sequence[str | os.PathLike], out: str 
         attrs["n_source_files"] = len(files)
         attrs["time_offset"] = offset if offset == "auto" else float(offset)  # the couple stage reads it
         with FrameStore(
-            out, "temperature", n, ("v", "u"), {"v": first["v"].values, "u": first["u"].values},
+            out, "temperature", n, ("v", "u"), {"v": first.v, "u": first.u},
             dtype=np.float32,
             var_attrs={"units": "degC", "long_name": "temperature"},
             attrs=attrs,
             extra_time_vars={"frame_index": ("int64",
                                              {"long_name": "frame number in the recording (-1: unknown)"})},
         ) as fs:
-            t, numbers = _write_frames(fs, _chain(first, label0, it), n, files, p)
+            t, numbers = _write_frames(fs, itertools.chain([first], it), n, files, p)
     log_gaps("IR", t, numbers)
     return Path(out)
 
@@ -262,36 +298,36 @@ def _offset(value) -> float:
     return out
 
 
-def _write_frames(fs: FrameStore, frames, n: int, files: Sequence[Path], time_params: dict):
+def _write_frames(fs: FrameStore, frames: Iterator[_Frame], n: int, files: Sequence[Path], time_params: dict):
     """Write every frame into ``fs`` and set the time axis; returns (times in s, frame numbers)."""
     file_times: list[float | None] = []
     numbers: list[int | None] = []
     labels: list[str] = []
     nan_total, first_nan = 0, None
     progress = Progress(n, "ingest IR", unit="frames", logger=log)
-    label0 = first = None
-    for i, (label, frame) in enumerate(frames):
+    first = None
+    for i, frame in enumerate(frames):
+        label = frame.label
         if i >= n:
             raise DataError(f"{label}: more frames than counted ({n}); is a file changing while being read?")
         if first is None:
-            label0, first = label, frame
-        _check_window(label, frame, label0, first)
+            first = frame
+        _check_window(frame, first)
         values = frame.values.astype(np.float32, copy=False)
-        n_nan = check_nan_fraction(label, frame, values)
+        n_nan = check_nan_fraction(label, values, frame.u, frame.v)
         nan_total += n_nan
         if n_nan and first_nan is None:
             first_nan = (label, n_nan / values.size)
-        file_times.append(float(frame["time"]) if "time" in frame.coords else None)
-        fi = frame.attrs.get("frame_index")
-        numbers.append(int(fi) if fi is not None else None)
+        file_times.append(frame.time)
+        numbers.append(frame.frame_index)
         labels.append(label)
-        fs.write(i, 0.0, values, frame_index=-1 if fi is None else int(fi))
+        fs.write(i, 0.0, values, frame_index=-1 if frame.frame_index is None else frame.frame_index)
         progress.update(i + 1)
     if len(labels) != n:
         raise DataError(f"{files[0].parent}: counted {n} frames but read {len(labels)}")
     t = frame_times(file_times, numbers, labels=labels, what="IR frame", **time_params)
     fs.set_times(t)
-    frac = nan_total / (n * first.size)
+    frac = nan_total / (n * first.values.size)
     if frac > WARN_NAN_FRACTION:
         log.warning("IR: %.2f %% of all pixel values are NaN (no temperature), first in %s (%.2f %% of "
                     "that frame); the coupling cannot use NaN pixels inside the specimen's footprint",
@@ -301,16 +337,26 @@ def _write_frames(fs: FrameStore, frames, n: int, files: Sequence[Path], time_pa
     return t, numbers
 
 
-def check_nan_fraction(label: str, frame: xr.DataArray, values: np.ndarray) -> int:
-    """Number of NaN pixels of one frame; DataError when more than MAX_NAN_FRACTION of it is NaN."""
+def check_nan_fraction(label: str, values: np.ndarray, u: np.ndarray, v: np.ndarray) -> int:
+    """Number of NaN pixels of one frame; DataError when more than MAX_NAN_FRACTION of it is NaN.
+
+    Parameters
+    ----------
+    label : str
+        The frame, for the message (``file[k]``).
+    values : ndarray, shape (V, U)
+        °C.
+    u, v : ndarray of int, shapes (U,) and (V,)
+        Full-sensor column and row of each pixel (px), named in the message.
+    """
     nan = np.isnan(values)
-    n_nan = int(nan.sum())
+    n_nan = int(np.count_nonzero(nan))
     if n_nan > MAX_NAN_FRACTION * values.size:
         rows, cols = np.nonzero(~nan)
         if rows.size == 0:
             what = "every pixel is NaN (no temperature at all)"
         else:
-            u, v = frame["u"].values, frame["v"].values
+            u, v = np.asarray(u), np.asarray(v)
             what = (f"{100 * n_nan / values.size:.1f} % of the pixels are NaN; the valid ones lie in "
                     f"u {u[cols.min()]}..{u[cols.max()]}, v {v[rows.min()]}..{v[rows.max()]} (full-sensor px)")
         raise DataError(
@@ -319,21 +365,17 @@ def check_nan_fraction(label: str, frame: xr.DataArray, values: np.ndarray) -> i
     return n_nan
 
 
-def _check_window(label: str, frame: xr.DataArray, label0: str, first: xr.DataArray) -> None:
+def _check_window(frame: _Frame, first: _Frame) -> None:
     """DataError when ``frame`` differs in size or crop window from the series' first frame."""
-    if frame.shape != first.shape or not (
-        np.array_equal(frame["u"].values, first["u"].values) and np.array_equal(frame["v"].values, first["v"].values)
+    if frame.values.shape != first.values.shape or not (
+        (frame.u is first.u or np.array_equal(frame.u, first.u))
+        and (frame.v is first.v or np.array_equal(frame.v, first.v))
     ):
         raise DataError(
-            f"{label}: frame covers u {_span(frame['u'])}, v {_span(frame['v'])} (shape {frame.shape}), "
-            f"but the first frame ({label0}) covers u {_span(first['u'])}, v {_span(first['v'])} "
-            f"(shape {first.shape}); all frames of a series must have the same size and crop window"
+            f"{frame.label}: frame covers u {_span(frame.u)}, v {_span(frame.v)} (shape {frame.values.shape}), "
+            f"but the first frame ({first.label}) covers u {_span(first.u)}, v {_span(first.v)} "
+            f"(shape {first.values.shape}); all frames of a series must have the same size and crop window"
         )
-
-
-def _chain(first, label0, it):
-    yield label0, first
-    yield from it
 
 
 def _span(c) -> str:

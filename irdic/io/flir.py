@@ -47,7 +47,8 @@ from ._common import check_file
 from .flir_planck import camera_info, counts_table, object_parameters, parameter_attrs
 from .stack import check_temperatures, temperature_dataarray
 
-__all__ = ["read_flir", "iter_flir_frames", "iter_flir_headers", "iter_flir_dataarrays", "is_radiometric_jpeg",
+__all__ = ["read_flir", "iter_flir_frames", "iter_flir_headers", "iter_flir_dataarrays", "iter_flir_records",
+           "is_radiometric_jpeg",
            "MAGIC", "HEADER_SIZE", "ENTRY_SIZE", "REC_RAW", "REC_CAMERA", "RAW_HEADER_SIZE"]
 
 MAGIC = b"FFF\x00"
@@ -417,17 +418,22 @@ def _attrs(info: dict, path) -> dict:
     return attrs
 
 
-def iter_flir_dataarrays(path: str | os.PathLike, overrides: Mapping[str, float] | None = None
-                         ) -> Iterator[xr.DataArray]:
-    """Stream the frames of a FLIR file as DataArrays (for series ingest).
+def iter_flir_records(path: str | os.PathLike, overrides: Mapping[str, float] | None = None
+                      ) -> Iterator[tuple[np.ndarray, float | None, dict]]:
+    """Stream the frames of a FLIR file as ``(values, time, attrs)``, without building DataArrays.
+
+    The content of :func:`iter_flir_dataarrays` (series ingest takes it as
+    it is: a DataArray per frame costs as much as decoding it).
 
     Yields
     ------
-    xarray.DataArray
-        float32 °C, dims ``("v", "u")``; scalar coordinate ``time`` = the
-        frame's Unix time (s, UTC), absent when the frame has none;
-        ``attrs`` as :func:`read_flir` plus ``frame_index`` (the position in
-        a file of several frames; absent for a file of one).
+    values : ndarray of float32, shape (height, width)
+        °C, top row first, full-sensor pixels from (0, 0).
+    time : float or None
+        The frame's Unix time (s, UTC).
+    attrs : dict
+        As :func:`read_flir` plus ``frame_index`` (the position in a file of
+        several frames; absent for a file of one).
     """
     p = check_file(path)
     for info, frame in iter_flir_frames(p, overrides):
@@ -435,7 +441,22 @@ def iter_flir_dataarrays(path: str | os.PathLike, overrides: Mapping[str, float]
         attrs = _attrs(info, p)
         if info["frame_index"] is not None:
             attrs["frame_index"] = info["frame_index"]
-        yield temperature_dataarray(frame, time=info["seconds"], attrs=attrs)
+        yield frame, info["seconds"], attrs
+
+
+def iter_flir_dataarrays(path: str | os.PathLike, overrides: Mapping[str, float] | None = None
+                         ) -> Iterator[xr.DataArray]:
+    """Stream the frames of a FLIR file as DataArrays.
+
+    Yields
+    ------
+    xarray.DataArray
+        float32 °C, dims ``("v", "u")``; scalar coordinate ``time`` = the
+        frame's Unix time (s, UTC), absent when the frame has none;
+        ``attrs`` as :func:`iter_flir_records`.
+    """
+    for frame, t, attrs in iter_flir_records(path, overrides):
+        yield temperature_dataarray(frame, time=t, attrs=attrs)
 
 
 def check_series(heads: list[dict], path) -> None:

@@ -53,8 +53,8 @@ from ..errors import DataError, FormatError, IrdicWarning
 from ._common import check_file
 from .stack import check_temperatures, temperature_dataarray
 
-__all__ = ["read_irb", "iter_irb_frames", "iter_irb_headers", "iter_irb_dataarrays", "count_irb_frames",
-           "unix_time"]
+__all__ = ["read_irb", "iter_irb_frames", "iter_irb_headers", "iter_irb_dataarrays", "iter_irb_records",
+           "count_irb_frames", "unix_time"]
 
 log = logging.getLogger(__name__)
 
@@ -424,8 +424,32 @@ def _attrs(info: dict, path) -> dict:
     return attrs
 
 
+def iter_irb_records(path: str | os.PathLike) -> Iterator[tuple[np.ndarray, float | None, dict]]:
+    """Stream the frames of an ``.irb`` file as ``(values, time, attrs)``, without building DataArrays.
+
+    The content of :func:`iter_irb_dataarrays` (series ingest takes it as
+    it is), each frame checked as it is decoded.
+
+    Yields
+    ------
+    values : ndarray of float32, shape (height, width)
+        °C, top row first, full-sensor pixels from (0, 0).
+    time : float or None
+        Recording time in s since 1970-01-01 00:00 of the camera's clock,
+        None when the frame has no valid date.
+    attrs : dict
+        As :func:`read_irb` plus ``frame_index``.
+    """
+    p = check_file(path)
+    for info, frame in iter_irb_frames(p):
+        check_temperatures(frame, p)
+        attrs = _attrs(info, p)
+        attrs["frame_index"] = int(info["frame_index"])
+        yield frame, unix_time(info), attrs
+
+
 def iter_irb_dataarrays(path: str | os.PathLike) -> Iterator[xr.DataArray]:
-    """Stream the frames of an ``.irb`` file as DataArrays (for series ingest).
+    """Stream the frames of an ``.irb`` file as DataArrays.
 
     Parameters
     ----------
@@ -442,12 +466,8 @@ def iter_irb_dataarrays(path: str | os.PathLike) -> Iterator[xr.DataArray]:
         when the frame has no valid date. ``attrs`` as :func:`read_irb` plus
         ``frame_index``.
     """
-    p = check_file(path)
-    for info, frame in iter_irb_frames(p):
-        check_temperatures(frame, p)
-        attrs = _attrs(info, p)
-        attrs["frame_index"] = int(info["frame_index"])
-        yield temperature_dataarray(frame, time=unix_time(info), attrs=attrs)
+    for frame, t, attrs in iter_irb_records(path):
+        yield temperature_dataarray(frame, time=t, attrs=attrs)
 
 
 def unix_time(info: dict) -> float | None:

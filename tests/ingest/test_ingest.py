@@ -206,7 +206,7 @@ def test_nan_check_names_full_sensor_pixels_of_a_cropped_frame():
     da = temperature_dataarray(x, u0=300, v0=200)  # a crop export's sensor position
     with pytest.raises(DataError, match=r"f\.txt: 97\.9 % of the pixels are NaN; the valid ones lie in "
                                         r"u 300\.\.300, v 200\.\.200 \(full-sensor px\)"):
-        check_nan_fraction("f.txt", da, da.values)
+        check_nan_fraction("f.txt", da.values, da["u"].values, da["v"].values)
 
 
 def test_some_nan_pixels_warn_with_their_fraction(tmp_path, caplog):

@@ -25,12 +25,12 @@ KELVIN = 273.15
 # ----------------------------------------------------------------------------
 # an independent decoder of the documented layout, one pixel at a time
 # ----------------------------------------------------------------------------
-def _camera_by_hand(rec: bytes) -> dict:
-    f = lambda off: struct.unpack_from("<f", rec, off)[0]  # noqa: E731 - the records of every sample are LE
+def _camera_by_hand(rec: bytes, bo: str = "<") -> dict:
+    f = lambda off: struct.unpack_from(bo + "f", rec, off)[0]  # noqa: E731 - the records of every sample are LE
     return {"E": f(0x20), "OD": f(0x24), "RTemp": f(0x28) - KELVIN, "ATemp": f(0x2c) - KELVIN,
             "IRWTemp": f(0x30) - KELVIN, "IRT": f(0x34), "RH": f(0x3c), "PR1": f(0x58), "PB": f(0x5c),
             "PF": f(0x60), "ATA1": f(0x70), "ATA2": f(0x74), "ATB1": f(0x78), "ATB2": f(0x7c), "ATX": f(0x80),
-            "PO": struct.unpack_from("<i", rec, 0x308)[0], "PR2": f(0x30c)}
+            "PO": struct.unpack_from(bo + "i", rec, 0x308)[0], "PR2": f(0x30c)}
 
 
 def _raw2temp(raw: float, E, OD, RTemp, ATemp, IRWTemp, IRT, RH, PR1, PB, PF, PO, PR2, ATA1, ATA2, ATB1, ATB2,
@@ -403,6 +403,23 @@ def test_ingest_seq_with_overrides(tmp_path):
         assert '"emissivity": 0.9' in ds.attrs["irdic_parameters"]
 
 
+def test_ingest_stores_the_readers_values_bit_for_bit(tmp_path):
+    """The streamed ingest (plain arrays, no DataArray per frame) writes exactly what read_ir returns."""
+    from irdic.ingest.ir import ingest_ir
+    from irdic.store import open_store
+
+    c = counts_of(_scene(5, 30, 40, seed=2))
+    c[2, :3, :] = 0  # too cold to have a temperature: NaN pixels, counted, kept
+    path = write_flir(tmp_path / "rec.seq", counts=c, times=[1.7e9 + 0.02 * k for k in range(5)])
+    da = read_ir(path)
+    ds = open_store(ingest_ir(path, tmp_path / "ir.zarr"), "ingest-ir")
+    assert np.isnan(da.values[2, :3]).all()
+    np.testing.assert_array_equal(ds["temperature"].values, da.values)  # NaN where NaN, every bit elsewhere
+    np.testing.assert_array_equal(ds["u"].values, np.arange(40))
+    np.testing.assert_array_equal(ds["v"].values, np.arange(30))
+    np.testing.assert_allclose(ds["time"].values, da["time"].values, atol=1e-6)
+
+
 def test_ingest_refuses_bad_series(tmp_path):
     from irdic.ingest.ir import ingest_ir
     from irdic.synthetic.writers import write_irb
@@ -498,3 +515,119 @@ def test_cli_ingest_with_overrides(tmp_path, capsys):
         assert ds.attrs["emissivity"] == 0.9 and ds.attrs["reflected_temp"] == 25.0
     assert main(["ingest-ir", str(path), str(tmp_path / "ir2.zarr"), "--emissivity", "1.9"]) == 2
     assert "ir.emissivity: 1.9 is greater than the maximum of 1" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------
+# file variants not among the samples, against a decoder written here from the layout
+# ----------------------------------------------------------------------------
+def _png_by_hand(data: bytes) -> np.ndarray:
+    """A 16-bit greyscale PNG decoded with zlib and the five row filters (samples as stored, big-endian)."""
+    import zlib
+
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    pos, idat, w = 8, b"", None
+    while pos < len(data):
+        n, kind = struct.unpack_from(">I4s", data, pos)
+        body = data[pos + 8:pos + 8 + n]
+        if kind == b"IHDR":
+            w, h, depth, colour = struct.unpack_from(">IIBB", body)
+            assert (depth, colour) == (16, 0)
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + n
+    flat, stride, bpp = zlib.decompress(idat), 2 * w, 2
+    rows, prev = [], bytearray(stride)
+    for r in range(h):
+        kind, line = flat[r * (stride + 1)], bytearray(flat[r * (stride + 1) + 1:(r + 1) * (stride + 1)])
+        for i in range(stride):
+            a = line[i - bpp] if i >= bpp else 0
+            b, c = prev[i], prev[i - bpp] if i >= bpp else 0
+            p = a + b - c
+            pred = [0, a, b, (a + b) // 2,
+                    a if abs(p - a) <= abs(p - b) and abs(p - a) <= abs(p - c) else b if abs(p - b) <= abs(p - c)
+                    else c][kind]
+            line[i] = (line[i] + pred) & 0xFF
+        rows.append(bytes(line))
+        prev = line
+    return np.frombuffer(b"".join(rows), ">u2").reshape(h, w)
+
+
+def _blocks_by_hand(data: bytes) -> list[tuple[int, dict, bytes, bytes]]:
+    """``(offset, {type: (subtype, offset, length)}, raw record, camera record)`` of each FFF block, chain order."""
+    out, pos = [], 0
+    while pos + 64 <= len(data) and data[pos:pos + 4] in (b"FFF\x00", b"AFF\x00"):
+        hb = "<" if 100 <= struct.unpack_from("<I", data, pos + 0x14)[0] < 200 else ">"
+        at, n = struct.unpack_from(hb + "II", data, pos + 0x18)
+        recs, end = {}, at + 32 * n
+        for k in range(n):
+            kind, sub, _, _, off, length = struct.unpack_from(hb + "HHIIII", data, pos + at + 32 * k)
+            if kind:
+                recs.setdefault(kind, (sub, off, length))
+                end = max(end, off + length)
+        raw, cam = (data[pos + recs[t][1]:pos + recs[t][1] + recs[t][2]] for t in (0x01, 0x20))
+        out.append((pos, recs, raw, cam))
+        pos += end
+    return out
+
+
+def _temperatures_by_hand(data: bytes) -> list[np.ndarray]:
+    """°C of every frame of an FFF chain, pixel by pixel through :func:`_raw2temp`."""
+    frames = []
+    for _pos, recs, raw, cam in _blocks_by_hand(data):
+        rb = "<" if struct.unpack_from("<H", raw)[0] == 2 else ">"
+        w, h = struct.unpack_from(rb + "HH", raw, 2)
+        sub = recs[0x01][0]
+        if sub in (1, 2):  # 1: big-endian whatever the mark says; 2: the record's byte order
+            counts = np.frombuffer(raw, (">" if sub == 1 else rb) + "u2", w * h, 32).reshape(h, w)
+        else:
+            assert sub == 3
+            stored = _png_by_hand(raw[32:])
+            cb = "<" if struct.unpack_from("<H", cam)[0] == 2 else ">"
+            median, rng = struct.unpack_from(cb + "HH", cam, 0x338)
+            inside = [np.mean(np.abs(c.astype(np.int64) - median) <= rng) for c in (stored, stored.byteswap())]
+            counts = stored if inside[0] > inside[1] else stored.byteswap()
+        par = _camera_by_hand(cam, "<" if struct.unpack_from("<H", cam)[0] == 2 else ">")
+        frames.append(np.array([[_raw2temp(float(c), **par) for c in row] for row in counts]))
+    return frames
+
+
+_VARIANT_PARAMS = {"emissivity": 0.87, "distance": 3.0, "reflected_k": 300.0, "atmosphere_k": 296.0,
+                   "window_k": 291.0, "window_transmission": 0.9, "humidity": 0.65}
+
+
+@pytest.mark.parametrize("variant", [
+    dict(header_order="<", record_order=">"),  # big-endian raw image, subtype 2
+    dict(header_order=">", record_order=">"),
+    dict(header_order=">", record_order=">", subtype=1),  # subtype 1: big-endian raw (exiftool; not seen)
+    dict(header_order="<", record_order="<", magic=b"AFF\x00"),
+    dict(header_order=">", record_order=">", magic=b"AFF\x00"),
+    dict(jpeg=True, header_order=">", record_order="<"),  # uncompressed raw in a radiometric JPEG
+    dict(jpeg=True, header_order=">", record_order=">"),
+    dict(jpeg=True, header_order="<", record_order="<"),
+    dict(jpeg=True, encoding="png", header_order=">", record_order="<"),  # samples stored LE, as cameras do
+    dict(jpeg=True, encoding="png", header_order=">", record_order=">", png_swap=False),  # stored as PNG says
+    dict(jpeg=True, encoding="png", header_order="<", record_order=">", png_swap=False),
+], ids=lambda v: "-".join(f"{k}={v[k]!r}" for k in v))
+def test_variants_match_an_independent_decoder(tmp_path, variant):
+    """Every pixel of each variant within 0.01 K of the decoder above, and of the scene within a count."""
+    variant = dict(variant)
+    magic = variant.pop("magic", None)
+    jpeg = variant.get("jpeg", False)
+    t = _scene(1, 20, 28, seed=3)[0] if jpeg else _scene(3, 20, 28, seed=3)
+    path = write_flir(tmp_path / ("a.jpg" if jpeg else "a.seq"), t, params=_VARIANT_PARAMS, **variant)
+    if magic is not None:
+        data = bytearray(path.read_bytes())
+        for pos, *_ in _blocks_by_hand(bytes(data)):
+            data[pos:pos + 4] = magic
+        path.write_bytes(bytes(data))
+    data = path.read_bytes()
+    by_hand = _temperatures_by_hand(_rjpeg_block(data) if jpeg else data)
+    assert len(by_hand) == (1 if jpeg else 3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        da = read_ir(path)
+    got = da.values.reshape(len(by_hand), *t.shape[-2:])
+    for k, want in enumerate(by_hand):
+        assert np.abs(got[k] - want).max() < 0.01, k
+    assert np.abs(got - t.reshape(got.shape)).max() < 0.02  # half a count of this camera: about 0.01 K
+    assert da.attrs["emissivity"] == pytest.approx(0.87) and da.attrs["distance"] == 3.0
