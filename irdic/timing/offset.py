@@ -23,13 +23,19 @@ rank-one model,
 ``J(tau) = ||X_c||^2 - s_1^2(X_c)``,
 
 with ``X_c`` the rows of ``X`` less their means and ``s_1`` its largest
-singular value. ``J`` is evaluated on a grid of candidates over a quarter
-of the record each way (on the frames that every candidate places inside
-the DIC record, so all candidates are judged on the same data), the best
-one is refined by bounded Brent minimisation (the positions are continuous in
-time: no frame grid limits the resolution), and the standard uncertainty
-comes from the criterion's curvature and the residual noise (Notes of
-:func:`estimate_offset`).
+singular value. The samples are taken at the DIC points and at nodes
+between them (about one smoothing width apart, :func:`_densified`), so that
+every pixel of the specimen counts. ``J`` is evaluated on a grid of
+candidates over a third of the record each way (on the frames that every
+candidate places inside the DIC record, so all candidates are judged on the
+same data), finer grids follow around the best one, and the estimate is
+refined by Gauss-Newton steps on the score ``Y . R(tau) = 0``, with ``R`` the
+rank-one residual and ``Y`` the derivative of the rank-one *model* (the
+pattern, averaged over the other frames, moved along the image velocity):
+the frames' own derivative carries the smoothed noise's gradient, whose
+share grows as the pattern weakens. The positions are continuous in time:
+no frame grid limits the resolution. The standard uncertainty comes from
+``Y`` and the pixel noise (Notes of :func:`estimate_offset`).
 
 When it cannot work: a static specimen (no motion: every offset fits the
 same), a uniform temperature (no pattern to carry), or motion too small for
@@ -40,6 +46,7 @@ motion found and the uncertainty it allows.
 
 from __future__ import annotations
 
+import copy
 import logging
 from dataclasses import dataclass
 
@@ -47,6 +54,7 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 from scipy.ndimage import distance_transform_edt, gaussian_filter
 from scipy.optimize import minimize_scalar
+from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from ..errors import DataError
 from ..footprint.mask import specimen_mask
@@ -59,21 +67,27 @@ log = logging.getLogger(__name__)
 #: an estimate whose standard uncertainty exceeds this many IR frame periods is refused
 MAX_STD_FRAMES = 0.25
 #: points used (evenly spread over the cloud's order): the criterion's noise falls as 1/sqrt(points)
-MAX_POINTS = 3000
+MAX_POINTS = 12000
 #: frames used (evenly spread over the record)
 MAX_FRAMES = 600
 #: Gaussian smoothing of the frames (px) before they are sampled
-SMOOTHING_PX = 3.0
+SMOOTHING_PX = 1.5
 #: an offset is estimated only where the points move at least this much in the image (px) ...
 MIN_MOTION_PX = 0.5
 #: ... and at least this many times their scatter from stage to stage (DIC noise)
 MIN_MOTION_JITTERS = 20.0
 #: the criterion's own bias, in IR frame periods, added in quadrature to the noise's share of the uncertainty:
 #: on noise-free synthetic scenes (smoothed frames of a moving, foreshortened pattern; positions interpolated
-#: between DIC stages) the estimates lie within 0.09 frame periods of the truth
+#: between DIC stages by a cubic spline) the estimates lie within 0.03 frame periods of the truth
 MODEL_STD_FRAMES = 0.03
 #: coarse candidates at most (the refinement is continuous)
 _MAX_CANDIDATES = 41
+#: points of the coarse search at most (it only has to find the basin)
+_COARSE_POINTS = 2000
+#: Gauss-Newton steps of the refinement at most
+_GN_STEPS = 8
+#: neighbours (the point included) of the local planes that give the pattern's gradient
+_NEIGHBOURS = 9
 
 
 @dataclass(frozen=True)
@@ -140,7 +154,22 @@ class _Sampler:
         k = min(3, t_dic.size - 1)
         self.spline = make_interp_spline(t_dic, positions.reshape(t_dic.size, -1), k=k, axis=0)
         self.M = positions.shape[1]
+        self.t_dic, self.positions = t_dic, positions
+        k = min(_NEIGHBOURS, self.M)
+        self.neighbours = cKDTree(positions[0]).query(positions[0], k=k)[1][:, 1:]
         _, self.h, self.w = self.frames.shape
+
+    def subset(self, points: int) -> "_Sampler":
+        """The same frames with at most ``points`` of the points, evenly spread."""
+        if self.M <= points:
+            return self
+        keep = np.linspace(0, self.M - 1, points).round().astype(int)
+        out = copy.copy(self)
+        out.spline = make_interp_spline(self.t_dic, self.positions[:, keep].reshape(self.t_dic.size, -1),
+                                        k=min(3, self.t_dic.size - 1), axis=0)
+        out.positions, out.M = self.positions[:, keep], keep.size
+        out.neighbours = cKDTree(out.positions[0]).query(out.positions[0], k=min(_NEIGHBOURS, keep.size))[1][:, 1:]
+        return out
 
     def inside(self, tau_lo: float, tau_hi: float) -> np.ndarray:
         """Frames every offset in [tau_lo, tau_hi] places inside the DIC record."""
@@ -205,10 +234,10 @@ class _Criterion:
         return self.parts(tau)[0] / self.idx.size / self.sampler.M
 
 
-def _prepared(positions, t_dic, max_points, inset=0.0):
+def _prepared(positions, t_dic, max_points, inset=0.0, spacing=0.0):
     """Points seen at half the DIC times or more, their gaps interpolated linearly in time; of those the ones at
     least ``inset`` px inside the cloud's outline at the first and the last time, at most ``max_points``,
-    evenly spread."""
+    evenly spread. With ``spacing`` (px), samples between the points are added (:func:`_densified`)."""
     ok_t = np.isfinite(positions).all(axis=2)
     ok = ok_t.sum(axis=0) >= max(2, (t_dic.size + 1) // 2)
     pos = positions[:, ok].copy()
@@ -216,6 +245,8 @@ def _prepared(positions, t_dic, max_points, inset=0.0):
         good = ok_t[:, ok][:, j]
         for c in (0, 1):
             pos[:, j, c] = np.interp(t_dic, t_dic[good], pos[good, j, c])
+    if spacing > 0 and pos.shape[1] >= 3:
+        pos = _densified(pos, spacing)
     keep = np.ones(pos.shape[1], bool)
     if inset > 0 and keep.sum() >= 3:
         for k in (0, -1):
@@ -224,6 +255,40 @@ def _prepared(positions, t_dic, max_points, inset=0.0):
     if keep.size > max_points:
         keep = keep[np.linspace(0, keep.size - 1, max_points).round().astype(int)]
     return pos[:, keep]
+
+
+def _densified(pos: np.ndarray, spacing: float, max_factor: int = 4) -> np.ndarray:
+    """The points (n_t, N, 2) and samples between them, about ``spacing`` px apart in the first frame.
+
+    Each triangle of the points' triangulation at the first time (without the triangles longer than
+    3 median spacings: holes and concave outlines stay open) is divided into ``r^2`` by a barycentric grid
+    of ``r + 1`` nodes per edge, ``r`` the points' spacing over ``spacing`` (at most ``max_factor``); a node
+    moves with the barycentric mean of its corners, exact where the motion is affine over a triangle.
+    Nodes shared by triangles are kept once.
+    """
+    p0 = pos[0]
+    d = cKDTree(p0).query(p0, k=2)[0][:, 1]
+    r = int(min(max_factor, np.floor(np.median(d) / spacing)))
+    if r < 2:
+        return pos
+    try:
+        tri = Delaunay(p0)
+    except QhullError:
+        return pos
+    c = p0[tri.simplices]
+    edges = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
+    simp = tri.simplices[edges <= 3.0 * np.median(d)]
+    i, j = np.meshgrid(np.arange(r + 1), np.arange(r + 1), indexing="ij")
+    sel = (i + j <= r) & ~(((i == 0) | (i == r)) & (j == 0) | ((i == 0) & (j == r)))
+    bary = np.stack([r - i[sel] - j[sel], i[sel], j[sel]], axis=1) / r  # (B, 3)
+    # a node's key: its corners' indices and weights, sorted, so that a node shared by two triangles is found once
+    nodes = simp[:, None, :].repeat(bary.shape[0], axis=1).reshape(-1, 3)
+    wts = np.broadcast_to(bary, (simp.shape[0],) + bary.shape).reshape(-1, 3)
+    key = np.sort(np.where(wts > 0, nodes, -1) * (r + 1) + np.rint(wts * r).astype(np.int64), axis=1)
+    _, first = np.unique(key, axis=0, return_index=True)
+    nodes, wts = nodes[first], wts[first]
+    extra = np.einsum("tnci,nc->tni", pos[:, nodes], wts)
+    return np.concatenate([pos, extra], axis=1)
 
 
 def _inside_outline(p: np.ndarray) -> np.ndarray:
@@ -257,7 +322,7 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         at fewer than half of the times, or nearer the cloud's outline than
         3 smoothing widths + 1 px, are left out).
     centre : float
-        Middle of the searched offsets (s); the search covers a quarter of the
+        Middle of the searched offsets (s); the search covers a third of the
         shorter record each way.
     parameter : str
         The configuration key named in errors.
@@ -278,27 +343,27 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
 
     Notes
     -----
-    Near the minimum the samples are ``X(tau) = X(tau*) + X' d + e`` with
+    Near the root the samples are ``X(tau) = X(tau*) + X' d + e`` with
     ``d = tau - tau*``. After removing the directions the rank-one model
     absorbs (row means, ``u w^T`` and ``z v^T`` for the fitted singular
-    vectors ``u``, ``v``), ``Y = (I - u u^T) X'_c (I - v v^T)`` and the least
-    squares estimate has ``var(d) = var(Y . e) / ||Y||^4``. The sample errors
+    vectors ``u``, ``v``), ``Y = (I - u u^T) X'_c (I - v v^T)``, with ``X'``
+    the model's derivative ``u_k s_1 grad(v^(-k)) . w`` (the pattern
+    ``v^(-k)`` from all frames but ``k``, its gradient from local planes
+    through each sample's neighbours, ``w`` the image velocity), and the
+    Gauss-Newton root has ``var(d) = var(Y . e) / ||Y||^4``. The sample errors
     are ``e = B G n``: pixel errors ``n`` of variance ``sigma^2``, smoothed
     (``G``) and sampled bilinearly (``B``), so ``var(Y . e) = sigma^2
     ||G B^T Y||^2`` (neighbouring samples share pixels and their errors).
     ``sigma^2`` comes from the raw frames: their samples' misfit of the
     rank-one model, each over its bilinear noise gain, per degree of
-    freedom. ``X'`` is a central difference over a tenth of a frame period;
-    it also holds the smoothed noise's own gradient along the image velocity
-    ``w``, whose expected square, ``sigma^2 |w|^2 / (8 pi s^4)`` per sample
-    for a Gaussian of ``s`` px, is taken out of ``||Y||^2``.
+    freedom.
     :data:`MODEL_STD_FRAMES` frame
     periods of model error are added in quadrature.
     """
     t_ir, t_dic = np.asarray(t_ir, float), np.asarray(t_dic, float)
     # the smoothing kernel of a kept point stays on the specimen
     inset = np.ceil(3 * smoothing_px) + 1 if smoothing_px > 0 else 0.0
-    pos = _prepared(np.asarray(positions, float), t_dic, max_points, inset)
+    pos = _prepared(np.asarray(positions, float), t_dic, max_points, inset, smoothing_px)
     period = float(np.median(np.diff(t_ir))) if t_ir.size > 1 else np.nan
     _check_sizes(pos, t_dic, t_ir, parameter)
     motion, jitter = _motion(pos)
@@ -307,8 +372,9 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         frames, t_ir = frames[keep], t_ir[keep]
     _check_motion(motion, jitter, parameter)
     sampler = _Sampler(frames, t_ir, t_dic, pos, smoothing_px)
-    grid, crit, best = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", motion, parameter)
+    grid, crit, best, outer = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", motion, parameter)
     tau, J = _refined(sampler, grid, best, period)
+    _check_inside(tau, outer, crit, motion, parameter)
     std, noise = _uncertainty(sampler, J, tau, period)
     _check_identified(std, period, motion, parameter)
     std = float(np.hypot(std, MODEL_STD_FRAMES * period))
@@ -355,6 +421,16 @@ def _check_identified(std, period, motion, parameter):
             f"timing information. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
+def _check_inside(tau, grid, crit, motion, parameter):
+    """The refined offset must lie inside the searched range (not at its end: the minimum may lie beyond)."""
+    tol = 0.02 * (grid[1] - grid[0])
+    if not grid[0] + tol < tau < grid[-1] - tol and np.ptp(crit) > 1e-12 * max(crit.max(), 1e-300):
+        raise DataError(
+            f"{parameter}: auto: the best offset lies at the end of the searched range {grid[0]:.4g}..{grid[-1]:.4g} s "
+            f"(the DIC points move at most {motion:.3g} px in the IR image): the clocks differ by more than a "
+            f"third of the record, or the data do not fix the offset; set {parameter} to a number (s)")
+
+
 def _fmt_std(std: float, period: float) -> str:
     if not np.isfinite(std):
         return "no precision at all (the criterion is flat)"
@@ -362,83 +438,130 @@ def _fmt_std(std: float, period: float) -> str:
 
 
 def _coarse(sampler, t_ir, t_dic, centre, period, where, motion, parameter):
-    """The coarse candidates, ``J`` per sample on them (same frames for all) and the index of the best."""
+    """The finest candidates, ``J`` per sample on them (same frames for all), the index of the best and the
+    outer grid (the searched range).
+
+    The candidates cover a third of the shorter record each way (less where fewer than 4 frames would lie
+    inside the DIC record for all of them), judged with at most :data:`_COARSE_POINTS` points on the
+    frames that every candidate places inside the DIC record: candidates judged on different frames are
+    not comparable (frames with little motion or pattern fit any offset). Where the candidates lie more
+    than a frame period apart, finer grids around the best one follow.
+    """
     span = min(t_dic[-1] - t_dic[0], t_ir[-1] - t_ir[0])
-    half = max(0.25 * span, 2.0 * period)
+    half = max(span / 3.0, 2.0 * period)
     n = int(np.clip(np.ceil(2 * half / period) + 1, 9, _MAX_CANDIDATES))
-    for _ in range(8):
+    for _ in range(16):
         grid = centre + np.linspace(-half, half, n)
         idx = sampler.inside(grid[0], grid[-1])
         if idx.size >= 4:
             break
-        half *= 0.5
+        half *= 0.8
     else:
         raise DataError(f"{where}: the IR record ({t_ir[0]:.4g}..{t_ir[-1]:.4g} s) and the DIC record "
                         f"({t_dic[0]:.4g}..{t_dic[-1]:.4g} s) overlap in fewer than 4 IR frames around an offset "
                         f"of {centre:.4g} s; set {parameter} to a number (s)")
-    J = _Criterion(sampler, idx)
+    J = _Criterion(sampler.subset(_COARSE_POINTS), idx)
     crit = np.array([J(g) for g in grid])
     best = int(np.argmin(crit))
-    if best in (0, grid.size - 1) and np.ptp(crit) > 1e-12 * max(crit.max(), 1e-300):
-        raise DataError(
-            f"{where}: the best offset lies at the end of the searched range {grid[0]:.4g}..{grid[-1]:.4g} s "
-            f"(the DIC points move at most {motion:.3g} px in the IR image): the clocks differ by more than a "
-            f"quarter of the record, or the data do not fix the offset; set {parameter} to a number (s)")
-    return grid, crit, best
+    outer, outer_crit = grid, crit
+    while grid[1] - grid[0] > period:
+        step = grid[1] - grid[0]
+        grid = grid[best] + np.linspace(-step, step, 9)
+        J = _Criterion(J.sampler, J.sampler.inside(grid[0], grid[-1]))
+        crit = np.array([J(g) for g in grid])
+        best = int(np.argmin(crit))
+    return grid, crit, best, outer
 
 
 def _refined(sampler: _Sampler, grid: np.ndarray, best: int, period: float):
     """The minimum of ``J`` between the coarse candidates next to ``best`` (on the frames every offset there
-    places inside the DIC record); while it lies at an end of that bracket, the bracket moves on by one
-    candidate (the coarse criterion, on fewer frames, can pick a neighbour of the true minimum)."""
+    places inside the DIC record), then Gauss-Newton steps on the model's derivative
+    (:func:`_model_derivative`) to the root of the score; while the minimum lies at an end of the bracket, the
+    bracket moves on by one candidate (the coarse criterion, on fewer frames, can pick a neighbour of the true
+    minimum)."""
     step = grid[1] - grid[0]
     lo, hi = grid[best] - step, grid[best] + step
     for _ in range(4):
         J = _Criterion(sampler, sampler.inside(lo, hi))
         if J.idx.size < 4:
             break
-        tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded", options={"xatol": 0.002 * period}).x)
+        tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded", options={"xatol": 0.01 * period}).x)
         if lo + 0.02 * step < tau < hi - 0.02 * step or not grid[0] < tau < grid[-1]:
-            return tau, J
+            break
         shift = step if tau >= hi - 0.02 * step else -step
         lo, hi = lo + shift, hi + shift
+    for _ in range(_GN_STEPS):
+        Y, R, _ = _score_parts(sampler, J, tau)
+        S = float(np.sum(Y * Y))
+        if not S > 0:
+            break
+        new = float(np.clip(tau - float(np.sum(Y * R)) / S, lo, hi))
+        done = abs(new - tau) <= 1e-4 * period
+        tau = new
+        if done:
+            break
     return tau, J
+
+
+def _score_parts(sampler: _Sampler, J: _Criterion, tau: float):
+    """At ``tau``: the model's derivative ``Y`` with the rank-one directions taken out, the residual ``R`` of the
+    rank-one fit (both (n, M), K/s and K) and the fitted singular vectors ``(u, v)``."""
+    e, Xc, u, v = J.parts(tau)
+    s = np.sqrt(max(float(np.sum(Xc * Xc)) - e, 0.0))
+    R = Xc - s * np.outer(u, v)
+    # frame k's pattern from the other frames (leave one out): its own noise would enter the derivative and the
+    # residual at once, and their correlation (one-sided neighbours near the outline) biases the root
+    p = Xc.T @ u
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(u * u < 0.999, u / (1.0 - u * u), 0.0)
+    Y = _model_derivative(sampler, J.idx, tau, scale, p[None, :] - u[:, None] * Xc)
+    Y -= Y.mean(axis=1, keepdims=True)
+    Y -= np.outer(u, u @ Y)
+    Y -= np.outer(Y @ v, v)
+    return Y, R, (u, v)
+
+
+def _model_derivative(sampler: _Sampler, idx: np.ndarray, tau: float, amplitude: np.ndarray,
+                      pattern: np.ndarray) -> np.ndarray:
+    """d/dtau of the rank-one model ``amplitude_k pattern_kj`` sampled at the points' positions (n, M), K/s.
+
+    The sample of frame ``k`` moves with the image velocity ``w``; the model's change is
+    ``amplitude_k grad(pattern) . w``, with the pattern's gradient in frame ``k``'s image from a local
+    least-squares plane through each point's neighbours (at their positions in that frame). The pattern is
+    the rank-one fit's, averaged over every frame: its gradient carries a small share of the pixel noise,
+    where the frames' own derivative (sampled at moving positions) carries all of it.
+    """
+    t = sampler.t_ir[idx] + tau
+    q = sampler.spline(t).reshape(idx.size, sampler.M, 2)
+    w = sampler.spline.derivative()(t).reshape(idx.size, sampler.M, 2)
+    nb = sampler.neighbours
+    dq = q[:, nb, :] - q[:, :, None, :]                      # (n, M, K, 2)
+    dp = pattern[:, nb] - pattern[:, :, None]                # (n, M, K)
+    A = np.einsum("nmki,nmkj->nmij", dq, dq)
+    b = np.einsum("nmki,nmk->nmi", dq, dp)
+    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gx = (A[..., 1, 1] * b[..., 0] - A[..., 0, 1] * b[..., 1]) / det
+        gy = (A[..., 0, 0] * b[..., 1] - A[..., 0, 1] * b[..., 0]) / det
+    g = np.where(np.isfinite(gx) & np.isfinite(gy), gx * w[..., 0] + gy * w[..., 1], 0.0)
+    return amplitude[:, None] * g
 
 
 def _uncertainty(sampler: _Sampler, J: _Criterion, tau: float, period: float) -> tuple[float, float]:
     """Standard uncertainty of ``tau`` (s) and the pixel noise (K) (see :func:`estimate_offset`)."""
-    _, Xc, u, v = J.parts(tau)
-    h = 0.05 * period
-    D = (sampler(tau + h, J.idx) - sampler(tau - h, J.idx)) / (2 * h)
-    D -= D.mean(axis=1, keepdims=True)
-    D -= np.outer(u, u @ D)
-    D -= np.outer(D @ v, v)
-    n, m = Xc.shape
+    Y, _, _ = _score_parts(sampler, J, tau)
     flat, wts = sampler.weights(tau, J.idx)
     sigma = _pixel_noise(sampler, J.idx, tau, wts)
-    # D holds the smoothed noise's own gradient along the motion as well: take out its expected square
-    S = float(np.sum(D * D)) - _noise_gradient_energy(sampler, J.idx, tau, sigma)
+    S = float(np.sum(Y * Y))
     if S <= 0 or not np.isfinite(sigma):
         return np.inf, sigma
-    # the estimate's error is -sum(D e) / S with e the smoothed pixel noise at the samples: e = G B n
-    acc = np.bincount(flat.ravel(), weights=(wts * D[..., None]).ravel(), minlength=sampler.frames.size)
+    # the estimate's error is -sum(Y e) / S with e the smoothed pixel noise at the samples: e = G B n
+    acc = np.bincount(flat.ravel(), weights=(wts * Y[..., None]).ravel(), minlength=sampler.frames.size)
     acc = acc.reshape(sampler.frames.shape)  # float64: the weights of all samples on each pixel
     if sampler.smoothing > 0:
         acc = gaussian_filter(acc, (0, sampler.smoothing, sampler.smoothing), mode="constant")
     var = sigma**2 * float(np.sum(acc * acc)) / S**2
     return float(np.sqrt(var)), sigma
-
-
-def _noise_gradient_energy(sampler: _Sampler, idx: np.ndarray, tau: float, sigma: float) -> float:
-    """Expected sum over the samples of (smoothed noise gradient . image velocity)^2 (K^2/s^2).
-
-    White noise of variance ``sigma^2`` smoothed by a Gaussian of ``s`` px has
-    gradient components of variance ``sigma^2 / (8 pi s^4)``; raw frames
-    (``s`` = 0) count as ``s`` = 1/2.
-    """
-    w = sampler.spline.derivative()(sampler.t_ir[idx] + tau).reshape(idx.size, sampler.M, 2)
-    s = max(sampler.smoothing, 0.5)
-    return float(sigma**2 / (8 * np.pi * s**4) * np.sum(w * w))
 
 
 def _pixel_noise(sampler: _Sampler, idx: np.ndarray, tau: float, wts: np.ndarray) -> float:
