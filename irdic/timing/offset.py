@@ -351,12 +351,10 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     ``v^(-k)`` from all frames but ``k``, its gradient from local planes
     through each sample's neighbours, ``w`` the image velocity), and the
     Gauss-Newton root has ``var(d) = var(Y . e) / ||Y||^4``. The sample errors
-    are ``e = B G n``: pixel errors ``n`` of variance ``sigma^2``, smoothed
-    (``G``) and sampled bilinearly (``B``), so ``var(Y . e) = sigma^2
-    ||G B^T Y||^2`` (neighbouring samples share pixels and their errors).
-    ``sigma^2`` comes from the raw frames: their samples' misfit of the
-    rank-one model, each over its bilinear noise gain, per degree of
-    freedom.
+    are ``e = B G n``: pixel errors ``n`` of variance ``sigma^2``, smoothed (``G``)
+    and sampled bilinearly (``B``), so ``var(Y . e) = sigma^2 ||G B^T Y||^2``.
+    ``sigma^2`` is the raw samples' rank-one misfit, each over its bilinear
+    noise gain, per degree of freedom.
     :data:`MODEL_STD_FRAMES` frame
     periods of model error are added in quadrature.
     """
