@@ -26,10 +26,11 @@ with ``X_c`` the rows of ``X`` less their means and ``s_1`` its largest
 singular value. The samples are taken at the DIC points and at nodes
 between them (about one smoothing width apart, :func:`_densified`), so that
 every pixel of the specimen counts. ``J`` is evaluated on a grid of
-candidates over a third of the record each way (on the frames that every
-candidate places inside the DIC record, so all candidates are judged on the
-same data), finer grids follow around the best one, and the estimate is
-refined by Gauss-Newton steps on the score ``Y . R(tau) = 0``, with ``R`` the
+candidates over a quarter of the record each way, each on the frames it
+places inside the DIC record; its few best local minima are refined and
+compared pairwise on the frames both place inside the record (frames with
+little motion fit any offset, so candidates judged on different frames are
+not comparable), and the winner is refined by Gauss-Newton steps on the score ``Y . R(tau) = 0``, with ``R`` the
 rank-one residual and ``Y`` the derivative of the rank-one *model* (the
 pattern, averaged over the other frames, moved along the image velocity):
 the frames' own derivative carries the smoothed noise's gradient, whose
@@ -80,10 +81,16 @@ MIN_MOTION_JITTERS = 20.0
 #: on noise-free synthetic scenes (smoothed frames of a moving, foreshortened pattern; positions interpolated
 #: between DIC stages by a cubic spline) the estimates lie within 0.03 frame periods of the truth
 MODEL_STD_FRAMES = 0.03
+#: the rank-one misfit at the estimate may exceed the frames' pixel noise by this factor at most ...
+FIT_RATIO = 1.5
+#: ... with this floor (K) under the noise (noise-free exports)
+FIT_FLOOR_K = 0.005
 #: coarse candidates at most (the refinement is continuous)
 _MAX_CANDIDATES = 41
 #: points of the coarse search at most (it only has to find the basin)
 _COARSE_POINTS = 2000
+#: basins (local minima of the coarse criterion) refined and compared at most
+_STARTS = 4
 #: Gauss-Newton steps of the refinement at most
 _GN_STEPS = 8
 #: neighbours (the point included) of the local planes that give the pattern's gradient
@@ -322,7 +329,7 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         at fewer than half of the times, or nearer the cloud's outline than
         3 smoothing widths + 1 px, are left out).
     centre : float
-        Middle of the searched offsets (s); the search covers a third of the
+        Middle of the searched offsets (s); the search covers a quarter of the
         shorter record each way.
     parameter : str
         The configuration key named in errors.
@@ -370,11 +377,17 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         frames, t_ir = frames[keep], t_ir[keep]
     _check_motion(motion, jitter, parameter)
     sampler = _Sampler(frames, t_ir, t_dic, pos, smoothing_px)
-    grid, crit, best, outer = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", motion, parameter)
-    tau, J = _refined(sampler, grid, best, period)
-    _check_inside(tau, outer, crit, motion, parameter)
+    grid, crit, starts, coarse = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", parameter)
+    step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
+    roots = [r for r in (_refined(coarse, grid[i], step, period, bounds)[0] for i in starts) if np.isfinite(r)]
+    tau, J = _refined(sampler, _tournament(coarse, roots) if roots else grid[starts[0]], step, period, bounds)
+    if J is None:
+        raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
+                        f"offset ({tau:.4g} s); set {parameter} to a number (s)")
+    _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
     std, noise = _uncertainty(sampler, J, tau, period)
     _check_identified(std, period, motion, parameter)
+    _check_fit(noise, _frame_noise(sampler.raw), tau, period, parameter)
     std = float(np.hypot(std, MODEL_STD_FRAMES * period))
     log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames; %d frames x %d points, "
              "motion up to %.3g px, pixel noise %.3g K)", tau, std, tau / period, std / period, J.idx.size,
@@ -426,7 +439,28 @@ def _check_inside(tau, grid, crit, motion, parameter):
         raise DataError(
             f"{parameter}: auto: the best offset lies at the end of the searched range {grid[0]:.4g}..{grid[-1]:.4g} s "
             f"(the DIC points move at most {motion:.3g} px in the IR image): the clocks differ by more than a "
-            f"third of the record, or the data do not fix the offset; set {parameter} to a number (s)")
+            f"quarter of the record, or the data do not fix the offset; set {parameter} to a number (s)")
+
+
+def _frame_noise(frames: np.ndarray, max_frames: int = 20) -> float:
+    """Pixel noise (K) of the frames whatever the offset: the robust spread of each pixel less the mean of its
+    four neighbours (``sigma^2 (1 + 1/4)`` for white noise; a smooth pattern cancels, edges are few)."""
+    f = frames[np.unique(np.linspace(0, frames.shape[0] - 1, min(max_frames, frames.shape[0])).round().astype(int))]
+    f = f.astype(np.float64)
+    r = f[:, 1:-1, 1:-1] - 0.25 * (f[:, :-2, 1:-1] + f[:, 2:, 1:-1] + f[:, 1:-1, :-2] + f[:, 1:-1, 2:])
+    return float(1.4826 * np.median(np.abs(r)) / np.sqrt(1.25)) if r.size else np.nan
+
+
+def _check_fit(misfit, noise, tau, period, parameter):
+    """At the estimate the rank-one model must explain the frames to their pixel noise: a larger misfit means a
+    wrong basin (an offset beyond the searched range) or a pattern that does not move with the material."""
+    if misfit > FIT_RATIO * np.hypot(noise, FIT_FLOOR_K):
+        raise DataError(
+            f"{parameter}: auto cannot estimate the clock offset from the data: at the best offset found "
+            f"({tau:.4g} s, {tau / period:.2f} IR frames) the frames do not follow the DIC motion (the specimen's "
+            f"temperature pattern misfits by {misfit:.3g} K against a pixel noise of {noise:.3g} K): the offset lies "
+            f"beyond the searched quarter of the record, or the pattern changes on the material. Set {parameter} "
+            f"to a number (s; docs/time-sync.md)")
 
 
 def _fmt_std(std: float, period: float) -> str:
@@ -435,59 +469,76 @@ def _fmt_std(std: float, period: float) -> str:
     return f"+- {std:.3g} s ({std / period:.2f} IR frames)"
 
 
-def _coarse(sampler, t_ir, t_dic, centre, period, where, motion, parameter):
-    """The finest candidates, ``J`` per sample on them (same frames for all), the index of the best and the
-    outer grid (the searched range).
+def _coarse(sampler, t_ir, t_dic, centre, period, where, parameter):
+    """The candidates (s) over a quarter of the shorter record each way, ``J`` per degree of freedom of each on
+    the frames it places inside the DIC record, and the starts: the candidates at its local minima, best
+    first (at most :data:`_STARTS`), judged with at most :data:`_COARSE_POINTS` points.
 
-    The candidates cover a third of the shorter record each way (less where fewer than 4 frames would lie
-    inside the DIC record for all of them), judged with at most :data:`_COARSE_POINTS` points on the
-    frames that every candidate places inside the DIC record: candidates judged on different frames are
-    not comparable (frames with little motion or pattern fit any offset). Where the candidates lie more
-    than a frame period apart, finer grids around the best one follow.
+    Each candidate is judged on its own frames, so that frames with motion count wherever they lie in the
+    record; frames with little motion fit any offset, so the order of the starts is only a first guess
+    (:func:`_tournament` decides on common frames).
     """
     span = min(t_dic[-1] - t_dic[0], t_ir[-1] - t_ir[0])
-    half = max(span / 3.0, 2.0 * period)
+    half = max(0.25 * span, 2.0 * period)
     n = int(np.clip(np.ceil(2 * half / period) + 1, 9, _MAX_CANDIDATES))
-    for _ in range(16):
-        grid = centre + np.linspace(-half, half, n)
-        idx = sampler.inside(grid[0], grid[-1])
-        if idx.size >= 4:
-            break
-        half *= 0.8
-    else:
+    grid = centre + np.linspace(-half, half, n)
+    coarse = sampler.subset(_COARSE_POINTS)
+    crit = _judged(coarse, grid)
+    if not np.isfinite(crit).any():
         raise DataError(f"{where}: the IR record ({t_ir[0]:.4g}..{t_ir[-1]:.4g} s) and the DIC record "
                         f"({t_dic[0]:.4g}..{t_dic[-1]:.4g} s) overlap in fewer than 4 IR frames around an offset "
                         f"of {centre:.4g} s; set {parameter} to a number (s)")
-    J = _Criterion(sampler.subset(_COARSE_POINTS), idx)
-    crit = np.array([J(g) for g in grid])
-    best = int(np.argmin(crit))
-    outer, outer_crit = grid, crit
-    while grid[1] - grid[0] > period:
-        step = grid[1] - grid[0]
-        grid = grid[best] + np.linspace(-step, step, 9)
-        J = _Criterion(J.sampler, J.sampler.inside(grid[0], grid[-1]))
-        crit = np.array([J(g) for g in grid])
-        best = int(np.argmin(crit))
-    return grid, crit, best, outer
+    c = np.where(np.isfinite(crit), crit, np.inf)
+    left, right = np.r_[np.inf, c[:-1]], np.r_[c[1:], np.inf]
+    minima = np.flatnonzero((c <= left) & (c <= right) & np.isfinite(c))
+    starts = minima[np.argsort(c[minima])][:_STARTS]
+    return grid, crit, starts, coarse
 
 
-def _refined(sampler: _Sampler, grid: np.ndarray, best: int, period: float):
-    """The minimum of ``J`` between the coarse candidates next to ``best`` (on the frames every offset there
-    places inside the DIC record), then Gauss-Newton steps on the model's derivative
-    (:func:`_model_derivative`) to the root of the score; while the minimum lies at an end of the bracket, the
-    bracket moves on by one candidate (the coarse criterion, on fewer frames, can pick a neighbour of the true
-    minimum)."""
-    step = grid[1] - grid[0]
-    lo, hi = grid[best] - step, grid[best] + step
+def _judged(sampler, grid):
+    """``J`` per degree of freedom of the rank-one fit at each candidate, on its own frames (NaN: fewer than
+    half the frames the best-placed candidate has)."""
+    frames = [sampler.inside(g, g) for g in grid]
+    full = max(idx.size for idx in frames)
+    out = np.full(grid.size, np.nan)
+    for i, (g, idx) in enumerate(zip(grid, frames)):
+        n, m = idx.size, sampler.M
+        if n >= max(4, (full + 1) // 2) and n * m > n + (n + m - 1):
+            out[i] = _Criterion(sampler, idx).parts(g)[0] / (n * m - n - (n + m - 1))
+    return out
+
+
+def _tournament(sampler, roots):
+    """The root that fits best, each pair compared on the frames both place inside the DIC record."""
+    best = roots[0]
+    for r in roots[1:]:
+        idx = sampler.inside(min(best, r), max(best, r))
+        if idx.size >= 4:
+            J = _Criterion(sampler, idx)
+            if J(r) < J(best):
+                best = r
+    return best
+
+
+def _refined(sampler: _Sampler, start: float, step: float, period: float, bounds: tuple[float, float]):
+    """The minimum of ``J`` within ``step`` of ``start`` (on the frames every offset there places inside the
+    DIC record), then Gauss-Newton steps on the model's derivative (:func:`_model_derivative`) to the root
+    of the score; while the minimum lies at an end of the bracket, the bracket moves on by one step (at most
+    four times, never beyond ``bounds``)."""
+    lo, hi = start - step, start + step
+    tau, J = start, None
     for _ in range(4):
-        J = _Criterion(sampler, sampler.inside(lo, hi))
-        if J.idx.size < 4:
+        idx = sampler.inside(lo, hi)
+        if idx.size < 4:
             break
+        J = _Criterion(sampler, idx)
         tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded", options={"xatol": 0.01 * period}).x)
-        if lo + 0.02 * step < tau < hi - 0.02 * step or not grid[0] < tau < grid[-1]:
+        if lo + 0.02 * step < tau < hi - 0.02 * step or not bounds[0] < tau < bounds[1]:
             break
         shift = step if tau >= hi - 0.02 * step else -step
         lo, hi = lo + shift, hi + shift
+    if J is None:
+        return np.nan, None
     for _ in range(_GN_STEPS):
         Y, R, _ = _score_parts(sampler, J, tau)
         S = float(np.sum(Y * Y))
