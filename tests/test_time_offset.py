@@ -102,6 +102,15 @@ def test_static_specimen_refused():
     assert re.search(r"move at most [0-9.e-]+ px in the IR image", msg) and "static specimen" in msg
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_offset_beyond_the_searched_range_refused(seed):
+    """The weak tube's 12 frames with the clocks 4 frame periods apart (the search covers 3): a clear refusal,
+    never a number whose uncertainty misses the truth (these seeds found a noise minimum 6 frames off)."""
+    dic, ir, cal, _ = clock_scene(-2.0, realistic=True, seed=seed, tube={})
+    with pytest.raises(DataError, match=r"experiments\.s07\.ir\.time_offset: auto"):
+        ir_clock(dic, ir, cal, "s07")
+
+
 def test_configured_offset_checked():
     offset = 0.6
     dic, ir, cal, _ = clock_scene(offset, realistic=True, seed=5)

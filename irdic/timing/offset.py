@@ -85,6 +85,9 @@ MODEL_STD_FRAMES = 0.03
 FIT_RATIO = 1.5
 #: ... with this floor (K) under the noise (noise-free exports)
 FIT_FLOOR_K = 0.005
+#: a Gauss-Newton step from one frame period either side of the estimate must return to within this many
+#: frame periods of it, or this many of its standard uncertainties
+BASIN_FRAMES, BASIN_STDS = 0.5, 4.0
 #: coarse candidates at most (the refinement is continuous)
 _MAX_CANDIDATES = 41
 #: points of the coarse search at most (it only has to find the basin)
@@ -388,6 +391,7 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     std, noise = _uncertainty(sampler, J, tau, period)
     _check_identified(std, period, motion, parameter)
     _check_fit(noise, _frame_noise(sampler.raw), tau, period, parameter)
+    _check_basin(sampler, tau, std, period, parameter)
     std = float(np.hypot(std, MODEL_STD_FRAMES * period))
     log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames; %d frames x %d points, "
              "motion up to %.3g px, pixel noise %.3g K)", tau, std, tau / period, std / period, J.idx.size,
@@ -461,6 +465,26 @@ def _check_fit(misfit, noise, tau, period, parameter):
             f"temperature pattern misfits by {misfit:.3g} K against a pixel noise of {noise:.3g} K): the offset lies "
             f"beyond the searched quarter of the record, or the pattern changes on the material. Set {parameter} "
             f"to a number (s; docs/time-sync.md)")
+
+
+def _check_basin(sampler, tau, std, period, parameter):
+    """A Gauss-Newton step from one frame period either side must come back to ``tau``: in the basin of the
+    true offset the score is linear in the offset over several frames, at a minimum the noise made (the true
+    one beyond the searched range, or no pattern to speak of) the steps run off."""
+    for side in (-1.0, 1.0):
+        start = tau + side * period
+        idx = sampler.inside(min(tau, start), max(tau, start))
+        if idx.size < 4:
+            continue
+        Y, R, _ = _score_parts(sampler, _Criterion(sampler, idx), start)
+        S = float(np.sum(Y * Y))
+        back = start - float(np.sum(Y * R)) / S if S > 0 else np.inf
+        if not abs(back - tau) <= max(BASIN_FRAMES * period, BASIN_STDS * std):
+            raise DataError(
+                f"{parameter}: auto cannot estimate the clock offset from the data: they do not single out one "
+                f"offset (from {start:.4g} s the fit goes to {back:.4g} s, not back to {tau:.4g} s): the offset "
+                f"lies beyond the searched quarter of the record, or the pattern is too weak for the record's "
+                f"noise. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
 def _fmt_std(std: float, period: float) -> str:
