@@ -24,7 +24,7 @@ rank-one model,
 
 with ``X_c`` the rows of ``X`` less their means and ``s_1`` its largest
 singular value. The samples are taken at the DIC points and at nodes
-between them (about one smoothing width apart, :func:`_densified`), so that
+between them (about one smoothing width apart, :func:`irdic.timing.samples.prepared`), so that
 every pixel of the specimen counts. ``J`` is evaluated on a grid of
 candidates over a quarter of the record each way, each on the frames it
 places inside the DIC record; its few best local minima are refined and
@@ -47,18 +47,15 @@ motion found and the uncertainty it allows.
 
 from __future__ import annotations
 
-import copy
 import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
-from scipy.ndimage import distance_transform_edt, gaussian_filter
+from scipy.ndimage import gaussian_filter
 from scipy.optimize import minimize_scalar
-from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from ..errors import DataError
-from ..footprint.mask import specimen_mask
+from .samples import Criterion, Sampler, prepared, rank_one, score_parts
 
 __all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_POINTS", "MAX_FRAMES", "SMOOTHING_PX", "MODEL_STD_FRAMES", "MIN_MOTION_PX",
            "MIN_MOTION_JITTERS"]
@@ -96,8 +93,6 @@ _COARSE_POINTS = 2000
 _STARTS = 4
 #: Gauss-Newton steps of the refinement at most
 _GN_STEPS = 8
-#: neighbours (the point included) of the local planes that give the pattern's gradient
-_NEIGHBOURS = 9
 
 
 @dataclass(frozen=True)
@@ -143,172 +138,6 @@ def crop_box(positions: np.ndarray, shape: tuple[int, int], margin: int = 12) ->
     u1, v1 = np.ceil(p.max(axis=0)).astype(int) + margin + 1
     H, W = shape
     return slice(max(v0, 0), min(v1, H)), slice(max(u0, 0), min(u1, W))
-
-
-class _Sampler:
-    """``X(tau)``: the frames sampled at the DIC points' positions at the DIC times ``t_ir + tau``.
-
-    The frames are smoothed by a Gaussian of ``smoothing`` px first: sampled at positions that move with
-    the candidate offset, raw pixel noise would make the criterion a rough function of the offset whose
-    wiggles (the noise's own gradient along the motion) hide the pattern's misfit.
-    """
-
-    def __init__(self, frames, t_ir, t_dic, positions, smoothing: float = 0.0):
-        # float32 as stored (half the memory); samples and sums are float64
-        self.raw = np.asarray(frames, dtype=np.float32)
-        self.smoothing = float(smoothing)
-        self.frames = (gaussian_filter(self.raw, (0, self.smoothing, self.smoothing), mode="nearest")
-                       if self.smoothing > 0 else self.raw)
-        self.t_ir = t_ir
-        self.t0, self.t1 = float(t_dic[0]), float(t_dic[-1])
-        k = min(3, t_dic.size - 1)
-        self.spline = make_interp_spline(t_dic, positions.reshape(t_dic.size, -1), k=k, axis=0)
-        self.M = positions.shape[1]
-        self.t_dic, self.positions = t_dic, positions
-        k = min(_NEIGHBOURS, self.M)
-        self.neighbours = cKDTree(positions[0]).query(positions[0], k=k)[1][:, 1:]
-        _, self.h, self.w = self.frames.shape
-
-    def subset(self, points: int) -> "_Sampler":
-        """The same frames with at most ``points`` of the points, evenly spread."""
-        if self.M <= points:
-            return self
-        keep = np.linspace(0, self.M - 1, points).round().astype(int)
-        out = copy.copy(self)
-        out.spline = make_interp_spline(self.t_dic, self.positions[:, keep].reshape(self.t_dic.size, -1),
-                                        k=min(3, self.t_dic.size - 1), axis=0)
-        out.positions, out.M = self.positions[:, keep], keep.size
-        out.neighbours = cKDTree(out.positions[0]).query(out.positions[0], k=min(_NEIGHBOURS, keep.size))[1][:, 1:]
-        return out
-
-    def inside(self, tau_lo: float, tau_hi: float) -> np.ndarray:
-        """Frames every offset in [tau_lo, tau_hi] places inside the DIC record."""
-        eps = 1e-9 * max(1.0, abs(self.t1))
-        return np.flatnonzero((self.t_ir + tau_lo >= self.t0 - eps) & (self.t_ir + tau_hi <= self.t1 + eps))
-
-    def weights(self, tau: float, idx: np.ndarray):
-        """Flat pixel indices (n, M, 4) and bilinear weights (n, M, 4) of frames ``idx`` at offset ``tau``."""
-        q = self.spline(self.t_ir[idx] + tau).reshape(idx.size, self.M, 2)
-        u = np.clip(q[..., 0], 0.0, self.w - 1.000001)
-        v = np.clip(q[..., 1], 0.0, self.h - 1.000001)
-        j, i = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
-        fu, fv = u - j, v - i
-        base = idx[:, None] * (self.h * self.w) + i * self.w + j
-        flat = np.stack([base, base + 1, base + self.w, base + self.w + 1], axis=-1)
-        wts = np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=-1)
-        return flat, wts
-
-    def __call__(self, tau: float, idx: np.ndarray, raw: bool = False):
-        """The samples (n, M) of the smoothed (or ``raw``) frames."""
-        flat, wts = self.weights(tau, idx)
-        return np.einsum("nmc,nmc->nm", (self.raw if raw else self.frames).reshape(-1)[flat], wts)
-
-
-def _rank_one(Xc: np.ndarray, start: np.ndarray | None = None, iters: int = 300):
-    """Largest singular value squared of ``Xc`` and its (left, right) unit vectors, by power iteration."""
-    n, m = Xc.shape
-    v = np.ones(m) / np.sqrt(m) if start is None or start.size != m else start.copy()
-    lam = 0.0
-    for _ in range(iters):
-        u = Xc @ v
-        w = Xc.T @ u
-        new = float(np.linalg.norm(w))
-        if new == 0.0:
-            return 0.0, np.zeros(n), v
-        v = w / new
-        # new = s1^2 once converged; stop when it changes by less than 1e-14 relative
-        if abs(new - lam) <= 1e-14 * new:
-            lam = new
-            break
-        lam = new
-    u = Xc @ v
-    s = float(np.linalg.norm(u))
-    return s * s, (u / s if s > 0 else u), v
-
-
-class _Criterion:
-    """``J(tau)`` per sample on a fixed set of frames, with a warm start for the power iteration."""
-
-    def __init__(self, sampler: _Sampler, idx: np.ndarray):
-        self.sampler, self.idx = sampler, idx
-        self.start = None
-
-    def parts(self, tau: float):
-        X = self.sampler(tau, self.idx)
-        Xc = X - X.mean(axis=1, keepdims=True)
-        s2, u, v = _rank_one(Xc, self.start)
-        self.start = v
-        return float(np.sum(Xc * Xc)) - s2, Xc, u, v
-
-    def __call__(self, tau: float) -> float:
-        return self.parts(tau)[0] / self.idx.size / self.sampler.M
-
-
-def _prepared(positions, t_dic, max_points, inset=0.0, spacing=0.0):
-    """Points seen at half the DIC times or more, their gaps interpolated linearly in time; of those the ones at
-    least ``inset`` px inside the cloud's outline at the first and the last time, at most ``max_points``,
-    evenly spread. With ``spacing`` (px), samples between the points are added (:func:`_densified`)."""
-    ok_t = np.isfinite(positions).all(axis=2)
-    ok = ok_t.sum(axis=0) >= max(2, (t_dic.size + 1) // 2)
-    pos = positions[:, ok].copy()
-    for j in np.flatnonzero(~ok_t[:, ok].all(axis=0)):
-        good = ok_t[:, ok][:, j]
-        for c in (0, 1):
-            pos[:, j, c] = np.interp(t_dic, t_dic[good], pos[good, j, c])
-    if spacing > 0 and pos.shape[1] >= 3:
-        pos = _densified(pos, spacing)
-    keep = np.ones(pos.shape[1], bool)
-    if inset > 0 and keep.sum() >= 3:
-        for k in (0, -1):
-            keep &= _inside_outline(pos[k]) >= inset
-    keep = np.flatnonzero(keep)
-    if keep.size > max_points:
-        keep = keep[np.linspace(0, keep.size - 1, max_points).round().astype(int)]
-    return pos[:, keep]
-
-
-def _densified(pos: np.ndarray, spacing: float, max_factor: int = 4) -> np.ndarray:
-    """The points (n_t, N, 2) and samples between them, about ``spacing`` px apart in the first frame.
-
-    Each triangle of the points' triangulation at the first time (without the triangles longer than
-    3 median spacings: holes and concave outlines stay open) is divided into ``r^2`` by a barycentric grid
-    of ``r + 1`` nodes per edge, ``r`` the points' spacing over ``spacing`` (at most ``max_factor``); a node
-    moves with the barycentric mean of its corners, exact where the motion is affine over a triangle.
-    Nodes shared by triangles are kept once.
-    """
-    p0 = pos[0]
-    d = cKDTree(p0).query(p0, k=2)[0][:, 1]
-    r = int(min(max_factor, np.floor(np.median(d) / spacing)))
-    if r < 2:
-        return pos
-    try:
-        tri = Delaunay(p0)
-    except QhullError:
-        return pos
-    c = p0[tri.simplices]
-    edges = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
-    simp = tri.simplices[edges <= 3.0 * np.median(d)]
-    i, j = np.meshgrid(np.arange(r + 1), np.arange(r + 1), indexing="ij")
-    sel = (i + j <= r) & ~(((i == 0) | (i == r)) & (j == 0) | ((i == 0) & (j == r)))
-    bary = np.stack([r - i[sel] - j[sel], i[sel], j[sel]], axis=1) / r  # (B, 3)
-    # a node's key: its corners' indices and weights, sorted, so that a node shared by two triangles is found once
-    nodes = simp[:, None, :].repeat(bary.shape[0], axis=1).reshape(-1, 3)
-    wts = np.broadcast_to(bary, (simp.shape[0],) + bary.shape).reshape(-1, 3)
-    key = np.sort(np.where(wts > 0, nodes, -1) * (r + 1) + np.rint(wts * r).astype(np.int64), axis=1)
-    _, first = np.unique(key, axis=0, return_index=True)
-    nodes, wts = nodes[first], wts[first]
-    extra = np.einsum("tnci,nc->tni", pos[:, nodes], wts)
-    return np.concatenate([pos, extra], axis=1)
-
-
-def _inside_outline(p: np.ndarray) -> np.ndarray:
-    """Distance (px) of each position (N, 2) to the outline of the cloud of the positions."""
-    lo = np.floor(p.min(axis=0)).astype(int) - 2
-    hi = np.ceil(p.max(axis=0)).astype(int) + 3
-    u, v = np.arange(lo[0], hi[0]), np.arange(lo[1], hi[1])
-    inside = distance_transform_edt(specimen_mask(p, u, v, erosion_px=0.0))
-    q = np.clip(p.round().astype(int) - lo, 0, [u.size - 1, v.size - 1])
-    return inside[q[:, 1], q[:, 0]]
 
 
 def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, positions: np.ndarray, *,
@@ -371,7 +200,7 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     t_ir, t_dic = np.asarray(t_ir, float), np.asarray(t_dic, float)
     # the smoothing kernel of a kept point stays on the specimen
     inset = np.ceil(3 * smoothing_px) + 1 if smoothing_px > 0 else 0.0
-    pos = _prepared(np.asarray(positions, float), t_dic, max_points, inset, smoothing_px)
+    pos = prepared(np.asarray(positions, float), t_dic, max_points, inset, smoothing_px)
     period = float(np.median(np.diff(t_ir))) if t_ir.size > 1 else np.nan
     _check_sizes(pos, t_dic, t_ir, parameter)
     motion, jitter = _motion(pos)
@@ -379,15 +208,8 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         keep = np.linspace(0, t_ir.size - 1, max_frames).round().astype(int)
         frames, t_ir = frames[keep], t_ir[keep]
     _check_motion(motion, jitter, parameter)
-    sampler = _Sampler(frames, t_ir, t_dic, pos, smoothing_px)
-    grid, crit, starts, coarse = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", parameter)
-    step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
-    roots = [r for r in (_refined(coarse, grid[i], step, period, bounds)[0] for i in starts) if np.isfinite(r)]
-    tau, J = _refined(sampler, _tournament(coarse, roots) if roots else grid[starts[0]], step, period, bounds)
-    if J is None:
-        raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
-                        f"offset ({tau:.4g} s); set {parameter} to a number (s)")
-    _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
+    sampler = Sampler(frames, t_ir, t_dic, pos, smoothing_px)
+    tau, J, grid, crit = _search(sampler, centre, period, motion, parameter)
     std, noise = _uncertainty(sampler, J, tau, period)
     _check_identified(std, period, motion, parameter)
     _check_fit(noise, _frame_noise(sampler.raw), tau, period, parameter)
@@ -397,6 +219,20 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
              "motion up to %.3g px, pixel noise %.3g K)", tau, std, tau / period, std / period, J.idx.size,
              pos.shape[1], motion, noise)
     return ClockOffset(tau, std, period, motion, noise, grid, crit, int(J.idx.size), int(pos.shape[1]))
+
+
+def _search(sampler: Sampler, centre: float, period: float, motion: float, parameter: str):
+    """The offset (s) and its criterion: the coarse candidates' basins refined, compared, the winner refined."""
+    t_ir, t_dic = sampler.t_ir, sampler.t_dic
+    grid, crit, starts, coarse = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", parameter)
+    step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
+    roots = [r for r in (_refined(coarse, grid[i], step, period, bounds)[0] for i in starts) if np.isfinite(r)]
+    tau, J = _refined(sampler, _tournament(coarse, roots) if roots else grid[starts[0]], step, period, bounds)
+    if J is None:
+        raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
+                        f"offset ({tau:.4g} s); set {parameter} to a number (s)")
+    _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
+    return tau, J, grid, crit
 
 
 def _motion(pos: np.ndarray) -> tuple[float, float]:
@@ -476,7 +312,7 @@ def _check_basin(sampler, tau, std, period, parameter):
         idx = sampler.inside(min(tau, start), max(tau, start))
         if idx.size < 4:
             continue
-        Y, R, _ = _score_parts(sampler, _Criterion(sampler, idx), start)
+        Y, R, _ = score_parts(sampler, Criterion(sampler, idx), start)
         S = float(np.sum(Y * Y))
         back = start - float(np.sum(Y * R)) / S if S > 0 else np.inf
         if not abs(back - tau) <= max(BASIN_FRAMES * period, BASIN_STDS * std):
@@ -528,7 +364,7 @@ def _judged(sampler, grid):
     for i, (g, idx) in enumerate(zip(grid, frames)):
         n, m = idx.size, sampler.M
         if n >= max(4, (full + 1) // 2) and n * m > n + (n + m - 1):
-            out[i] = _Criterion(sampler, idx).parts(g)[0] / (n * m - n - (n + m - 1))
+            out[i] = Criterion(sampler, idx).parts(g)[0] / (n * m - n - (n + m - 1))
     return out
 
 
@@ -538,15 +374,15 @@ def _tournament(sampler, roots):
     for r in roots[1:]:
         idx = sampler.inside(min(best, r), max(best, r))
         if idx.size >= 4:
-            J = _Criterion(sampler, idx)
+            J = Criterion(sampler, idx)
             if J(r) < J(best):
                 best = r
     return best
 
 
-def _refined(sampler: _Sampler, start: float, step: float, period: float, bounds: tuple[float, float]):
+def _refined(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float]):
     """The minimum of ``J`` within ``step`` of ``start`` (on the frames every offset there places inside the
-    DIC record), then Gauss-Newton steps on the model's derivative (:func:`_model_derivative`) to the root
+    DIC record), then Gauss-Newton steps on the model's derivative (:func:`model_derivative`) to the root
     of the score; while the minimum lies at an end of the bracket, the bracket moves on by one step (at most
     four times, never beyond ``bounds``)."""
     lo, hi = start - step, start + step
@@ -555,7 +391,7 @@ def _refined(sampler: _Sampler, start: float, step: float, period: float, bounds
         idx = sampler.inside(lo, hi)
         if idx.size < 4:
             break
-        J = _Criterion(sampler, idx)
+        J = Criterion(sampler, idx)
         tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded", options={"xatol": 0.01 * period}).x)
         if lo + 0.02 * step < tau < hi - 0.02 * step or not bounds[0] < tau < bounds[1]:
             break
@@ -564,7 +400,7 @@ def _refined(sampler: _Sampler, start: float, step: float, period: float, bounds
     if J is None:
         return np.nan, None
     for _ in range(_GN_STEPS):
-        Y, R, _ = _score_parts(sampler, J, tau)
+        Y, R, _ = score_parts(sampler, J, tau)
         S = float(np.sum(Y * Y))
         if not S > 0:
             break
@@ -576,53 +412,9 @@ def _refined(sampler: _Sampler, start: float, step: float, period: float, bounds
     return tau, J
 
 
-def _score_parts(sampler: _Sampler, J: _Criterion, tau: float):
-    """At ``tau``: the model's derivative ``Y`` with the rank-one directions taken out, the residual ``R`` of the
-    rank-one fit (both (n, M), K/s and K) and the fitted singular vectors ``(u, v)``."""
-    e, Xc, u, v = J.parts(tau)
-    s = np.sqrt(max(float(np.sum(Xc * Xc)) - e, 0.0))
-    R = Xc - s * np.outer(u, v)
-    # frame k's pattern from the other frames (leave one out): its own noise would enter the derivative and the
-    # residual at once, and their correlation (one-sided neighbours near the outline) biases the root
-    p = Xc.T @ u
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(u * u < 0.999, u / (1.0 - u * u), 0.0)
-    Y = _model_derivative(sampler, J.idx, tau, scale, p[None, :] - u[:, None] * Xc)
-    Y -= Y.mean(axis=1, keepdims=True)
-    Y -= np.outer(u, u @ Y)
-    Y -= np.outer(Y @ v, v)
-    return Y, R, (u, v)
-
-
-def _model_derivative(sampler: _Sampler, idx: np.ndarray, tau: float, amplitude: np.ndarray,
-                      pattern: np.ndarray) -> np.ndarray:
-    """d/dtau of the rank-one model ``amplitude_k pattern_kj`` sampled at the points' positions (n, M), K/s.
-
-    The sample of frame ``k`` moves with the image velocity ``w``; the model's change is
-    ``amplitude_k grad(pattern) . w``, with the pattern's gradient in frame ``k``'s image from a local
-    least-squares plane through each point's neighbours (at their positions in that frame). The pattern is
-    the rank-one fit's, averaged over every frame: its gradient carries a small share of the pixel noise,
-    where the frames' own derivative (sampled at moving positions) carries all of it.
-    """
-    t = sampler.t_ir[idx] + tau
-    q = sampler.spline(t).reshape(idx.size, sampler.M, 2)
-    w = sampler.spline.derivative()(t).reshape(idx.size, sampler.M, 2)
-    nb = sampler.neighbours
-    dq = q[:, nb, :] - q[:, :, None, :]                      # (n, M, K, 2)
-    dp = pattern[:, nb] - pattern[:, :, None]                # (n, M, K)
-    A = np.einsum("nmki,nmkj->nmij", dq, dq)
-    b = np.einsum("nmki,nmk->nmi", dq, dp)
-    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] ** 2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        gx = (A[..., 1, 1] * b[..., 0] - A[..., 0, 1] * b[..., 1]) / det
-        gy = (A[..., 0, 0] * b[..., 1] - A[..., 0, 1] * b[..., 0]) / det
-    g = np.where(np.isfinite(gx) & np.isfinite(gy), gx * w[..., 0] + gy * w[..., 1], 0.0)
-    return amplitude[:, None] * g
-
-
-def _uncertainty(sampler: _Sampler, J: _Criterion, tau: float, period: float) -> tuple[float, float]:
+def _uncertainty(sampler: Sampler, J: Criterion, tau: float, period: float) -> tuple[float, float]:
     """Standard uncertainty of ``tau`` (s) and the pixel noise (K) (see :func:`estimate_offset`)."""
-    Y, _, _ = _score_parts(sampler, J, tau)
+    Y, _, _ = score_parts(sampler, J, tau)
     flat, wts = sampler.weights(tau, J.idx)
     sigma = _pixel_noise(sampler, J.idx, tau, wts)
     S = float(np.sum(Y * Y))
@@ -637,11 +429,11 @@ def _uncertainty(sampler: _Sampler, J: _Criterion, tau: float, period: float) ->
     return float(np.sqrt(var)), sigma
 
 
-def _pixel_noise(sampler: _Sampler, idx: np.ndarray, tau: float, wts: np.ndarray) -> float:
+def _pixel_noise(sampler: Sampler, idx: np.ndarray, tau: float, wts: np.ndarray) -> float:
     """Pixel noise (K): the raw samples' misfit of the rank-one model, each over its bilinear noise gain."""
     X = sampler(tau, idx, raw=True)
     Xc = X - X.mean(axis=1, keepdims=True)
-    s2, u, v = _rank_one(Xc)
+    s2, u, v = rank_one(Xc)
     R = Xc - np.sqrt(s2) * np.outer(u, v)
     gain = np.einsum("nmc,nmc->nm", wts, wts)  # a sample between pixels averages their noise
     n, m = X.shape
