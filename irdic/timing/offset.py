@@ -65,7 +65,7 @@ log = logging.getLogger(__name__)
 #: an estimate whose standard uncertainty exceeds this many IR frame periods is refused
 MAX_STD_FRAMES = 0.25
 #: points used (evenly spread over the cloud's order): the criterion's noise falls as 1/sqrt(points)
-MAX_POINTS = 12000
+MAX_POINTS = 8000
 #: frames used (evenly spread over the record)
 MAX_FRAMES = 600
 #: Gaussian smoothing of the frames (px) before they are sampled
@@ -90,7 +90,7 @@ _MAX_CANDIDATES = 41
 #: points of the coarse search at most (it only has to find the basin)
 _COARSE_POINTS = 2000
 #: basins (local minima of the coarse criterion) refined and compared at most
-_STARTS = 4
+_STARTS = 3
 #: Gauss-Newton steps of the refinement at most
 _GN_STEPS = 8
 
@@ -226,8 +226,12 @@ def _search(sampler: Sampler, centre: float, period: float, motion: float, param
     t_ir, t_dic = sampler.t_ir, sampler.t_dic
     grid, crit, starts, coarse = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", parameter)
     step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
-    roots = [r for r in (_refined(coarse, grid[i], step, period, bounds)[0] for i in starts) if np.isfinite(r)]
-    tau, J = _refined(sampler, _tournament(coarse, roots) if roots else grid[starts[0]], step, period, bounds)
+    roots = [_refined(coarse, grid[i], step, period, bounds, newton=False)[0] for i in starts]
+    roots = [r for r in roots if np.isfinite(r)]
+    if roots:  # located to a twentieth of a frame: Gauss-Newton on every sample from there
+        tau, J = _refined(sampler, _tournament(coarse, roots), step, period, bounds, search=False)
+    else:
+        tau, J = _refined(sampler, grid[starts[0]], step, period, bounds)
     if J is None:
         raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
                         f"offset ({tau:.4g} s); set {parameter} to a number (s)")
@@ -380,26 +384,31 @@ def _tournament(sampler, roots):
     return best
 
 
-def _refined(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float]):
+def _refined(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float],
+             newton: bool = True, search: bool = True):
     """The minimum of ``J`` within ``step`` of ``start`` (on the frames every offset there places inside the
     DIC record), then Gauss-Newton steps on the model's derivative (:func:`model_derivative`) to the root
     of the score; while the minimum lies at an end of the bracket, the bracket moves on by one step (at most
-    four times, never beyond ``bounds``)."""
+    four times, never beyond ``bounds``); without ``newton`` the minimum only (to a twentieth of a frame),
+    without ``search`` the Gauss-Newton steps from ``start`` only."""
     lo, hi = start - step, start + step
     tau, J = start, None
-    for _ in range(4):
+    if not search and sampler.inside(lo, hi).size >= 4:
+        J = Criterion(sampler, sampler.inside(lo, hi))
+    for _ in range(4 if search else 0):
         idx = sampler.inside(lo, hi)
         if idx.size < 4:
             break
         J = Criterion(sampler, idx)
-        tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded", options={"xatol": 0.01 * period}).x)
+        tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded",
+                                    options={"xatol": (0.01 if newton else 0.05) * period}).x)
         if lo + 0.02 * step < tau < hi - 0.02 * step or not bounds[0] < tau < bounds[1]:
             break
         shift = step if tau >= hi - 0.02 * step else -step
         lo, hi = lo + shift, hi + shift
     if J is None:
         return np.nan, None
-    for _ in range(_GN_STEPS):
+    for _ in range(_GN_STEPS if newton else 0):
         Y, R, _ = score_parts(sampler, J, tau)
         S = float(np.sum(Y * Y))
         if not S > 0:
