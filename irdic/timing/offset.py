@@ -86,9 +86,9 @@ FIT_FLOOR_K = 0.005
 #: frame periods of it, or this many of its standard uncertainties
 BASIN_FRAMES, BASIN_STDS = 0.5, 4.0
 #: coarse candidates at most (the refinement is continuous)
-_MAX_CANDIDATES = 41
+_MAX_CANDIDATES = 31
 #: points of the coarse search at most (it only has to find the basin)
-_COARSE_POINTS = 2000
+_COARSE_POINTS = 1500
 #: basins (local minima of the coarse criterion) refined and compared at most
 _STARTS = 3
 #: Gauss-Newton steps of the refinement at most
