@@ -23,13 +23,20 @@ rank-one model,
 ``J(tau) = ||X_c||^2 - s_1^2(X_c)``,
 
 with ``X_c`` the rows of ``X`` less their means and ``s_1`` its largest
-singular value. ``J`` is evaluated on a grid of candidates over a quarter
-of the record each way (on the frames that every candidate places inside
-the DIC record, so all candidates are judged on the same data), the best
-one is refined by bounded Brent minimisation (the positions are continuous in
-time: no frame grid limits the resolution), and the standard uncertainty
-comes from the criterion's curvature and the residual noise (Notes of
-:func:`estimate_offset`).
+singular value. The samples are taken at the DIC points and at nodes
+between them (about one smoothing width apart, :func:`irdic.timing.samples.prepared`), so that
+every pixel of the specimen counts. ``J`` is evaluated on a grid of
+candidates over a quarter of the record each way, each on the frames it
+places inside the DIC record; its few best local minima are refined and
+compared pairwise on the frames both place inside the record (frames with
+little motion fit any offset, so candidates judged on different frames are
+not comparable), and the winner is refined by Gauss-Newton steps on the score ``Y . R(tau) = 0``, with ``R`` the
+rank-one residual and ``Y`` the derivative of the rank-one *model* (the
+pattern, averaged over the other frames, moved along the image velocity):
+the frames' own derivative carries the smoothed noise's gradient, whose
+share grows as the pattern weakens. The positions are continuous in time:
+no frame grid limits the resolution. The standard uncertainty comes from
+``Y`` and the pixel noise (Notes of :func:`estimate_offset`).
 
 When it cannot work: a static specimen (no motion: every offset fits the
 same), a uniform temperature (no pattern to carry), or motion too small for
@@ -44,12 +51,11 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
-from scipy.ndimage import distance_transform_edt, gaussian_filter
+from scipy.ndimage import gaussian_filter
 from scipy.optimize import minimize_scalar
 
 from ..errors import DataError
-from ..footprint.mask import specimen_mask
+from .samples import Criterion, Sampler, prepared, rank_one, score_parts
 
 __all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_POINTS", "MAX_FRAMES", "SMOOTHING_PX", "MODEL_STD_FRAMES", "MIN_MOTION_PX",
            "MIN_MOTION_JITTERS"]
@@ -59,21 +65,34 @@ log = logging.getLogger(__name__)
 #: an estimate whose standard uncertainty exceeds this many IR frame periods is refused
 MAX_STD_FRAMES = 0.25
 #: points used (evenly spread over the cloud's order): the criterion's noise falls as 1/sqrt(points)
-MAX_POINTS = 3000
+MAX_POINTS = 8000
 #: frames used (evenly spread over the record)
 MAX_FRAMES = 600
 #: Gaussian smoothing of the frames (px) before they are sampled
-SMOOTHING_PX = 3.0
+SMOOTHING_PX = 1.5
 #: an offset is estimated only where the points move at least this much in the image (px) ...
 MIN_MOTION_PX = 0.5
 #: ... and at least this many times their scatter from stage to stage (DIC noise)
 MIN_MOTION_JITTERS = 20.0
 #: the criterion's own bias, in IR frame periods, added in quadrature to the noise's share of the uncertainty:
 #: on noise-free synthetic scenes (smoothed frames of a moving, foreshortened pattern; positions interpolated
-#: between DIC stages) the estimates lie within 0.09 frame periods of the truth
+#: between DIC stages by a cubic spline) the estimates lie within 0.03 frame periods of the truth
 MODEL_STD_FRAMES = 0.03
+#: the rank-one misfit at the estimate may exceed the frames' pixel noise by this factor at most ...
+FIT_RATIO = 1.5
+#: ... with this floor (K) under the noise (noise-free exports)
+FIT_FLOOR_K = 0.005
+#: a Gauss-Newton step from one frame period either side of the estimate must return to within this many
+#: frame periods of it, or this many of its standard uncertainties
+BASIN_FRAMES, BASIN_STDS = 0.5, 4.0
 #: coarse candidates at most (the refinement is continuous)
-_MAX_CANDIDATES = 41
+_MAX_CANDIDATES = 31
+#: points of the coarse search at most (it only has to find the basin)
+_COARSE_POINTS = 1500
+#: basins (local minima of the coarse criterion) refined and compared at most
+_STARTS = 3
+#: Gauss-Newton steps of the refinement at most
+_GN_STEPS = 8
 
 
 @dataclass(frozen=True)
@@ -121,121 +140,6 @@ def crop_box(positions: np.ndarray, shape: tuple[int, int], margin: int = 12) ->
     return slice(max(v0, 0), min(v1, H)), slice(max(u0, 0), min(u1, W))
 
 
-class _Sampler:
-    """``X(tau)``: the frames sampled at the DIC points' positions at the DIC times ``t_ir + tau``.
-
-    The frames are smoothed by a Gaussian of ``smoothing`` px first: sampled at positions that move with
-    the candidate offset, raw pixel noise would make the criterion a rough function of the offset whose
-    wiggles (the noise's own gradient along the motion) hide the pattern's misfit.
-    """
-
-    def __init__(self, frames, t_ir, t_dic, positions, smoothing: float = 0.0):
-        # float32 as stored (half the memory); samples and sums are float64
-        self.raw = np.asarray(frames, dtype=np.float32)
-        self.smoothing = float(smoothing)
-        self.frames = (gaussian_filter(self.raw, (0, self.smoothing, self.smoothing), mode="nearest")
-                       if self.smoothing > 0 else self.raw)
-        self.t_ir = t_ir
-        self.t0, self.t1 = float(t_dic[0]), float(t_dic[-1])
-        k = min(3, t_dic.size - 1)
-        self.spline = make_interp_spline(t_dic, positions.reshape(t_dic.size, -1), k=k, axis=0)
-        self.M = positions.shape[1]
-        _, self.h, self.w = self.frames.shape
-
-    def inside(self, tau_lo: float, tau_hi: float) -> np.ndarray:
-        """Frames every offset in [tau_lo, tau_hi] places inside the DIC record."""
-        eps = 1e-9 * max(1.0, abs(self.t1))
-        return np.flatnonzero((self.t_ir + tau_lo >= self.t0 - eps) & (self.t_ir + tau_hi <= self.t1 + eps))
-
-    def weights(self, tau: float, idx: np.ndarray):
-        """Flat pixel indices (n, M, 4) and bilinear weights (n, M, 4) of frames ``idx`` at offset ``tau``."""
-        q = self.spline(self.t_ir[idx] + tau).reshape(idx.size, self.M, 2)
-        u = np.clip(q[..., 0], 0.0, self.w - 1.000001)
-        v = np.clip(q[..., 1], 0.0, self.h - 1.000001)
-        j, i = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
-        fu, fv = u - j, v - i
-        base = idx[:, None] * (self.h * self.w) + i * self.w + j
-        flat = np.stack([base, base + 1, base + self.w, base + self.w + 1], axis=-1)
-        wts = np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=-1)
-        return flat, wts
-
-    def __call__(self, tau: float, idx: np.ndarray, raw: bool = False):
-        """The samples (n, M) of the smoothed (or ``raw``) frames."""
-        flat, wts = self.weights(tau, idx)
-        return np.einsum("nmc,nmc->nm", (self.raw if raw else self.frames).reshape(-1)[flat], wts)
-
-
-def _rank_one(Xc: np.ndarray, start: np.ndarray | None = None, iters: int = 300):
-    """Largest singular value squared of ``Xc`` and its (left, right) unit vectors, by power iteration."""
-    n, m = Xc.shape
-    v = np.ones(m) / np.sqrt(m) if start is None or start.size != m else start.copy()
-    lam = 0.0
-    for _ in range(iters):
-        u = Xc @ v
-        w = Xc.T @ u
-        new = float(np.linalg.norm(w))
-        if new == 0.0:
-            return 0.0, np.zeros(n), v
-        v = w / new
-        # new = s1^2 once converged; stop when it changes by less than 1e-14 relative
-        if abs(new - lam) <= 1e-14 * new:
-            lam = new
-            break
-        lam = new
-    u = Xc @ v
-    s = float(np.linalg.norm(u))
-    return s * s, (u / s if s > 0 else u), v
-
-
-class _Criterion:
-    """``J(tau)`` per sample on a fixed set of frames, with a warm start for the power iteration."""
-
-    def __init__(self, sampler: _Sampler, idx: np.ndarray):
-        self.sampler, self.idx = sampler, idx
-        self.start = None
-
-    def parts(self, tau: float):
-        X = self.sampler(tau, self.idx)
-        Xc = X - X.mean(axis=1, keepdims=True)
-        s2, u, v = _rank_one(Xc, self.start)
-        self.start = v
-        return float(np.sum(Xc * Xc)) - s2, Xc, u, v
-
-    def __call__(self, tau: float) -> float:
-        return self.parts(tau)[0] / self.idx.size / self.sampler.M
-
-
-def _prepared(positions, t_dic, max_points, inset=0.0):
-    """Points seen at half the DIC times or more, their gaps interpolated linearly in time; of those the ones at
-    least ``inset`` px inside the cloud's outline at the first and the last time, at most ``max_points``,
-    evenly spread."""
-    ok_t = np.isfinite(positions).all(axis=2)
-    ok = ok_t.sum(axis=0) >= max(2, (t_dic.size + 1) // 2)
-    pos = positions[:, ok].copy()
-    for j in np.flatnonzero(~ok_t[:, ok].all(axis=0)):
-        good = ok_t[:, ok][:, j]
-        for c in (0, 1):
-            pos[:, j, c] = np.interp(t_dic, t_dic[good], pos[good, j, c])
-    keep = np.ones(pos.shape[1], bool)
-    if inset > 0 and keep.sum() >= 3:
-        for k in (0, -1):
-            keep &= _inside_outline(pos[k]) >= inset
-    keep = np.flatnonzero(keep)
-    if keep.size > max_points:
-        keep = keep[np.linspace(0, keep.size - 1, max_points).round().astype(int)]
-    return pos[:, keep]
-
-
-def _inside_outline(p: np.ndarray) -> np.ndarray:
-    """Distance (px) of each position (N, 2) to the outline of the cloud of the positions."""
-    lo = np.floor(p.min(axis=0)).astype(int) - 2
-    hi = np.ceil(p.max(axis=0)).astype(int) + 3
-    u, v = np.arange(lo[0], hi[0]), np.arange(lo[1], hi[1])
-    inside = distance_transform_edt(specimen_mask(p, u, v, erosion_px=0.0))
-    q = np.clip(p.round().astype(int) - lo, 0, [u.size - 1, v.size - 1])
-    return inside[q[:, 1], q[:, 0]]
-
-
 def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, positions: np.ndarray, *,
                     centre: float = 0.0, parameter: str = "ir.time_offset", smoothing_px: float = SMOOTHING_PX,
                     max_points: int = MAX_POINTS, max_frames: int = MAX_FRAMES) -> ClockOffset:
@@ -278,27 +182,25 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
 
     Notes
     -----
-    Near the minimum the samples are ``X(tau) = X(tau*) + X' d + e`` with
+    Near the root the samples are ``X(tau) = X(tau*) + X' d + e`` with
     ``d = tau - tau*``. After removing the directions the rank-one model
     absorbs (row means, ``u w^T`` and ``z v^T`` for the fitted singular
-    vectors ``u``, ``v``), ``Y = (I - u u^T) X'_c (I - v v^T)`` and the least
-    squares estimate has ``var(d) = var(Y . e) / ||Y||^4``. The sample errors
-    are ``e = B G n``: pixel errors ``n`` of variance ``sigma^2``, smoothed
-    (``G``) and sampled bilinearly (``B``), so ``var(Y . e) = sigma^2
-    ||G B^T Y||^2`` (neighbouring samples share pixels and their errors).
-    ``sigma^2`` comes from the raw frames: their samples' misfit of the
-    rank-one model, each over its bilinear noise gain, per degree of
-    freedom. ``X'`` is a central difference over a tenth of a frame period;
-    it also holds the smoothed noise's own gradient along the image velocity
-    ``w``, whose expected square, ``sigma^2 |w|^2 / (8 pi s^4)`` per sample
-    for a Gaussian of ``s`` px, is taken out of ``||Y||^2``.
+    vectors ``u``, ``v``), ``Y = (I - u u^T) X'_c (I - v v^T)``, with ``X'``
+    the model's derivative ``u_k s_1 grad(v^(-k)) . w`` (the pattern
+    ``v^(-k)`` from all frames but ``k``, its gradient from local planes
+    through each sample's neighbours, ``w`` the image velocity), and the
+    Gauss-Newton root has ``var(d) = var(Y . e) / ||Y||^4``. The sample errors
+    are ``e = B G n``: pixel errors ``n`` of variance ``sigma^2``, smoothed (``G``)
+    and sampled bilinearly (``B``), so ``var(Y . e) = sigma^2 ||G B^T Y||^2``.
+    ``sigma^2`` is the raw samples' rank-one misfit, each over its bilinear
+    noise gain, per degree of freedom.
     :data:`MODEL_STD_FRAMES` frame
     periods of model error are added in quadrature.
     """
     t_ir, t_dic = np.asarray(t_ir, float), np.asarray(t_dic, float)
     # the smoothing kernel of a kept point stays on the specimen
     inset = np.ceil(3 * smoothing_px) + 1 if smoothing_px > 0 else 0.0
-    pos = _prepared(np.asarray(positions, float), t_dic, max_points, inset)
+    pos = prepared(np.asarray(positions, float), t_dic, max_points, inset, smoothing_px)
     period = float(np.median(np.diff(t_ir))) if t_ir.size > 1 else np.nan
     _check_sizes(pos, t_dic, t_ir, parameter)
     motion, jitter = _motion(pos)
@@ -306,16 +208,35 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         keep = np.linspace(0, t_ir.size - 1, max_frames).round().astype(int)
         frames, t_ir = frames[keep], t_ir[keep]
     _check_motion(motion, jitter, parameter)
-    sampler = _Sampler(frames, t_ir, t_dic, pos, smoothing_px)
-    grid, crit, best = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", motion, parameter)
-    tau, J = _refined(sampler, grid, best, period)
+    sampler = Sampler(frames, t_ir, t_dic, pos, smoothing_px)
+    tau, J, grid, crit = _search(sampler, centre, period, motion, parameter)
     std, noise = _uncertainty(sampler, J, tau, period)
     _check_identified(std, period, motion, parameter)
+    _check_fit(noise, _frame_noise(sampler.raw), tau, period, parameter)
+    _check_basin(sampler, tau, std, period, parameter)
     std = float(np.hypot(std, MODEL_STD_FRAMES * period))
     log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames; %d frames x %d points, "
              "motion up to %.3g px, pixel noise %.3g K)", tau, std, tau / period, std / period, J.idx.size,
              pos.shape[1], motion, noise)
     return ClockOffset(tau, std, period, motion, noise, grid, crit, int(J.idx.size), int(pos.shape[1]))
+
+
+def _search(sampler: Sampler, centre: float, period: float, motion: float, parameter: str):
+    """The offset (s) and its criterion: the coarse candidates' basins refined, compared, the winner refined."""
+    t_ir, t_dic = sampler.t_ir, sampler.t_dic
+    grid, crit, starts, coarse = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", parameter)
+    step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
+    roots = [_refined(coarse, grid[i], step, period, bounds, newton=False)[0] for i in starts]
+    roots = [r for r in roots if np.isfinite(r)]
+    if roots:  # located to a twentieth of a frame: Gauss-Newton on every sample from there
+        tau, J = _refined(sampler, _tournament(coarse, roots), step, period, bounds, search=False)
+    else:
+        tau, J = _refined(sampler, grid[starts[0]], step, period, bounds)
+    if J is None:
+        raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
+                        f"offset ({tau:.4g} s); set {parameter} to a number (s)")
+    _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
+    return tau, J, grid, crit
 
 
 def _motion(pos: np.ndarray) -> tuple[float, float]:
@@ -355,73 +276,161 @@ def _check_identified(std, period, motion, parameter):
             f"timing information. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
+def _check_inside(tau, grid, crit, motion, parameter):
+    """The refined offset must lie inside the searched range (not at its end: the minimum may lie beyond)."""
+    tol = 0.02 * (grid[1] - grid[0])
+    if not grid[0] + tol < tau < grid[-1] - tol and np.ptp(crit) > 1e-12 * max(crit.max(), 1e-300):
+        raise DataError(
+            f"{parameter}: auto: the best offset lies at the end of the searched range {grid[0]:.4g}..{grid[-1]:.4g} s "
+            f"(the DIC points move at most {motion:.3g} px in the IR image): the clocks differ by more than a "
+            f"quarter of the record, or the data do not fix the offset; set {parameter} to a number (s)")
+
+
+def _frame_noise(frames: np.ndarray, max_frames: int = 20) -> float:
+    """Pixel noise (K) of the frames whatever the offset: the robust spread of each pixel less the mean of its
+    four neighbours (``sigma^2 (1 + 1/4)`` for white noise; a smooth pattern cancels, edges are few)."""
+    f = frames[np.unique(np.linspace(0, frames.shape[0] - 1, min(max_frames, frames.shape[0])).round().astype(int))]
+    f = f.astype(np.float64)
+    r = f[:, 1:-1, 1:-1] - 0.25 * (f[:, :-2, 1:-1] + f[:, 2:, 1:-1] + f[:, 1:-1, :-2] + f[:, 1:-1, 2:])
+    return float(1.4826 * np.median(np.abs(r)) / np.sqrt(1.25)) if r.size else np.nan
+
+
+def _check_fit(misfit, noise, tau, period, parameter):
+    """At the estimate the rank-one model must explain the frames to their pixel noise: a larger misfit means a
+    wrong basin (an offset beyond the searched range) or a pattern that does not move with the material."""
+    if misfit > FIT_RATIO * np.hypot(noise, FIT_FLOOR_K):
+        raise DataError(
+            f"{parameter}: auto cannot estimate the clock offset from the data: at the best offset found "
+            f"({tau:.4g} s, {tau / period:.2f} IR frames) the frames do not follow the DIC motion (the specimen's "
+            f"temperature pattern misfits by {misfit:.3g} K against a pixel noise of {noise:.3g} K): the offset lies "
+            f"beyond the searched quarter of the record, or the pattern changes on the material. Set {parameter} "
+            f"to a number (s; docs/time-sync.md)")
+
+
+def _check_basin(sampler, tau, std, period, parameter):
+    """A Gauss-Newton step from one frame period either side must come back to ``tau``: in the basin of the
+    true offset the score is linear in the offset over several frames, at a minimum the noise made (the true
+    one beyond the searched range, or no pattern to speak of) the steps run off."""
+    for side in (-1.0, 1.0):
+        start = tau + side * period
+        idx = sampler.inside(min(tau, start), max(tau, start))
+        if idx.size < 4:
+            continue
+        Y, R, _ = score_parts(sampler, Criterion(sampler, idx), start)
+        S = float(np.sum(Y * Y))
+        back = start - float(np.sum(Y * R)) / S if S > 0 else np.inf
+        if not abs(back - tau) <= max(BASIN_FRAMES * period, BASIN_STDS * std):
+            raise DataError(
+                f"{parameter}: auto cannot estimate the clock offset from the data: they do not single out one "
+                f"offset (from {start:.4g} s the fit goes to {back:.4g} s, not back to {tau:.4g} s): the offset "
+                f"lies beyond the searched quarter of the record, or the pattern is too weak for the record's "
+                f"noise. Set {parameter} to a number (s; docs/time-sync.md)")
+
+
 def _fmt_std(std: float, period: float) -> str:
     if not np.isfinite(std):
         return "no precision at all (the criterion is flat)"
     return f"+- {std:.3g} s ({std / period:.2f} IR frames)"
 
 
-def _coarse(sampler, t_ir, t_dic, centre, period, where, motion, parameter):
-    """The coarse candidates, ``J`` per sample on them (same frames for all) and the index of the best."""
+def _coarse(sampler, t_ir, t_dic, centre, period, where, parameter):
+    """The candidates (s) over a quarter of the shorter record each way, ``J`` per degree of freedom of each on
+    the frames it places inside the DIC record, and the starts: the candidates at its local minima, best
+    first (at most :data:`_STARTS`), judged with at most :data:`_COARSE_POINTS` points.
+
+    Each candidate is judged on its own frames, so that frames with motion count wherever they lie in the
+    record; frames with little motion fit any offset, so the order of the starts is only a first guess
+    (:func:`_tournament` decides on common frames).
+    """
     span = min(t_dic[-1] - t_dic[0], t_ir[-1] - t_ir[0])
     half = max(0.25 * span, 2.0 * period)
     n = int(np.clip(np.ceil(2 * half / period) + 1, 9, _MAX_CANDIDATES))
-    for _ in range(8):
-        grid = centre + np.linspace(-half, half, n)
-        idx = sampler.inside(grid[0], grid[-1])
-        if idx.size >= 4:
-            break
-        half *= 0.5
-    else:
+    grid = centre + np.linspace(-half, half, n)
+    coarse = sampler.subset(_COARSE_POINTS)
+    crit = _judged(coarse, grid)
+    if not np.isfinite(crit).any():
         raise DataError(f"{where}: the IR record ({t_ir[0]:.4g}..{t_ir[-1]:.4g} s) and the DIC record "
                         f"({t_dic[0]:.4g}..{t_dic[-1]:.4g} s) overlap in fewer than 4 IR frames around an offset "
                         f"of {centre:.4g} s; set {parameter} to a number (s)")
-    J = _Criterion(sampler, idx)
-    crit = np.array([J(g) for g in grid])
-    best = int(np.argmin(crit))
-    if best in (0, grid.size - 1) and np.ptp(crit) > 1e-12 * max(crit.max(), 1e-300):
-        raise DataError(
-            f"{where}: the best offset lies at the end of the searched range {grid[0]:.4g}..{grid[-1]:.4g} s "
-            f"(the DIC points move at most {motion:.3g} px in the IR image): the clocks differ by more than a "
-            f"quarter of the record, or the data do not fix the offset; set {parameter} to a number (s)")
-    return grid, crit, best
+    c = np.where(np.isfinite(crit), crit, np.inf)
+    left, right = np.r_[np.inf, c[:-1]], np.r_[c[1:], np.inf]
+    minima = np.flatnonzero((c <= left) & (c <= right) & np.isfinite(c))
+    starts = minima[np.argsort(c[minima])][:_STARTS]
+    return grid, crit, starts, coarse
 
 
-def _refined(sampler: _Sampler, grid: np.ndarray, best: int, period: float):
-    """The minimum of ``J`` between the coarse candidates next to ``best`` (on the frames every offset there
-    places inside the DIC record); while it lies at an end of that bracket, the bracket moves on by one
-    candidate (the coarse criterion, on fewer frames, can pick a neighbour of the true minimum)."""
-    step = grid[1] - grid[0]
-    lo, hi = grid[best] - step, grid[best] + step
-    for _ in range(4):
-        J = _Criterion(sampler, sampler.inside(lo, hi))
-        if J.idx.size < 4:
+def _judged(sampler, grid):
+    """``J`` per degree of freedom of the rank-one fit at each candidate, on its own frames (NaN: fewer than
+    half the frames the best-placed candidate has)."""
+    frames = [sampler.inside(g, g) for g in grid]
+    full = max(idx.size for idx in frames)
+    out = np.full(grid.size, np.nan)
+    for i, (g, idx) in enumerate(zip(grid, frames)):
+        n, m = idx.size, sampler.M
+        if n >= max(4, (full + 1) // 2) and n * m > n + (n + m - 1):
+            out[i] = Criterion(sampler, idx).parts(g)[0] / (n * m - n - (n + m - 1))
+    return out
+
+
+def _tournament(sampler, roots):
+    """The root that fits best, each pair compared on the frames both place inside the DIC record."""
+    best = roots[0]
+    for r in roots[1:]:
+        idx = sampler.inside(min(best, r), max(best, r))
+        if idx.size >= 4:
+            J = Criterion(sampler, idx)
+            if J(r) < J(best):
+                best = r
+    return best
+
+
+def _refined(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float],
+             newton: bool = True, search: bool = True):
+    """The minimum of ``J`` within ``step`` of ``start`` (on the frames every offset there places inside the
+    DIC record), then Gauss-Newton steps on the model's derivative (:func:`model_derivative`) to the root
+    of the score; while the minimum lies at an end of the bracket, the bracket moves on by one step (at most
+    four times, never beyond ``bounds``); without ``newton`` the minimum only (to a twentieth of a frame),
+    without ``search`` the Gauss-Newton steps from ``start`` only."""
+    lo, hi = start - step, start + step
+    tau, J = start, None
+    if not search and sampler.inside(lo, hi).size >= 4:
+        J = Criterion(sampler, sampler.inside(lo, hi))
+    for _ in range(4 if search else 0):
+        idx = sampler.inside(lo, hi)
+        if idx.size < 4:
             break
-        tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded", options={"xatol": 0.002 * period}).x)
-        if lo + 0.02 * step < tau < hi - 0.02 * step or not grid[0] < tau < grid[-1]:
-            return tau, J
+        J = Criterion(sampler, idx)
+        tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded",
+                                    options={"xatol": (0.01 if newton else 0.05) * period}).x)
+        if lo + 0.02 * step < tau < hi - 0.02 * step or not bounds[0] < tau < bounds[1]:
+            break
         shift = step if tau >= hi - 0.02 * step else -step
         lo, hi = lo + shift, hi + shift
+    if J is None:
+        return np.nan, None
+    for _ in range(_GN_STEPS if newton else 0):
+        Y, R, _ = score_parts(sampler, J, tau)
+        S = float(np.sum(Y * Y))
+        if not S > 0:
+            break
+        new = float(np.clip(tau - float(np.sum(Y * R)) / S, lo, hi))
+        done = abs(new - tau) <= 1e-4 * period
+        tau = new
+        if done:
+            break
     return tau, J
 
 
-def _uncertainty(sampler: _Sampler, J: _Criterion, tau: float, period: float) -> tuple[float, float]:
+def _uncertainty(sampler: Sampler, J: Criterion, tau: float, period: float) -> tuple[float, float]:
     """Standard uncertainty of ``tau`` (s) and the pixel noise (K) (see :func:`estimate_offset`)."""
-    _, Xc, u, v = J.parts(tau)
-    h = 0.05 * period
-    D = (sampler(tau + h, J.idx) - sampler(tau - h, J.idx)) / (2 * h)
-    D -= D.mean(axis=1, keepdims=True)
-    D -= np.outer(u, u @ D)
-    D -= np.outer(D @ v, v)
-    n, m = Xc.shape
+    Y, _, _ = score_parts(sampler, J, tau)
     flat, wts = sampler.weights(tau, J.idx)
     sigma = _pixel_noise(sampler, J.idx, tau, wts)
-    # D holds the smoothed noise's own gradient along the motion as well: take out its expected square
-    S = float(np.sum(D * D)) - _noise_gradient_energy(sampler, J.idx, tau, sigma)
+    S = float(np.sum(Y * Y))
     if S <= 0 or not np.isfinite(sigma):
         return np.inf, sigma
-    # the estimate's error is -sum(D e) / S with e the smoothed pixel noise at the samples: e = G B n
-    acc = np.bincount(flat.ravel(), weights=(wts * D[..., None]).ravel(), minlength=sampler.frames.size)
+    # the estimate's error is -sum(Y e) / S with e the smoothed pixel noise at the samples: e = G B n
+    acc = np.bincount(flat.ravel(), weights=(wts * Y[..., None]).ravel(), minlength=sampler.frames.size)
     acc = acc.reshape(sampler.frames.shape)  # float64: the weights of all samples on each pixel
     if sampler.smoothing > 0:
         acc = gaussian_filter(acc, (0, sampler.smoothing, sampler.smoothing), mode="constant")
@@ -429,23 +438,11 @@ def _uncertainty(sampler: _Sampler, J: _Criterion, tau: float, period: float) ->
     return float(np.sqrt(var)), sigma
 
 
-def _noise_gradient_energy(sampler: _Sampler, idx: np.ndarray, tau: float, sigma: float) -> float:
-    """Expected sum over the samples of (smoothed noise gradient . image velocity)^2 (K^2/s^2).
-
-    White noise of variance ``sigma^2`` smoothed by a Gaussian of ``s`` px has
-    gradient components of variance ``sigma^2 / (8 pi s^4)``; raw frames
-    (``s`` = 0) count as ``s`` = 1/2.
-    """
-    w = sampler.spline.derivative()(sampler.t_ir[idx] + tau).reshape(idx.size, sampler.M, 2)
-    s = max(sampler.smoothing, 0.5)
-    return float(sigma**2 / (8 * np.pi * s**4) * np.sum(w * w))
-
-
-def _pixel_noise(sampler: _Sampler, idx: np.ndarray, tau: float, wts: np.ndarray) -> float:
+def _pixel_noise(sampler: Sampler, idx: np.ndarray, tau: float, wts: np.ndarray) -> float:
     """Pixel noise (K): the raw samples' misfit of the rank-one model, each over its bilinear noise gain."""
     X = sampler(tau, idx, raw=True)
     Xc = X - X.mean(axis=1, keepdims=True)
-    s2, u, v = _rank_one(Xc)
+    s2, u, v = rank_one(Xc)
     R = Xc - np.sqrt(s2) * np.outer(u, v)
     gain = np.einsum("nmc,nmc->nm", wts, wts)  # a sample between pixels averages their noise
     n, m = X.shape
