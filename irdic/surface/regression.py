@@ -44,7 +44,7 @@ GRADIENT_MIN_PARAMETERS = 16
 
 #: Centre spacing factors the Laplacian-risk criterion tries (:func:`laplacian_risk_spatial`): a second
 #: derivative's noise grows like σ / H², so its best spacing is wider than the gradient's; 3 is the pilot.
-LAPLACIAN_CANDIDATES = (5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 24.0, 32.0)
+LAPLACIAN_CANDIDATES = (4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 24.0, 32.0)
 
 log = logging.getLogger(__name__)
 
