@@ -63,7 +63,7 @@ def test_bias_estimate_covers_a_biased_regression():
 
 def test_a_spacing_far_too_wide_is_flagged():
     """The same spot under a regression twice as wide as needed: the error is all bias, ten times the noise;
-    flagged everywhere, and the estimate is of the bias's order (low by up to a third: the reference's bias
+    flagged everywhere, and the estimate is of the bias's order (low by up to half: the references' bias
     grows with the spacing too, see :func:`irdic.heat.laplacian_bias`)."""
     psi, t, noisy, x, true, _ = _plane(_spot)
     inner = np.broadcast_to(edge_distance(psi) > 4, true.shape).copy()
