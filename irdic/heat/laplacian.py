@@ -404,6 +404,7 @@ def laplacian_bias(psi, theta, x, result: Laplacian, times, k_time=1.0, *, c=0.9
     W = TemporalInterpolant(float_array(times, "times")[tt], c=c_t, R0=R0_t, smoothing=k_time).weights() \
         if k_time > 1.0 and full.any() else None
     b = None
+    rim = edge_distance(p) < result.spacing * h
     for k_ref in refs:
         try:
             ref = ls_design(p, k_ref, h, c, R0)
@@ -411,7 +412,7 @@ def laplacian_bias(psi, theta, x, result: Laplacian, times, k_time=1.0, *, c=0.9
             log.info("temperature Laplacian: the bias reference at %.3g spacings does not fit", k_ref)
             continue
         bk = _reference_bias(p, design, ref, series, x_f, sigma, W, full, result.spacing, c, R0)
-        b = bk if b is None else np.minimum(b, bk)
+        b = bk if b is None else np.where(rim, np.maximum(b, bk), np.minimum(b, bk))
     if b is None:
         log.warning("temperature Laplacian: no bias estimate (no reference regression fits the points)")
         return np.where(np.isfinite(result.laplacian), 0.0, np.nan)
