@@ -56,7 +56,8 @@ TIME_CANDIDATES = (1.5, 2.0, 3.0, 4.0)
 #: pixels': the half-shells' estimates were twice the error, the tube's four times. Two references, the smaller
 #: estimate: a reference whose ripple happens to be the larger doubles the other's (the sphere cap and the moving
 #: tube of the benchmark's point clouds, 10 spacings: 0.81 and 0.86 of the errors within 1 std with 0.8 alone,
-#: 0.70 and 0.68 with both).
+#: 0.70 and 0.68 with both); within one centre spacing of the edge the larger (the paper-scale R 65 mm
+#: half-shell: 0.57 / 0.85 of the errors within 1 / 2 std with the smaller there, 0.64 / 0.89 with the larger).
 REFERENCE_RATIO = (0.8, 1.25)
 
 #: Where a point's neighbours do not resolve the bias, :func:`laplacian_bias` averages over the points within this
@@ -346,11 +347,9 @@ def laplacian_bias(psi, theta, x, result: Laplacian, times, k_time=1.0, *, c=0.9
     Parameters
     ----------
     psi, theta, x, c, R0, ops
-        As :func:`surface_laplacian`; ``result`` its result (the spacing and the noise level).
+        As :func:`surface_laplacian`; ``result`` its result (the spacing and the noise level); ``seed`` the probes'.
     times : array_like, shape (T,)
         DIC times (s); ``k_time`` the regression in time's spacing (1: none), ``c_t``, ``R0_t`` its kernel.
-    seed : int
-        Of the noise probes.
 
     Returns
     -------
@@ -367,17 +366,17 @@ def laplacian_bias(psi, theta, x, result: Laplacian, times, k_time=1.0, *, c=0.9
     noises that differs. As for the gradient
     (:func:`irdic.uncertainty.regression_bias.reference_options`) the bias
     squared is :data:`~irdic.uncertainty.regression_bias.REFERENCE_SHARE` of
-    ``<d² − var d>``; of the two references the smaller estimate counts. ``d``
-    is regressed in time as the Laplacian is (the bias persists from time to
-    time, the noise does not), then
+    ``<d² − var d>``; of the two references the smaller estimate counts,
+    except within one centre spacing of the cloud's edge, where the
+    one-sided fit's bias grows with the spacing and the references share it:
+    there the larger. ``d`` is regressed in time as the Laplacian is (the
+    bias persists, the noise does not), then
     :func:`~irdic.uncertainty.regression_bias.local_bias` averages
     ``d² − var d`` locally, keeps it where it exceeds its scatter on
     :data:`~irdic.uncertainty.probes.BIAS_PROBES` noise probes through the
-    same operators, and where no neighbourhood resolves it averages over
-    the points within :data:`BIAS_REACH` centre spacings. ``var d = σ² ‖r_k − r_ref‖²`` of the two regressions' rows,
-    exact. Where a spacing far wider than needed smooths the field (the bias
-    grows with the spacing and the references share it), the estimate is
-    low, by up to half, but far above the noise.
+    same operators, and where no neighbourhood resolves it averages over the
+    points within :data:`BIAS_REACH` centre spacings. ``var d = σ² ‖r_k −
+    r_ref‖²`` of the two regressions' rows, exact.
     """
     from ..numerics.temporal import TemporalInterpolant
     from ..uncertainty.probes import BIAS_PROBES
