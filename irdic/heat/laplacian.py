@@ -39,6 +39,12 @@ log = logging.getLogger(__name__)
 JUDGED_MARGIN = 3.0
 
 
+#: Points the Laplacian's risk criterion judges at most (:func:`~irdic.surface.regression.laplacian_risk_spatial`;
+#: the gradient's 4,000 is a round patch too small for the wide spacings a noise-dominated Laplacian needs: 63 points
+#: across on the paper-scale moving tube, 0.25 mm apart, where the widest candidate, 32 spacings, is 8 mm).
+RISK_MAX_POINTS = 16000
+
+
 #: Centre spacings (DIC times) GCV tries for the Laplacian's regression in time (:func:`smooth_in_time`). The
 #: per-time Laplacian is noise-dominated, so GCV of the series alone goes to the widest spacing it may (12-16
 #: DIC times on the demo tube and half-shell), where the temporal bias outgrows the std that the regression
@@ -145,7 +151,8 @@ def _judged(p):
 
 def _choose_spacing(p, theta, judged, c, R0, separation):
     sample = theta[np.linspace(0, theta.shape[0] - 1, min(theta.shape[0], 8)).astype(int)].T
-    k, table = laplacian_risk_spatial(p, sample, c=c, R0=R0, judged=judged, separation=separation)
+    k, table = laplacian_risk_spatial(p, sample, c=c, R0=R0, judged=judged, separation=separation,
+                                      max_points=RISK_MAX_POINTS)
     log.info("temperature Laplacian: the estimated risk chose %.1f point spacings", k)
     return k, table
 
