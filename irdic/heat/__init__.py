@@ -13,6 +13,7 @@ Units: mm, s, K, W/m³ (see ``docs/heat.md``).
 """
 
 from .balance import HeatTerms, heat_balance, loss_time_constant
-from .laplacian import Laplacian, laplace_beltrami, smooth_in_time, surface_laplacian
+from .laplacian import Laplacian, laplace_beltrami, laplacian_bias, smooth_in_time, surface_laplacian, with_bias
 
-__all__ = ["Laplacian", "laplace_beltrami", "surface_laplacian", "smooth_in_time", "HeatTerms", "heat_balance", "loss_time_constant"]
+__all__ = ["Laplacian", "laplace_beltrami", "surface_laplacian", "smooth_in_time", "laplacian_bias", "with_bias",
+           "HeatTerms", "heat_balance", "loss_time_constant"]

@@ -20,7 +20,7 @@ from ..errors import ConfigError, DataError
 from ..surface.parametrisation import median_spacing
 from ..vocabulary import cf_attrs
 from .balance import MM2_PER_M2, heat_balance, loss_time_constant
-from .laplacian import JUDGED_MARGIN, smooth_in_time, surface_laplacian
+from .laplacian import JUDGED_MARGIN, laplacian_bias, smooth_in_time, surface_laplacian, with_bias
 
 __all__ = ["heat_dataset", "HEAT_VARIABLES"]
 
@@ -116,10 +116,13 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
     psi = fields["surface_parameter"].transpose("point", "param").values.astype(float)
     x = fields["x"].transpose("time", "point", "component").values.astype(float)
     raw = _aligned_points(fields, points)
+    ops = {}
     lap = surface_laplacian(psi, raw, x, spacing=material["laplacian_smoothing"], c=c, R0=R0,
-                            separation=separation)
+                            separation=separation, ops=ops)
     t = fields["time"].values.astype(float)
     lap, k_t = smooth_in_time(lap, t, material.get("laplacian_smoothing_time"), c=c_t, R0=R0_t)
+    bias = laplacian_bias(psi, raw, x, lap, t, k_t, c=c, R0=R0, c_t=c_t, R0_t=R0_t, ops=ops)
+    noise_std, lap = lap.std, with_bias(lap, bias)
     theta = fields["temperature"].values.astype(float)
     rate = fields["temperature_rate"].values.astype(float)
     theta0, theta0_std = _reference(fields, material)
@@ -130,7 +133,8 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
                          specific_heat=material["specific_heat"], conductivity=material["conductivity"], tau=tau,
                          rate_std=_std(fields, "temperature_rate"), theta_std=_std(fields, "temperature"),
                          theta0_std=theta0_std, laplacian_std=lap.std)
-    flags = _bias_flags(fields, edge, lap.spacing * h, tau is not None, theta.shape)
+    flags = _bias_flags(fields, terms, material["conductivity"] * MM2_PER_M2 * bias, noise_std, bias,
+                        tau is not None, theta.shape)
     log.info("heat: %d times x %d points in %.1f s (Laplacian spacing %.3g x %.3g mm)", t.size, psi.shape[0],
              _time.perf_counter() - started, lap.spacing, h)
     values = {"heat_source": (terms.source, terms.source_std), "temperature_laplacian": (lap.laplacian, lap.std),
@@ -141,16 +145,24 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
     return _assemble(fields, values, flags, attrs)
 
 
-def _bias_flags(fields, edge, reach, with_losses, shape):
-    """``_bias_dominated`` of each variable: the Laplacian within one centre spacing of the cloud's edge (the
-    regression's one-sided fit there), the rate's and the temperature's flags of the fields stage."""
-    near = np.broadcast_to(~(edge >= reach), shape)
+def _bias_flags(fields, terms, conduction_bias, laplacian_noise, laplacian_bias, with_losses, shape):
+    """``_bias_dominated`` of each variable: where its estimated bias exceeds its noise std.
+
+    The Laplacian and the conduction: :func:`~irdic.heat.laplacian.laplacian_bias` against the noise std.
+    The storage and the losses: the fields' flags of the rate and the temperature (whose stds hold their bias
+    where flagged). The source: its bias, the conduction's and, where flagged, the storage's and the losses'
+    stds, against the rest of its variance.
+    """
+    lap = np.nan_to_num(laplacian_bias) > laplacian_noise
     rate = _flag(fields, "temperature_rate")
     temp = _flag(fields, "temperature")
     rate = np.zeros(shape, bool) if rate is None else rate
     temp = np.zeros(shape, bool) if (temp is None or not with_losses) else temp
-    return {"temperature_laplacian": near, "heat_conduction": near, "heat_storage": rate, "heat_losses": temp,
-            "heat_source": near | rate | temp}
+    b2 = (np.square(np.nan_to_num(conduction_bias)) + np.where(rate, terms.storage_std, 0.0) ** 2
+          + np.where(temp, terms.losses_std, 0.0) ** 2)
+    source = b2 > np.square(terms.source_std) - b2
+    return {"temperature_laplacian": lap, "heat_conduction": lap, "heat_storage": rate, "heat_losses": temp,
+            "heat_source": source}
 
 
 def _attrs(material, tau, tau_std, how, lap, h):
@@ -176,6 +188,6 @@ def _assemble(fields, values, flags, attrs) -> xr.Dataset:
         data[f"{name}_std"] = (tp, std, {"units": base["units"], "long_name": f"standard uncertainty of {name} "
                                          "(IR noise through the regressions and the fields' stds; see docs/heat.md)"})
         data[f"{name}_bias_dominated"] = (tp, np.asarray(flags[name], bool), {
-            "long_name": f"the method's bias (cloud edge, series end, mask edge) dominates the noise: {name}_std "
-                         "does not bound the error"})
+            "long_name": f"the method's estimated bias exceeds the noise: there {name}_std is mostly that "
+                         "estimate (a local or regional RMS), not a Gaussian width"})
     return xr.Dataset(data, coords={"time": fields["time"], "point": fields["point"]}, attrs=attrs)
