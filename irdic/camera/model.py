@@ -208,6 +208,11 @@ def _decompose(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     R = D @ Q
     if np.linalg.det(R) < 0:  # only for a mirrored M, which normalise_matrix excludes
         raise CalibrationError("projection matrix has det(M[:, :3]) < 0: it describes a mirrored camera")
+    # A DLT of nearly degenerate pairs can give a singular left block: its camera centre lies at
+    # infinity (an affine camera), which no pinhole calibration describes.
+    if not np.isfinite(Kr).all() or np.linalg.cond(M[:, :3]) > 1e12 or K[2, 2] == 0:
+        raise CalibrationError("projection matrix has a singular left 3x3 block (camera centre at infinity): "
+                               "it is not a pinhole camera")
     K = K / K[2, 2]
     C = -np.linalg.solve(M[:, :3], M[:, 3])
     return K, R, C
