@@ -126,8 +126,10 @@ def _compare(whole: Path, chunked: Path):
             ga = {k: v for k, v in a.attrs.items() if k.startswith("ir_noise_gain")}
             gb = {k: v for k, v in b.attrs.items() if k.startswith("ir_noise_gain")}
             assert ga.keys() == gb.keys() and ga
-            for k in ga:  # equal up to the rounding of separate processes
-                assert gb[k] == pytest.approx(ga[k], rel=1e-9), k
+            # equal up to the rounding of separate processes, whose BLAS runs other thread counts (the
+            # whole record on 2 threads, each chunk's job on its own): 2e-9 seen with the AVX2 kernels
+            for k in ga:
+                assert gb[k] == pytest.approx(ga[k], rel=1e-7), k
         else:
             # "auto" is resolved once on the whole record: every chunk and the whole record choose alike
             assert {k: v for k, v in a.attrs.items() if k.endswith("_chosen")} == \
