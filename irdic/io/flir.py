@@ -99,6 +99,42 @@ def _directory(raw: bytes, bo: str) -> tuple[dict[int, tuple[int, int, int]], in
     return out, end
 
 
+def _plausible_header(fh, pos: int, size: int) -> bool:
+    """Whether a complete FFF header and a directory with a raw image record that fits the file start at ``pos``."""
+    fh.seek(pos)
+    head = fh.read(HEADER_SIZE)
+    try:
+        bo, dir_offset, n = _header(head, "", None)
+    except FormatError:
+        return False
+    fh.seek(pos + dir_offset)
+    raw = fh.read(ENTRY_SIZE * n)
+    if len(raw) < ENTRY_SIZE * n:
+        return False
+    records, end = _directory(raw, bo)
+    return REC_RAW in records and pos + records[REC_RAW][1] + RAW_HEADER_SIZE <= size
+
+
+def _next_header(fh, start: int, size: int, chunk: int = 1 << 20) -> int | None:
+    """The first plausible FFF header at or after ``start`` (bytes between blocks that are not a block: a gap or
+    an index some writers leave); None when there is none. Only the gap is searched, never a known block."""
+    pos = start
+    while pos < size - HEADER_SIZE:
+        fh.seek(pos)
+        buf = fh.read(chunk + 3)
+        found = []
+        for magic in (MAGIC, b"AFF\x00"):
+            k = buf.find(magic)
+            while k >= 0:
+                found.append(k)
+                k = buf.find(magic, k + 1)
+        for k in sorted(found):
+            if _plausible_header(fh, pos + k, size):
+                return pos + k
+        pos += chunk
+    return None
+
+
 def _walk(fh, path, size: int) -> Iterator[dict]:
     """The blocks of a file that hold a frame, in chain order: ``{frame, offset, length, records}``.
 
@@ -112,10 +148,16 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
         fh.seek(offset)
         head = fh.read(HEADER_SIZE)
         if block > 0 and head[:4] not in (MAGIC, b"AFF\x00"):
-            if size - offset >= HEADER_SIZE:  # less is padding (radiometric JPEGs end with a byte or two)
-                warnings.warn(f"{path}: {size - offset} bytes after frame {frame - 1} are not an FFF frame; "
-                              "ignored", IrdicWarning, stacklevel=3)
-            break
+            resume = _next_header(fh, offset, size)
+            if resume is None:
+                if size - offset >= HEADER_SIZE:  # less is padding (radiometric JPEGs end with a byte or two)
+                    warnings.warn(f"{path}: {size - offset} bytes after frame {frame - 1} are not an FFF frame; "
+                                  "ignored", IrdicWarning, stacklevel=3)
+                break
+            warnings.warn(f"{path}: {resume - offset} bytes after frame {frame - 1} (from byte {offset}) are not "
+                          f"FFF data; skipped to the next FFF header at byte {resume}", IrdicWarning, stacklevel=3)
+            offset = resume
+            continue
         if block > 0 and len(head) < HEADER_SIZE:
             _cut(path, frame, "inside its header")
             break

@@ -200,6 +200,28 @@ def test_blocks_without_a_raw_image_are_left_out(tmp_path):
         read_ir(path, format="flir")
 
 
+def test_bytes_between_blocks_are_skipped_to_the_next_header(tmp_path):
+    """Padding or an index between frames: the chain resumes at the next complete FFF header after the gap,
+    past a stray marker in the gap; the markers inside pixel data are never looked at."""
+    c = counts_of(_scene(3, 20, 28, seed=10))
+    c[1, 3, 4:6] = [0x4646, 0x0046]  # 'FFF\0' inside frame 1's pixels
+    raw = write_flir(tmp_path / "a.seq", counts=c, times=[1.7e9, 1.7e9 + 0.04, 1.7e9 + 0.08]).read_bytes()
+    second, third = (h["offset"] for h in list(iter_flir_headers(tmp_path / "a.seq"))[1:])
+    gap = bytes(100) + b"FFF\x00" + bytes(60) + b"\x01" * 413  # a stray marker with no valid header behind it
+    path = tmp_path / "gaps.seq"
+    path.write_bytes(raw[:second] + bytes(512) + raw[second:third] + gap + raw[third:])
+    with pytest.warns(IrdicWarning) as got:
+        da = read_ir(path)
+    messages = {str(w.message).split(": ", 1)[1] for w in got}
+    assert messages == {f"512 bytes after frame 0 (from byte {second}) are not FFF data; skipped to the next FFF "
+                        f"header at byte {second + 512}",
+                        f"577 bytes after frame 1 (from byte {third + 512}) are not FFF data; skipped to the next "
+                        f"FFF header at byte {third + 512 + 577}"}
+    assert da.shape[0] == 3
+    np.testing.assert_allclose(da.values, read_ir(tmp_path / "a.seq").values)
+    np.testing.assert_allclose(da["time"].values, [0, 0.04, 0.08], atol=1e-9)
+
+
 def test_aff_block_without_camera_info_names_the_format(tmp_path):
     block = _block(tmp_path, _scene(1, 8, 8)[0])
     block[:4] = b"AFF\x00"
