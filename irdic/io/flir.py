@@ -535,7 +535,8 @@ def read_flir(path: str | os.PathLike, *, emissivity: float | None = None,
     xarray.DataArray
         float32 °C. One frame: dims ``("v", "u")`` with scalar ``time``
         (Unix s) when the frame has one. Several: dims ``("time", "v", "u")``
-        with ``time`` in s relative to the first frame and ``frame_index``.
+        with ``time`` in s relative to the first frame (the frame numbers,
+        with a warning, when a frame has no time stamp) and ``frame_index``.
         ``attrs``: ``format="flir"``, ``source``, ``camera``, the object
         parameters (``emissivity``, ``distance`` m, ``reflected_temp``,
         ``env_temp`` (atmosphere), ``ir_window_temp`` °C,
@@ -566,6 +567,9 @@ def read_flir(path: str | os.PathLike, *, emissivity: float | None = None,
         return temperature_dataarray(stack[0], time=first["seconds"], attrs=attrs)
     attrs["n_frames"] = n
     t = [info["seconds"] for info in heads]
+    if None in t:
+        warnings.warn(f"{p}: frame {t.index(None)} has no time stamp: the time coordinate numbers the frames "
+                      "(0, 1, 2 ...) instead of giving seconds", IrdicWarning, stacklevel=2)
     # the stamps have millisecond resolution: relative times rounded to it drop float64 noise of Unix seconds
     time = np.arange(n, dtype=np.float64) if None in t else np.round(np.asarray(t) - t[0], 3)
     return temperature_dataarray(stack, time=time, extra_coords={"frame_index": np.arange(n)}, attrs=attrs)

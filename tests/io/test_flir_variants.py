@@ -168,6 +168,13 @@ def test_short_camera_info_records(tmp_path, length, has_time):
         read_ir(path)
 
 
+def test_frames_without_time_stamps_are_numbered_with_a_warning(tmp_path):
+    path = write_flir(tmp_path / "a.seq", _scene(3, 8, 8), times=[0, 0, 0])
+    with pytest.warns(IrdicWarning, match=r"a.seq: frame 0 has no time stamp: the time coordinate numbers the frames"):
+        da = read_ir(path)
+    np.testing.assert_array_equal(da["time"].values, [0, 1, 2])
+
+
 # ----------------------------------------------------------------------------
 # several FFF blocks, radiometric JPEG segments
 # ----------------------------------------------------------------------------
