@@ -155,7 +155,8 @@ def _walk(fh, path, size: int) -> Iterator[dict]:
                                   "ignored", IrdicWarning, stacklevel=3)
                 break
             warnings.warn(f"{path}: {resume - offset} bytes after frame {frame - 1} (from byte {offset}) are not "
-                          f"FFF data; skipped to the next FFF header at byte {resume}", IrdicWarning, stacklevel=3)
+                          f"FFF data (padding, or a frame damaged beyond reading); skipped to the next FFF header "
+                          f"at byte {resume}", IrdicWarning, stacklevel=3)
             offset = resume
             continue
         if block > 0 and len(head) < HEADER_SIZE:

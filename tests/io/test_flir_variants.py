@@ -220,13 +220,26 @@ def test_bytes_between_blocks_are_skipped_to_the_next_header(tmp_path):
     with pytest.warns(IrdicWarning) as got:
         da = read_ir(path)
     messages = {str(w.message).split(": ", 1)[1] for w in got}
-    assert messages == {f"512 bytes after frame 0 (from byte {second}) are not FFF data; skipped to the next FFF "
-                        f"header at byte {second + 512}",
-                        f"577 bytes after frame 1 (from byte {third + 512}) are not FFF data; skipped to the next "
-                        f"FFF header at byte {third + 512 + 577}"}
+    why = "are not FFF data (padding, or a frame damaged beyond reading); skipped to the next FFF header at byte"
+    assert messages == {f"512 bytes after frame 0 (from byte {second}) {why} {second + 512}",
+                        f"577 bytes after frame 1 (from byte {third + 512}) {why} {third + 512 + 577}"}
     assert da.shape[0] == 3
     np.testing.assert_allclose(da.values, read_ir(tmp_path / "a.seq").values)
     np.testing.assert_allclose(da["time"].values, [0, 0.04, 0.08], atol=1e-9)
+
+
+def test_frame_with_a_destroyed_header_is_left_out_with_a_warning(tmp_path):
+    t = _scene(4, 20, 28, seed=11)
+    raw = bytearray(write_flir(tmp_path / "a.seq", t, times=[1.7e9 + 0.04 * k for k in range(4)]).read_bytes())
+    heads = list(iter_flir_headers(tmp_path / "a.seq"))
+    raw[heads[2]["offset"]:heads[2]["offset"] + 64] = bytes(64)
+    path = tmp_path / "hole.seq"
+    path.write_bytes(bytes(raw))
+    with pytest.warns(IrdicWarning, match=rf"hole.seq: {heads[3]['offset'] - heads[2]['offset']} bytes after frame 1 "
+                                          r"\(from byte \d+\) are not FFF data \(padding, or a frame damaged"):
+        da = read_ir(path)
+    assert da.shape[0] == 3 and np.abs(da.values - t[[0, 1, 3]]).max() < 0.02
+    np.testing.assert_allclose(da["time"].values, [0, 0.04, 0.12], atol=1e-9)  # each frame keeps its own time
 
 
 def test_aff_block_without_camera_info_names_the_format(tmp_path):
