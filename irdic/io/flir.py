@@ -19,13 +19,16 @@ fixed stride; a block ends at the largest ``offset + length`` of its
 directory and the next one starts there. Frames are found by following that
 chain: the 4 bytes ``FFF\\0`` also occur inside pixel data, so the file is
 never searched for them. A radiometric JPEG carries one FFF block split over
-APP1 segments whose payload starts ``FLIR\\0`` (byte 6 = chunk index,
-byte 7 = last index, data from byte 8 on).
+APP1 segments (:mod:`irdic.io.flir_jpeg`). A block without a raw image record
+(a file header, a damaged frame) is left out with a warning.
 
-PNG samples are usually stored little-endian although PNG is big-endian: the
-byte order is chosen per image as the one that puts more pixels inside the
-raw range the camera displayed (RawValueMedian +- RawValueRange), or, without
-that range, the smoother one. Rows run top to bottom.
+PNG samples are usually stored little-endian although PNG is big-endian (the
+ThermaCAM EX320, whose records are big-endian, stores them as PNG says): the
+byte order is chosen per image as the one that puts clearly more pixels
+inside the raw range the camera displayed (RawValueMedian +- RawValueRange),
+else the clearly smoother one, else the raw record's. Rows run top to
+bottom, in the sensor's orientation (a picture turned afterwards in a photo
+viewer keeps its raw image as recorded).
 
 Frames are streamed: memory is one frame whatever the length of the record.
 Times are the Unix times of each frame's camera info.
@@ -44,6 +47,7 @@ import xarray as xr
 
 from ..errors import DataError, FormatError, IrdicWarning
 from ._common import check_file
+from .flir_jpeg import fff_from_jpeg, is_radiometric_jpeg
 from .flir_planck import camera_info, counts_table, object_parameters, parameter_attrs
 from .stack import check_temperatures, temperature_dataarray
 
@@ -59,7 +63,6 @@ REC_RAW, REC_CAMERA = 0x01, 0x20
 RAW_BE, RAW_LE, RAW_PNG, RAW_JPEGLS = 1, 2, 3, 4
 MAX_ENTRIES = 4096
 MAX_SIDE = 16384
-_JPEG_SEGMENT_LIMIT = 1 << 16  # JPEG segments read before the image data when looking for FLIR APP1
 
 
 # ----------------------------------------------------------------------------
@@ -96,42 +99,97 @@ def _directory(raw: bytes, bo: str) -> tuple[dict[int, tuple[int, int, int]], in
     return out, end
 
 
-def _walk(fh, path, size: int) -> Iterator[dict]:
-    """The blocks of a file in chain order: ``{frame, offset, length, records}``.
+def _plausible_header(fh, pos: int, size: int) -> bool:
+    """Whether a complete FFF header and a directory with a raw image record that fits the file start at ``pos``."""
+    fh.seek(pos)
+    head = fh.read(HEADER_SIZE)
+    try:
+        bo, dir_offset, n = _header(head, "", None)
+    except FormatError:
+        return False
+    fh.seek(pos + dir_offset)
+    raw = fh.read(ENTRY_SIZE * n)
+    if len(raw) < ENTRY_SIZE * n:
+        return False
+    records, end = _directory(raw, bo)
+    return REC_RAW in records and pos + records[REC_RAW][1] + RAW_HEADER_SIZE <= size
 
-    ``length`` may run past the end of the file for the last block only.
+
+def _next_header(fh, start: int, size: int, chunk: int = 1 << 20) -> int | None:
+    """The first plausible FFF header at or after ``start`` (bytes between blocks that are not a block: a gap or
+    an index some writers leave); None when there is none. Only the gap is searched, never a known block."""
+    pos = start
+    while pos < size - HEADER_SIZE:
+        fh.seek(pos)
+        buf = fh.read(chunk + 3)
+        found = []
+        for magic in (MAGIC, b"AFF\x00"):
+            k = buf.find(magic)
+            while k >= 0:
+                found.append(k)
+                k = buf.find(magic, k + 1)
+        for k in sorted(found):
+            if _plausible_header(fh, pos + k, size):
+                return pos + k
+        pos += chunk
+    return None
+
+
+def _walk(fh, path, size: int) -> Iterator[dict]:
+    """The blocks of a file that hold a frame, in chain order: ``{frame, offset, length, records}``.
+
+    ``length`` may run past the end of the file for the last block only. A
+    block without a raw image record (a header or a damaged frame) is left
+    out with a warning; frames are numbered among the blocks that hold one.
     """
-    offset, frame = 0, 0
+    offset, block, frame, skipped = 0, 0, 0, []
     while offset < size:
         where = f"frame {frame} (byte {offset})"
         fh.seek(offset)
         head = fh.read(HEADER_SIZE)
-        if frame > 0 and head[:4] not in (MAGIC, b"AFF\x00"):
-            if size - offset >= HEADER_SIZE:  # less is padding (radiometric JPEGs end with a byte or two)
-                warnings.warn(f"{path}: {size - offset} bytes after frame {frame - 1} are not an FFF frame; "
-                              "ignored", IrdicWarning, stacklevel=3)
-            return
-        if frame > 0 and len(head) < HEADER_SIZE:
+        if block > 0 and head[:4] not in (MAGIC, b"AFF\x00"):
+            resume = _next_header(fh, offset, size)
+            if resume is None:
+                if size - offset >= HEADER_SIZE:  # less is padding (radiometric JPEGs end with a byte or two)
+                    warnings.warn(f"{path}: {size - offset} bytes after frame {frame - 1} are not an FFF frame; "
+                                  "ignored", IrdicWarning, stacklevel=3)
+                break
+            warnings.warn(f"{path}: {resume - offset} bytes after frame {frame - 1} (from byte {offset}) are not "
+                          f"FFF data (padding, or a frame damaged beyond reading); skipped to the next FFF header "
+                          f"at byte {resume}", IrdicWarning, stacklevel=3)
+            offset = resume
+            continue
+        if block > 0 and len(head) < HEADER_SIZE:
             _cut(path, frame, "inside its header")
-            return
+            break
         bo, dir_offset, n = _header(head, where, path)
         fh.seek(offset + dir_offset)
         raw = fh.read(ENTRY_SIZE * n)
         if len(raw) < ENTRY_SIZE * n:
-            if frame > 0:
+            if block > 0:
                 _cut(path, frame, "inside its record directory")
-                return
+                break
             raise FormatError(f"{where}: the record directory runs past the end of the file (truncated)", path)
         records, end = _directory(raw, bo)
         length = max(dir_offset + ENTRY_SIZE * n, end)
+        block += 1
         if REC_RAW not in records:
-            raise FormatError(f"{where}: the FFF block has no raw image record (type 1)", path)
+            skipped.append((offset, sorted(records)))
+            offset += length
+            continue
         # a file of one frame (a .fff, a radiometric JPEG) has no frame number: its position says nothing
         single = frame == 0 and size - (offset + length) < HEADER_SIZE
         yield {"frame": frame, "offset": offset, "length": length, "records": records,
-               "frame_index": None if single else frame}
+               "frame_index": None if single else frame, "aff": head[:4] == b"AFF\x00"}
         offset += length
         frame += 1
+    if skipped:
+        kinds = sorted({f"0x{t:02x}" for _, types in skipped for t in types})
+        what = (f"{len(skipped)} FFF block(s) (the first at byte {skipped[0][0]}) hold no raw image record "
+                f"(type 1; record types {', '.join(kinds) or 'none'})")
+        if frame == 0:
+            raise FormatError(f"{what} and no block holds one: no frame to read", path)
+        warnings.warn(f"{path}: {what}; left out", IrdicWarning, stacklevel=3)
 
 
 def _cut(path, frame: int, where: str) -> None:
@@ -146,55 +204,13 @@ def _read_record(fh, block: dict, rtype: int, size: int) -> tuple[int, bytes, in
     return sub, fh.read(max(0, min(length, size - block["offset"] - off))), length
 
 
-# ----------------------------------------------------------------------------
-# radiometric JPEG
-# ----------------------------------------------------------------------------
-def _jpeg_flir_chunks(fh, path, strict: bool) -> list[bytes]:
-    """The FLIR APP1 payloads of a JPEG, in chunk order (empty when it has none)."""
-    fh.seek(0)
-    if fh.read(2) != b"\xff\xd8":
-        return []
-    chunks: dict[int, bytes] = {}
-    last = None
-    while True:
-        marker = fh.read(4)
-        if len(marker) < 4 or marker[0] != 0xFF or marker[1] in (0xD9, 0xDA):
-            break  # end of the header segments (start of scan) or a damaged file
-        (seg_len,) = struct.unpack(">H", marker[2:])
-        payload = fh.read(max(0, seg_len - 2))
-        if marker[1] == 0xE1 and payload[:5] == b"FLIR\x00" and len(payload) >= 8:
-            if strict and payload[6] in chunks:
-                raise FormatError(f"the FLIR APP1 segment {payload[6]} occurs twice", path)
-            chunks[payload[6]] = payload[8:]
-            last = payload[7]
-    if not chunks:
-        return []
-    missing = sorted(set(range(last + 1)) - set(chunks))
-    if strict and missing:
-        raise FormatError(f"radiometric JPEG: FLIR APP1 segment(s) {missing} of 0..{last} are missing "
-                          "(truncated or edited picture)", path)
-    return [chunks[k] for k in sorted(chunks)]
-
-
-def is_radiometric_jpeg(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is a JPEG with FLIR radiometric data (APP1 ``FLIR`` segments)."""
-    with open(check_file(path), "rb") as fh:
-        return bool(_jpeg_flir_chunks(fh, path, strict=False))
-
-
 def _open_blocks(p) -> tuple[object, int]:
     """A binary file object over the FFF chain of ``p`` (the file, or the FFF block of a JPEG) and its size."""
     fh = open(p, "rb")
     if fh.read(2) != b"\xff\xd8":
         return fh, p.stat().st_size
-    try:
-        chunks = _jpeg_flir_chunks(fh, p, strict=True)
-    finally:
-        fh.close()
-    if not chunks:
-        raise FormatError("a JPEG without FLIR radiometric data (no APP1 'FLIR' segment): a plain picture "
-                          "holds colours, not temperatures; save radiometric JPEGs or record a .seq", p)
-    data = b"".join(chunks)
+    fh.close()
+    data = fff_from_jpeg(p)
     return io.BytesIO(data), len(data)
 
 
@@ -224,7 +240,9 @@ def _camera(fh, block: dict, size: int, path) -> dict:
     where = f"frame {block['frame']}"
     if REC_CAMERA not in block["records"]:
         raise FormatError(f"{where}: the FFF block has no camera-info record (type 0x20): no Planck constants "
-                          "to convert counts to temperatures", path)
+                          "to convert counts to temperatures" + (" (an AFF file, as older FLIR software such as "
+                          "ExaminIR writes, stores none: export temperatures from that software)"
+                          if block.get("aff") else ""), path)
     _sub, raw, _length = _read_record(fh, block, REC_CAMERA, size)
     return camera_info(raw, where, path)
 
@@ -250,14 +268,24 @@ def _roughness(img: np.ndarray) -> float:
     return float(np.abs(np.diff(x, axis=-1)).mean()) if x.shape[-1] > 1 else 0.0
 
 
-def _png_order(img: np.ndarray, cam: dict) -> np.ndarray:
-    """The PNG's samples in the byte order that makes them counts (see the module notes)."""
+def _png_order(img: np.ndarray, cam: dict, record_order: str) -> np.ndarray:
+    """The PNG's samples in the byte order that makes them counts (see the module notes).
+
+    The first clear answer of: the share of pixels inside the raw range the
+    camera displayed (one order at least half, and a quarter more than the
+    other), the roughness (one order at least 4 times smoother), the byte
+    order of the raw record (in every file seen the PNG's samples follow it:
+    little-endian records, byte-swapped PNG; big-endian, a plain PNG).
+    """
     swapped = img.byteswap()
     if cam["range"] > 0:
-        keep = _in_range(img, cam["median"], cam["range"]) > _in_range(swapped, cam["median"], cam["range"])
-    else:
-        keep = _roughness(img) < _roughness(swapped)
-    return img if keep else swapped
+        inside = _in_range(img, cam["median"], cam["range"]), _in_range(swapped, cam["median"], cam["range"])
+        if max(inside) >= 0.5 and abs(inside[0] - inside[1]) >= 0.25:
+            return img if inside[0] > inside[1] else swapped
+    rough = _roughness(img), _roughness(swapped)
+    if max(rough) > 4 * min(rough):
+        return img if rough[0] < rough[1] else swapped
+    return img if record_order == ">" else swapped
 
 
 def _codestream_size(data: bytes, sub: int) -> tuple[int, int] | None:
@@ -279,8 +307,9 @@ def _codestream_size(data: bytes, sub: int) -> tuple[int, int] | None:
 def _decode(sub: int, data: bytes, bo: str, w: int, h: int, cam: dict, where: str, path) -> np.ndarray:
     """Counts (uint16, shape (h, w)) of a raw record's image; incomplete uncompressed rows are masked later."""
     if sub in (RAW_LE, RAW_BE):
-        # subtype 1 is big-endian; subtype 2 follows its record's byte-order mark (little-endian in every file seen)
-        dtype = np.dtype(np.uint16).newbyteorder(">" if sub == RAW_BE else bo)
+        # the pixels are u16 words of the record, in the byte order its mark (word 0 = 2) gives, as exiftool reads
+        # them: little-endian in every real file seen; the subtype (1 "big-", 2 "little-endian") agrees with the mark
+        dtype = np.dtype(np.uint16).newbyteorder(bo)
         n = min(len(data) // 2, w * h)
         if n == w * h:  # the usual case: the counts as they lie in the record, no copy
             return np.frombuffer(data, dtype, count=n).reshape(h, w)
@@ -305,7 +334,7 @@ def _decode(sub: int, data: bytes, bo: str, w: int, h: int, cam: dict, where: st
     if img.dtype != np.uint16 or img.shape != (h, w):
         raise FormatError(f"{where}: the raw image decodes to {img.dtype} {img.shape}, the record header says "
                           f"{w} x {h} px of 16 bits", path)
-    return _png_order(img, cam) if sub == RAW_PNG else img
+    return _png_order(img, cam, bo) if sub == RAW_PNG else img
 
 
 def _frame_counts(fh, block: dict, size: int, cam: dict, path, warn: bool = True) -> tuple[np.ndarray, int]:
@@ -507,7 +536,8 @@ def read_flir(path: str | os.PathLike, *, emissivity: float | None = None,
     xarray.DataArray
         float32 °C. One frame: dims ``("v", "u")`` with scalar ``time``
         (Unix s) when the frame has one. Several: dims ``("time", "v", "u")``
-        with ``time`` in s relative to the first frame and ``frame_index``.
+        with ``time`` in s relative to the first frame (the frame numbers,
+        with a warning, when a frame has no time stamp) and ``frame_index``.
         ``attrs``: ``format="flir"``, ``source``, ``camera``, the object
         parameters (``emissivity``, ``distance`` m, ``reflected_temp``,
         ``env_temp`` (atmosphere), ``ir_window_temp`` °C,
@@ -538,6 +568,9 @@ def read_flir(path: str | os.PathLike, *, emissivity: float | None = None,
         return temperature_dataarray(stack[0], time=first["seconds"], attrs=attrs)
     attrs["n_frames"] = n
     t = [info["seconds"] for info in heads]
+    if None in t:
+        warnings.warn(f"{p}: frame {t.index(None)} has no time stamp: the time coordinate numbers the frames "
+                      "(0, 1, 2 ...) instead of giving seconds", IrdicWarning, stacklevel=2)
     # the stamps have millisecond resolution: relative times rounded to it drop float64 noise of Unix seconds
     time = np.arange(n, dtype=np.float64) if None in t else np.round(np.asarray(t) - t[0], 3)
     return temperature_dataarray(stack, time=time, extra_coords={"frame_index": np.arange(n)}, attrs=attrs)

@@ -19,6 +19,11 @@ record's byte order is the one in which its first u16 reads 2):
             s16 time-zone offset (minutes west of UTC)
 ==========  ==================================================================
 
+The record is 2428 or 2476 bytes long in most files, 2108 in DJI Zenmuse XT
+images and 1148 in the ThermaCAM EX320's, with the same offsets; the
+constants end at 0x310, the fields after them are read when the record
+holds them.
+
 Counts become °C through a 65536-entry table built once per parameter set:
 the conversion is exact per count (float64) and costs one table lookup per
 pixel.
@@ -38,8 +43,10 @@ __all__ = ["camera_info", "object_parameters", "parameter_attrs", "counts_table"
            "celsius_to_counts", "planck_signal", "OVERRIDES", "PARAMETER_ATTRS", "CAMERA_INFO_SIZE", "KELVIN"]
 
 KELVIN = 273.15
-#: smallest camera-info record that holds every field read here (the time stamp ends at 0x38e)
-CAMERA_INFO_SIZE = 0x466
+#: smallest camera-info record that gives temperatures (PlanckR2 ends at 0x310); the raw range (to 0x33e) and the
+#: time stamp (to 0x38e) are read when the record is long enough to hold them
+CAMERA_INFO_SIZE = 0x310
+_RANGE_END, _TIME_END = 0x33e, 0x38e
 
 _FLOATS = {
     "emissivity": 0x20, "distance": 0x24, "reflected_k": 0x28, "atmosphere_k": 0x2c, "window_k": 0x30,
@@ -71,7 +78,9 @@ def camera_info(raw: bytes, where: str, path) -> dict:
     Parameters
     ----------
     raw : bytes
-        The record, at least :data:`CAMERA_INFO_SIZE` bytes.
+        The record, at least :data:`CAMERA_INFO_SIZE` bytes; a shorter one
+        than 0x38e bytes has no time stamp (``seconds`` None), one shorter
+        than 0x33e no raw range (``median`` and ``range`` 0).
     where : str
         "frame k" for messages.
     path : path-like
@@ -94,14 +103,14 @@ def camera_info(raw: bytes, where: str, path) -> dict:
     if len(raw) < CAMERA_INFO_SIZE or not bo:
         raise FormatError(f"{where}: camera-info record of {len(raw)} bytes "
                           + ("has no byte-order mark (first u16 = 2)" if len(raw) >= CAMERA_INFO_SIZE else
-                             f"is shorter than the {CAMERA_INFO_SIZE} bytes of FLIR's layout")
+                             f"is shorter than the {CAMERA_INFO_SIZE} bytes that hold the Planck constants")
                           + " (damaged file or a layout irdic does not know)", path)
     params = {k: float(struct.unpack_from(bo + "f", raw, off)[0]) for k, off in _FLOATS.items()}
     params["o"] = float(struct.unpack_from(bo + "i", raw, 0x308)[0])
     if params["humidity"] > 2:  # some cameras store percent
         params["humidity"] /= 100.0
-    median, rng = struct.unpack_from(bo + "HH", raw, 0x338)
-    sec, ms, tz = struct.unpack_from(bo + "IIh", raw, 0x384)
+    median, rng = struct.unpack_from(bo + "HH", raw, 0x338) if len(raw) >= _RANGE_END else (0, 0)
+    sec, ms, tz = struct.unpack_from(bo + "IIh", raw, 0x384) if len(raw) >= _TIME_END else (0, 0, 0)
     model = raw[0xd4:0xd4 + 32].split(b"\x00", 1)[0].decode("latin-1", errors="replace").strip()
     return {"params": params, "model": model, "median": int(median), "range": int(rng),
             "seconds": sec + (ms & 0xFFFF) / 1000.0 if sec else None, "tz_minutes": int(tz)}

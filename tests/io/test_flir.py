@@ -46,7 +46,8 @@ def _raw2temp(raw: float, E, OD, RTemp, ATemp, IRWTemp, IRT, RH, PR1, PB, PF, PO
     raw_wind_attn = (1 - IRT) / E / tau1 / IRT * planck(IRWTemp)
     raw_atm2_attn = (1 - tau2) / E / tau1 / IRT / tau2 * planck(ATemp)
     raw_obj = raw / E / tau1 / IRT / tau2 - raw_atm1_attn - raw_atm2_attn - raw_wind_attn - raw_refl1_attn
-    return PB / math.log(PR1 / (PR2 * (raw_obj + PO)) + PF) - KELVIN
+    arg = PR1 / (PR2 * (raw_obj + PO)) + PF if raw_obj + PO > 0 else 0.0
+    return PB / math.log(arg) - KELVIN if arg > 1 else math.nan  # too cold for a temperature
 
 
 def _shipped_or_sample(samples_dir: Path | None, name: str) -> Path:
@@ -137,6 +138,9 @@ def _rjpeg_block(raw: bytes) -> bytes:
     """The FFF block of a radiometric JPEG, from its APP1 'FLIR' segments (written out independently)."""
     pos, parts = 2, {}
     while raw[pos] == 0xFF and raw[pos + 1] != 0xDA:
+        if raw[pos + 1] == 0xFF:  # a fill byte
+            pos += 1
+            continue
         n = struct.unpack_from(">H", raw, pos + 2)[0]
         seg = raw[pos + 4:pos + 2 + n]
         if raw[pos + 1] == 0xE1 and seg.startswith(b"FLIR\x00"):
@@ -577,15 +581,22 @@ def _temperatures_by_hand(data: bytes) -> list[np.ndarray]:
         rb = "<" if struct.unpack_from("<H", raw)[0] == 2 else ">"
         w, h = struct.unpack_from(rb + "HH", raw, 2)
         sub = recs[0x01][0]
-        if sub in (1, 2):  # 1: big-endian whatever the mark says; 2: the record's byte order
-            counts = np.frombuffer(raw, (">" if sub == 1 else rb) + "u2", w * h, 32).reshape(h, w)
+        if sub in (1, 2):  # the record's byte order (its mark), as exiftool reads both subtypes
+            counts = np.frombuffer(raw, rb + "u2", w * h, 32).reshape(h, w)
         else:
             assert sub == 3
             stored = _png_by_hand(raw[32:])
             cb = "<" if struct.unpack_from("<H", cam)[0] == 2 else ">"
-            median, rng = struct.unpack_from(cb + "HH", cam, 0x338)
-            inside = [np.mean(np.abs(c.astype(np.int64) - median) <= rng) for c in (stored, stored.byteswap())]
-            counts = stored if inside[0] > inside[1] else stored.byteswap()
+            median, rng = struct.unpack_from(cb + "HH", cam, 0x338) if len(cam) >= 0x33e else (0, 0)
+            both = (stored, stored.byteswap())
+            inside = [np.mean(np.abs(c.astype(np.int64) - median) <= rng) for c in both]
+            rough = [np.abs(np.diff(c.astype(float), axis=1)).mean() for c in both]
+            if rng and max(inside) >= 0.5 and abs(inside[0] - inside[1]) >= 0.25:  # the displayed raw range
+                counts = both[int(inside[1] > inside[0])]
+            elif max(rough) > 4 * min(rough):  # the wrong order is rough
+                counts = both[int(rough[1] < rough[0])]
+            else:  # PNG samples in the record's byte order
+                counts = both[int(rb == "<")]
         par = _camera_by_hand(cam, "<" if struct.unpack_from("<H", cam)[0] == 2 else ">")
         frames.append(np.array([[_raw2temp(float(c), **par) for c in row] for row in counts]))
     return frames
