@@ -50,11 +50,11 @@ def detect_ir_format(path: str | os.PathLike) -> str:
         return "flir"
     if head.startswith(b"\xff\xd8"):
         from .flir import is_radiometric_jpeg
+        from .flir_jpeg import plain_jpeg_message
 
         if is_radiometric_jpeg(p):
             return "flir"
-        raise FormatError("a JPEG without FLIR radiometric data (no APP1 'FLIR' segment): a plain picture holds "
-                          "colours, not temperatures; save radiometric JPEGs or record a FLIR .seq", p)
+        raise FormatError(plain_jpeg_message(p), p)
     if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
         return "tiff"
     text = head.lstrip(b"\xef\xbb\xbf").lstrip()

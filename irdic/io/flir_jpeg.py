@@ -76,7 +76,7 @@ def is_radiometric_jpeg(path: str | os.PathLike) -> bool:
         return bool(flir_segments(fh, path, strict=False))
 
 
-def _plain_jpeg_message(path) -> str:
+def plain_jpeg_message(path) -> str:
     """Why a JPEG without FLIR segments cannot be read (DJI's own radiometric JPEGs named as such)."""
     with open(path, "rb") as fh:
         head = fh.read(1 << 16)
@@ -100,5 +100,5 @@ def fff_from_jpeg(path) -> bytes:
     with open(path, "rb") as fh:
         chunks = flir_segments(fh, path, strict=True)
     if not chunks:
-        raise FormatError(_plain_jpeg_message(path), path)
+        raise FormatError(plain_jpeg_message(path), path)
     return b"".join(chunks)

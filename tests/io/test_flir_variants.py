@@ -294,8 +294,9 @@ def test_dji_radiometric_jpeg_is_named(tmp_path):
     exif = b"Exif\x00\x00II*\x00" + b"DJI\x00" + bytes(16)
     path = tmp_path / "DJI_0001_R.JPG"
     path.write_bytes(picture[:2] + b"\xff\xe1" + struct.pack(">H", 2 + len(exif)) + exif + picture[2:])
-    with pytest.raises(FormatError, match=r"DJI_0001_R.JPG.*DJI radiometric JPEG in DJI's own format"):
-        read_ir(path, format="flir")
+    for fmt in ("flir", "auto"):  # forced, or told from the content
+        with pytest.raises(FormatError, match=r"DJI_0001_R.JPG.*DJI radiometric JPEG in DJI's own format"):
+            read_ir(path, format=fmt)
 
 
 # ----------------------------------------------------------------------------
