@@ -16,6 +16,11 @@ tested against; it does not use irdic's own calibration or interpolation code.
   :func:`tube_experiment`) at scales ``tiny``, ``demo``, ``paper``.
 - :mod:`.demo`: :func:`make_demo` writes it all as IRBIS text, ARAMIS
   nodemaps, a marker file and zarr truth stores.
+- :mod:`.family`: a family of scenes drawn from a seed (:func:`family.draw`)
+  and a fixed, named set (:func:`family.member`): other geometries
+  (:mod:`.shapes`), motions and temperature patterns (:mod:`.patterns`),
+  noise, point densities and camera poses, each a :class:`~.family.Scene`
+  with its truth (:class:`~.scene.SceneSpecimen`).
 
 Coordinates: the world frame is the DIC frame (mm), y up, z towards the DIC
 cameras; pixels ``u`` = column, ``v`` = row, 0-based, centres on integers.
@@ -28,11 +33,13 @@ from .render import FrameRenderer, field, pixel_derivatives, visibility
 from .specimens import HalfShell, Hit, Specimen, Tube
 from .target import OpenBook, TargetImage, camera_dataset, open_book_target
 from .truth import point_truth
+from . import family
+from .scene import SceneSpecimen
 
 __all__ = [
     "TrueCamera", "look_at", "lab_camera", "IR_F", "IR_SIZE",
     "OpenBook", "TargetImage", "open_book_target", "camera_dataset",
-    "Specimen", "HalfShell", "Tube", "Hit",
+    "Specimen", "HalfShell", "Tube", "Hit", "SceneSpecimen", "family",
     "FrameRenderer", "field", "pixel_derivatives", "visibility",
     "point_truth",
     "Experiment", "experiment", "halfshell_experiment", "tube_experiment", "SCALES", "EXPERIMENTS",

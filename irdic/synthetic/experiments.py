@@ -226,7 +226,13 @@ def _auto_window(spec: Specimen, camera: TrueCamera, duration: float, margin: in
         h = np.linspace(spec.Z_b, spec.Z_b + spec.L, 31)
     S, Hh = np.meshgrid(s, h)
     t = np.linspace(0.0, duration, 11)[:, None]
-    uv = camera.project(spec.position(S.ravel()[None], Hh.ravel()[None], t)).reshape(-1, 2)
+    return window_around(camera.project(spec.position(S.ravel()[None], Hh.ravel()[None], t)), camera, margin)
+
+
+def window_around(uv, camera: TrueCamera, margin: int = 20):
+    """Crop window ``(u0, v0, width, height)`` around projected surface points ``uv`` (..., 2) plus ``margin`` px,
+    on the sensor."""
+    uv = np.asarray(uv, float).reshape(-1, 2)
     uv = uv[np.all(np.isfinite(uv), axis=1)]
     if uv.size == 0:
         raise ConfigError("the specimen is not in front of `camera`; no IR window can be placed")

@@ -51,4 +51,6 @@ def temperature_laplacian(specimen: Specimen, s, h, t):
         return _tube(specimen, s, h, t)
     if isinstance(specimen, HalfShell):
         return _halfshell(specimen, s, h, t)
+    if hasattr(specimen, "laplacian"):  # a scene of the family (irdic.synthetic.scene)
+        return specimen.laplacian(s, h, t)
     raise TypeError(f"no closed-form Laplacian for {type(specimen).__name__}")

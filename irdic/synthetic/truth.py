@@ -57,6 +57,10 @@ def _unit(a):
     return a / n
 
 
+def _dot(a, b):
+    return np.einsum("...i,...i->...", a, b)
+
+
 def point_truth(specimen, camera: TrueCamera, s, h, times, *, ids=None, window=None, patch=None,
                 max_rays: int = 150_000) -> xr.Dataset:
     """Closed-form truth at material points ``(s, h)`` and ``times``.
@@ -132,10 +136,15 @@ def _material_truth(specimen, s: np.ndarray, h: np.ndarray, times: np.ndarray) -
     E = specimen.green_lagrange(S, Hh, Tt)
     e_max, e_min, n_max, n_min = specimen.principal_strains(S, Hh, Tt)
     E_s, E_h = specimen.reference_basis(s, h)
+    # the push-forward F N = (A^α · N) a_α: the reference tangents need not be orthonormal
+    A_s, A_h = specimen.tangents(s, h, np.full(s.shape, specimen.reference_time))
+    G = np.stack([np.stack([_dot(A_s, A_s), _dot(A_s, A_h)], -1), np.stack([_dot(A_s, A_h), _dot(A_h, A_h)], -1)], -2)
+    Gi = np.linalg.inv(G)
+    dual = (Gi[..., 0, 0, None] * A_s + Gi[..., 0, 1, None] * A_h, Gi[..., 1, 0, None] * A_s + Gi[..., 1, 1, None] * A_h)
     dirs = {}
     for key, n in (("max", n_max), ("min", n_min)):
         dirs[key] = n[..., :1] * E_s + n[..., 1:] * E_h
-        dirs[key + "_cur"] = _unit(n[..., :1] * a_s + n[..., 1:] * a_h)
+        dirs[key + "_cur"] = _unit(_dot(dual[0], dirs[key])[..., None] * a_s + _dot(dual[1], dirs[key])[..., None] * a_h)
     x_ref = specimen.position(s, h, specimen.reference_time)
     return {
         "s": (("point",), s, {"units": "mm", "long_name": "material arc-length coordinate"}),
