@@ -46,6 +46,7 @@ motion found and the uncertainty it allows.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -54,7 +55,7 @@ from scipy.optimize import minimize_scalar
 
 from ..errors import DataError
 from .nodes import Nodes, triangulation
-from .samples import Criterion, Sampler, prepared, rank_one
+from .samples import Criterion, Sampler, leading, prepared
 from .score import Score, Uncertainty, solve, uncertainty
 
 __all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_FRAMES", "MAX_SAMPLES",
@@ -86,6 +87,10 @@ FIT_FLOOR_K = 0.005
 #: the score from one frame period either side of the estimate must point back to within this many frame
 #: periods of it, or this many of its standard uncertainties
 BASIN_FRAMES, BASIN_STDS = 0.5, 4.0
+#: pattern components at most: where the residuals of the one-component model hold structure (their robust
+#: variance over this factor times the white-noise one, which it is 0.7-1.0 times for white noise, and over this
+#: many frame periods), models of two and three are fitted (:func:`_model_order`)
+MAX_RANK, STRUCTURE_RATIO, STRUCTURE_FRAMES = 3, 1.25, 0.03
 #: frames within this many frame periods outside the DIC record at the estimate still count (positions
 #: extrapolated by the spline)
 SLACK_FRAMES = 0.25
@@ -117,6 +122,8 @@ class ClockOffset:
         IR frames and material nodes the estimate used.
     parts : Uncertainty
         The parts of ``std``.
+    rank : int
+        Pattern components of the model (1: a pattern that only scales).
     """
 
     offset: float
@@ -129,6 +136,7 @@ class ClockOffset:
     frames: int
     points: int
     parts: Uncertainty
+    rank: int = 1
 
 
 def crop_box(positions: np.ndarray, shape: tuple[int, int], margin: int = 12) -> tuple[slice, slice]:
@@ -206,21 +214,62 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     coarse = _nodes(pos, t_dic, mesh, SEARCH_SMOOTHING_PX, count=SEARCH_NODES)
     some = _spread_out(t_ir.size, SEARCH_SAMPLES // coarse.M)
     search = Sampler(frames[some], t_ir[some], coarse, SEARCH_SMOOTHING_PX)
-    tau0, grid, crit = _search(search, centre, period, motion, parameter)
-    fine, spacing = _refinement_sampler(frames, t_ir, pos, t_dic, mesh, search.inside(tau0, tau0).size)
-    tau, score, slope = _refined(fine, tau0, period, motion, parameter)
     sigma = _frame_noise(frames)
-    parts = uncertainty(score, tau, slope, sigma)
-    _check_identified(tau, parts.std, period, motion, parameter)
+    fits, fine, spacing = _fits(search, frames, t_ir, pos, t_dic, mesh, centre, period, motion, parameter, sigma)
+    rank, shift = _model_order(fits, period)
+    tau, score, parts, grid, crit = fits[rank]
+    parts = dataclasses.replace(parts, model=shift)
+    _check_identified(tau, parts, period, motion, parameter)
     _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
-    _check_fit(_misfit(fine, score.idx, tau), sigma, tau, period, parameter)
+    _check_fit(_misfit(fine, score.idx, tau, rank), sigma, tau, period, parameter)
     _check_basin(score, tau, parts.std, period, parameter)
-    out = ClockOffset(tau, parts.std, period, motion, sigma, grid, crit, int(score.idx.size), int(fine.M), parts)
+    out = ClockOffset(tau, parts.std, period, motion, sigma, grid, crit, int(score.idx.size), int(fine.M), parts, rank)
     log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames: noise %.3f, robust %.3f, "
-             "motion between DIC stages %.3f; %d frames x %d nodes %.2g px apart, motion up to %.3g px, pixel "
-             "noise %.3g K)", tau, parts.std, tau / period, parts.std / period, parts.noise / period,
-             parts.robust / period, parts.interpolation / period, out.frames, out.points, spacing, motion, sigma)
+             "motion between DIC stages %.3f; %d frames x %d nodes %.2g px apart, %d pattern component%s, motion up "
+             "to %.3g px, pixel noise %.3g K)", tau, parts.std, tau / period, parts.std / period, parts.noise / period,
+             parts.robust / period, parts.interpolation / period, out.frames, out.points, spacing, rank,
+             "s" if rank > 1 else "", motion, sigma)
     return out
+
+
+def _fits(search, frames, t_ir, pos, t_dic, mesh, centre, period, motion, parameter, sigma):
+    """The estimates of the models with one component and, where it leaves structure, two and three:
+    {rank: (tau, score, Uncertainty, grid, criterion)}, the refinement's sampler and its node spacing (px)."""
+    fits, failed, fine, spacing = {}, None, None, np.nan
+    for rank in range(1, MAX_RANK + 1):
+        try:
+            tau0, grid, crit = _search(search, centre, period, motion, parameter, rank)
+            if fine is None:
+                fine, spacing = _refinement_sampler(frames, t_ir, pos, t_dic, mesh, search.inside(tau0, tau0).size)
+            tau, score, slope = _refined(fine, tau0, period, motion, parameter, rank)
+        except DataError as exc:
+            failed = failed or exc
+            if rank > 1:
+                break
+            continue
+        fits[rank] = (tau, score, uncertainty(score, tau, slope, sigma), grid, crit)
+        if rank == 1 and not _structured(fits[1][2], period):
+            break
+    if not fits:
+        raise failed
+    return fits, fine, spacing
+
+
+def _structured(parts: Uncertainty, period: float) -> bool:
+    """Whether the residuals hold structure the model misses (module constants :data:`STRUCTURE_RATIO`,
+    :data:`STRUCTURE_FRAMES`)."""
+    return parts.robust > max(STRUCTURE_RATIO * parts.noise, STRUCTURE_FRAMES * period)
+
+
+def _model_order(fits: dict, period: float) -> tuple[int, float]:
+    """The model kept and the shift (s) of its estimate to that of the neighbouring order: one component
+    where it leaves no structure (no shift); else two where they leave none, three otherwise, each with the
+    distance between the two- and three-component estimates (infinite where either failed)."""
+    if len(fits) == 1 and not _structured(fits[1][2], period):
+        return 1, 0.0
+    if 2 not in fits or 3 not in fits:
+        return max(fits), np.inf
+    return (2 if not _structured(fits[2][2], period) else 3), abs(fits[3][0] - fits[2][0])
 
 
 def _nodes(pos, t_dic, mesh, smoothing, count=None, spacing=None) -> Nodes:
@@ -253,7 +302,7 @@ def _spread_out(n: int, count: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(n, max(8, count))).round().astype(int))
 
 
-def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parameter: str):
+def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parameter: str, rank: int):
     """The root of the fixed-weight score from ``tau0``, the weights refitted once at the first root when it lies
     more than a tenth of a frame period away; (tau, score, slope)."""
     tau, score, slope = tau0, None, np.nan
@@ -263,7 +312,7 @@ def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parame
             tau = np.nan
             break
         start = tau
-        score = Score(sampler, idx, start, GRADIENT_PX)
+        score = Score(sampler, idx, start, GRADIENT_PX, rank)
         tau, slope = solve(score, start, period)
         if not np.isfinite(tau) or abs(tau - start) <= 0.1 * period:
             break
@@ -274,17 +323,17 @@ def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parame
     return tau, score, slope
 
 
-def _search(sampler: Sampler, centre: float, period: float, motion: float, parameter: str):
+def _search(sampler: Sampler, centre: float, period: float, motion: float, parameter: str, rank: int):
     """The best candidate's basin, refined to a twentieth of a frame: the coarse candidates' local minima
     refined and compared on common frames. Returns it (s), the candidates (s) and their criterion."""
-    grid, crit, starts = _coarse(sampler, centre, period, parameter)
+    grid, crit, starts = _coarse(sampler, centre, period, parameter, rank)
     step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
-    roots = [_minimum(sampler, grid[i], step, period, bounds) for i in starts]
+    roots = [_minimum(sampler, grid[i], step, period, bounds, rank) for i in starts]
     roots = [r for r in roots if np.isfinite(r)]
     if not roots:
         raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
                         f"offset ({grid[starts[0]]:.4g} s); set {parameter} to a number (s)")
-    return _tournament(sampler, roots), grid, crit
+    return _tournament(sampler, roots, rank), grid, crit
 
 
 def _motion(pos: np.ndarray) -> tuple[float, float]:
@@ -314,15 +363,25 @@ def _check_motion(motion, jitter, parameter):
             f"specimen carries no timing information. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
-def _check_identified(tau, std, period, motion, parameter):
-    if not np.isfinite(std) or std > MAX_STD_FRAMES * period:
-        found = f" (they put it at {tau:.4g} s {_fmt_std(std, period)})" if np.isfinite(std) else ""
-        raise DataError(
-            f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
-            f"{motion:.3g} px in the IR image over the record, and the temperature pattern they carry fixes the "
-            f"offset only to {_fmt_std(std, period)}, more than {MAX_STD_FRAMES:g} IR frame period ({period:.4g} s)"
-            f"{found}; a static specimen, a uniform temperature or too little motion for the record's noise carry "
-            f"no timing information. Set {parameter} to a number (s; docs/time-sync.md)")
+def _check_identified(tau, parts, period, motion, parameter):
+    std = parts.std
+    if np.isfinite(std) and std <= MAX_STD_FRAMES * period:
+        return
+    if parts.model > max(parts.noise, parts.robust, parts.interpolation):
+        why = (f"the temperature pattern changes its shape on the material (heat flowing in from a grip, a "
+               f"travelling band): models of two and three pattern components "
+               + (f"put the offset {parts.model:.3g} s apart" if np.isfinite(parts.model) else "do not fit")
+               + ", so the motion cannot be told from the pattern's change")
+    else:
+        why = ("the offset shows where the image velocity changes (the motion starts, stops or turns) on a "
+               "temperature pattern; a static specimen, motion at a constant rate, a uniform temperature or too "
+               "little motion for the record's noise carry no timing information")
+    found = f" (they put it at {tau:.4g} s {_fmt_std(std, period)})" if np.isfinite(std) else ""
+    raise DataError(
+        f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
+        f"{motion:.3g} px in the IR image over the record, and the temperature pattern they carry fixes the "
+        f"offset only to {_fmt_std(std, period)}, more than {MAX_STD_FRAMES:g} IR frame period ({period:.4g} s)"
+        f"{found}: {why}. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
 def _check_inside(tau, grid, crit, motion, parameter):
@@ -344,18 +403,18 @@ def _frame_noise(frames: np.ndarray, max_frames: int = 20) -> float:
     return float(1.4826 * np.median(np.abs(r)) / np.sqrt(1.25)) if r.size else np.nan
 
 
-def _misfit(sampler: Sampler, idx: np.ndarray, tau: float) -> float:
-    """Pixel noise (K) the rank-one model leaves at ``tau``: the raw samples' misfit, each over its bilinear
-    noise gain, per degree of freedom."""
+def _misfit(sampler: Sampler, idx: np.ndarray, tau: float, rank: int) -> float:
+    """Pixel noise (K) the model of ``rank`` components leaves at ``tau``: the raw samples' misfit, each over
+    its bilinear noise gain, per degree of freedom."""
     X = sampler(tau, idx, raw=True)
     Xc = X - X.mean(axis=1, keepdims=True)
-    s2, u, v = rank_one(Xc)
-    R = Xc - np.sqrt(s2) * np.outer(u, v)
+    s2, U, V = leading(Xc, rank)
+    R = Xc - (U * np.sqrt(s2)) @ V.T
     q = sampler.nodes.at(sampler.t_ir[idx] + tau)
     fu, fv = q[..., 0] % 1.0, q[..., 1] % 1.0
     gain = ((1 - fu) ** 2 + fu**2) * ((1 - fv) ** 2 + fv**2)  # a sample between pixels averages their noise
     n, m = X.shape
-    dof = n * m - n - (n + m - 1)
+    dof = n * m - n - rank * (n + m - rank)
     return float(np.sqrt(np.sum(R * R / gain) / dof)) if dof > 0 else np.nan
 
 
@@ -390,8 +449,9 @@ def _check_basin(score: Score, tau: float, std: float, period: float, parameter:
             raise DataError(
                 f"{parameter}: auto cannot estimate the clock offset from the data: they do not single out one "
                 f"offset (from {start:.4g} s the score points to {back:.4g} s, not back to {tau:.4g} s): the offset "
-                f"lies beyond the searched quarter of the record, or the pattern is too weak for the record's "
-                f"noise. Set {parameter} to a number (s; docs/time-sync.md)")
+                f"lies beyond the searched quarter of the record, the pattern is too weak for the record's noise, "
+                f"or the motion changes too quickly between the DIC stages to be interpolated. Set {parameter} to a "
+                f"number (s; docs/time-sync.md)")
 
 
 def _fmt_std(std: float, period: float) -> str:
@@ -400,7 +460,7 @@ def _fmt_std(std: float, period: float) -> str:
     return f"+- {std:.3g} s ({std / period:.2f} IR frames)"
 
 
-def _coarse(sampler, centre, period, parameter):
+def _coarse(sampler, centre, period, parameter, rank):
     """The candidates (s) over a quarter of the shorter record each way, ``J`` per degree of freedom of each on
     the frames it places inside the DIC record, and the starts: the candidates at its local minima, best
     first (at most :data:`_STARTS`).
@@ -414,7 +474,7 @@ def _coarse(sampler, centre, period, parameter):
     half = max(0.25 * span, 2.0 * period)
     n = int(np.clip(np.ceil(2 * half / period) + 1, 9, _MAX_CANDIDATES))
     grid = centre + np.linspace(-half, half, n)
-    crit = _judged(sampler, grid)
+    crit = _judged(sampler, grid, rank)
     if not np.isfinite(crit).any():
         raise DataError(f"{parameter}: auto: the IR record ({t_ir[0]:.4g}..{t_ir[-1]:.4g} s) and the DIC record "
                         f"({t0:.4g}..{t1:.4g} s) overlap in fewer than 4 IR frames around an offset of "
@@ -425,32 +485,34 @@ def _coarse(sampler, centre, period, parameter):
     return grid, crit, minima[np.argsort(c[minima])][:_STARTS]
 
 
-def _judged(sampler, grid):
-    """``J`` per degree of freedom of the rank-one fit at each candidate, on its own frames (NaN: fewer than
-    half the frames the best-placed candidate has)."""
+def _judged(sampler, grid, rank):
+    """``J`` per degree of freedom of the rank-``rank`` fit at each candidate, on its own frames (NaN: fewer
+    than half the frames the best-placed candidate has)."""
     frames = [sampler.inside(g, g) for g in grid]
     full = max(idx.size for idx in frames)
     out = np.full(grid.size, np.nan)
     for i, (g, idx) in enumerate(zip(grid, frames)):
         n, m = idx.size, sampler.M
-        if n >= max(4, (full + 1) // 2) and n * m > n + (n + m - 1):
-            out[i] = Criterion(sampler, idx).parts(g)[0] / (n * m - n - (n + m - 1))
+        dof = n * m - n - rank * (n + m - rank)
+        if n >= max(4, (full + 1) // 2, 2 * rank + 2) and dof > 0:
+            out[i] = Criterion(sampler, idx, rank).parts(g)[0] / dof
     return out
 
 
-def _tournament(sampler, roots):
+def _tournament(sampler, roots, rank):
     """The minimum that fits best, each pair compared on the frames both place inside the DIC record."""
     best = roots[0]
     for r in roots[1:]:
         idx = sampler.inside(min(best, r), max(best, r))
         if idx.size >= 4:
-            J = Criterion(sampler, idx)
+            J = Criterion(sampler, idx, rank)
             if J(r) < J(best):
                 best = r
     return best
 
 
-def _minimum(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float]) -> float:
+def _minimum(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float],
+             rank: int) -> float:
     """The minimum of ``J`` within ``step`` of ``start`` (on the frames every offset there places inside the
     DIC record), to a twentieth of a frame period; while it lies at an end of the bracket, the bracket moves on
     by one step (at most four times, never beyond ``bounds``). NaN: fewer than 4 frames."""
@@ -460,7 +522,7 @@ def _minimum(sampler: Sampler, start: float, step: float, period: float, bounds:
         idx = sampler.inside(lo, hi)
         if idx.size < 4:
             break
-        tau = float(minimize_scalar(Criterion(sampler, idx), bounds=(lo, hi), method="bounded",
+        tau = float(minimize_scalar(Criterion(sampler, idx, rank), bounds=(lo, hi), method="bounded",
                                     options={"xatol": 0.05 * period}).x)
         if lo + 0.02 * step < tau < hi - 0.02 * step or not bounds[0] < tau < bounds[1]:
             break

@@ -6,7 +6,8 @@ nodes (:class:`~irdic.timing.nodes.Nodes`) have at the DIC time
 ``t_k + tau``; :meth:`Sampler.spread` is its adjoint (weights on the samples
 to weights on the pixels), for the noise of anything linear in the samples.
 :class:`Criterion` is the misfit of the rank-one model ``X_k = a_k + b_k P``
-that the offset search minimises.
+that the offset search minimises (``X_k = a_k + sum_i b_ik P_i`` with more
+components where the pattern changes its shape on the material).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from scipy.ndimage import gaussian_filter
 
 from .nodes import Nodes
 
-__all__ = ["Sampler", "Criterion", "rank_one", "prepared"]
+__all__ = ["Sampler", "Criterion", "leading", "prepared"]
 
 
 class Sampler:
@@ -94,40 +95,56 @@ class Sampler:
         return acc
 
 
-def rank_one(Xc: np.ndarray, start: np.ndarray | None = None, iters: int = 300):
-    """Largest singular value squared of ``Xc`` and its (left, right) unit vectors, by power iteration."""
+def leading(Xc: np.ndarray, rank: int = 1, start: np.ndarray | None = None, iters: int = 300):
+    """The ``rank`` largest singular values squared (rank,) of ``Xc`` (n, m) and their left (n, rank) and right
+    (m, rank) unit vectors, by subspace iteration from ``start`` (m, rank) if given.
+
+    Iterates until the sum of the values changes by less than 1e-13 relative (a component at the noise level
+    converges slowly: then ``iters`` ends it, its vectors still orthonormal)."""
     n, m = Xc.shape
-    v = np.ones(m) / np.sqrt(m) if start is None or start.size != m else start.copy()
-    lam = 0.0
+    if start is not None and start.shape == (m, rank):
+        V = start
+    elif rank == 1:
+        V = np.ones((m, 1)) / np.sqrt(m)
+    else:  # a fixed start: the estimate does not depend on a random draw
+        V = np.linalg.qr(Xc.T @ np.cos(np.outer(np.arange(n), np.arange(1, rank + 1))))[0]
+    total = 0.0
     for _ in range(iters):
-        w = Xc.T @ (Xc @ v)
-        new = float(np.linalg.norm(w))
-        if new == 0.0:
-            return 0.0, np.zeros(n), v
-        v = w / new
-        # new = s1^2 once converged; stop when it changes by less than 1e-13 relative
-        if abs(new - lam) <= 1e-13 * new:
+        W = Xc.T @ (Xc @ V)
+        if rank == 1:
+            norm = float(np.linalg.norm(W))
+            if norm == 0.0:
+                return np.zeros(1), np.zeros((n, 1)), V
+            V, new = W / norm, norm
+        else:
+            V = np.linalg.qr(W)[0]
+            new = float(np.sum(np.linalg.norm(Xc @ V, axis=0) ** 2))
+        if abs(new - total) <= 1e-13 * new:
             break
-        lam = new
-    u = Xc @ v
-    s = float(np.linalg.norm(u))
-    return s * s, (u / s if s > 0 else u), v
+        total = new
+    B = Xc @ V
+    if rank == 1:
+        s = np.linalg.norm(B, axis=0)
+        return s**2, B / np.where(s > 0, s, 1.0), V
+    U, s, Wt = np.linalg.svd(B, full_matrices=False)
+    return s**2, U, V @ Wt.T
 
 
 class Criterion:
-    """``J(tau)`` per sample on a fixed set of frames, with a warm start for the power iteration."""
+    """``J(tau)`` per sample on a fixed set of frames, with a warm start for the subspace iteration."""
 
-    def __init__(self, sampler: Sampler, idx: np.ndarray):
-        self.sampler, self.idx = sampler, idx
+    def __init__(self, sampler: Sampler, idx: np.ndarray, rank: int = 1):
+        self.sampler, self.idx, self.rank = sampler, idx, rank
         self.start = None
 
     def parts(self, tau: float):
-        """The misfit ``||X_c||^2 - s_1^2`` (K^2), the centred samples and the singular vectors."""
+        """The misfit ``||X_c||^2 - sum s_i^2`` (K^2) of the rank-``rank`` model, the centred samples and the
+        singular vectors (U, V)."""
         X = self.sampler(tau, self.idx)
         Xc = X - X.mean(axis=1, keepdims=True)
-        s2, u, v = rank_one(Xc, self.start)
-        self.start = v
-        return float(np.sum(Xc * Xc)) - s2, Xc, u, v
+        s2, U, V = leading(Xc, self.rank, self.start)
+        self.start = V
+        return float(np.sum(Xc * Xc) - np.sum(s2)), Xc, U, V
 
     def __call__(self, tau: float) -> float:
         return self.parts(tau)[0] / self.idx.size / self.sampler.M

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .samples import Sampler, rank_one
+from .samples import Sampler, leading
 
 __all__ = ["Score", "solve", "Uncertainty", "uncertainty"]
 
@@ -54,19 +54,20 @@ class Score:
         After :func:`solve`: each sample's share of the slope, ``Y dX/dtau`` (n, M), from the secant.
     """
 
-    def __init__(self, sampler: Sampler, idx: np.ndarray, tau_w: float, bandwidth: float):
-        self.sampler, self.idx, self.tau_w = sampler, idx, float(tau_w)
+    def __init__(self, sampler: Sampler, idx: np.ndarray, tau_w: float, bandwidth: float, rank: int = 1):
+        self.sampler, self.idx, self.tau_w, self.rank = sampler, idx, float(tau_w), rank
         X = sampler(tau_w, idx)
         Xc = X - X.mean(axis=1, keepdims=True)
-        _, u, v = rank_one(Xc)
-        p = Xc.T @ u  # the pattern (K), the model being u p^T
+        _, U, V = leading(Xc, rank)
         _, r = sampler.nodes.motion(sampler.t_ir[idx] + tau_w)
-        g = sampler.nodes.gradient(p, bandwidth)
-        Y = u[:, None] * (g[None, :, 0] * r[..., 0] + g[None, :, 1] * r[..., 1])
+        Y = np.zeros_like(Xc)
+        for i in range(rank):  # the model sum_i u_i p_i^T, each pattern moved along the motion
+            g = sampler.nodes.gradient(Xc.T @ U[:, i], bandwidth)
+            Y += U[:, i, None] * (g[None, :, 0] * r[..., 0] + g[None, :, 1] * r[..., 1])
         Y -= Y.mean(axis=1, keepdims=True)
-        Y -= np.outer(u, u @ Y)
-        Y -= np.outer(Y @ v, v)
-        self.Y, self.u, self.v = Y, u, v
+        Y -= U @ (U.T @ Y)
+        Y -= (Y @ V) @ V.T
+        self.Y, self.V = Y, V
         self.last, self.rate = (self.tau_w, X), None
 
     def samples(self, tau: float) -> np.ndarray:
@@ -79,11 +80,11 @@ class Score:
         return float(np.sum(self.Y * X))
 
     def residual(self) -> np.ndarray:
-        """The samples of the last offset evaluated less the rank-one model fitted to them (n, M), K."""
+        """The samples of the last offset evaluated less the model fitted to them (n, M), K."""
         X = self.last[1]
         Xc = X - X.mean(axis=1, keepdims=True)
-        s2, u, v = rank_one(Xc, self.v)
-        return Xc - np.sqrt(s2) * np.outer(u, v)
+        s2, U, V = leading(Xc, self.rank, self.V)
+        return Xc - (U * np.sqrt(s2)) @ V.T
 
 
 def solve(score: Score, tau0: float, period: float) -> tuple[float, float]:
@@ -119,17 +120,21 @@ class Uncertainty:
         in space or in time, counted).
     interpolation : float
         The change of the estimate with the spline of the motion two degrees lower.
+    model : float
+        Where the pattern changes its shape on the material: the change of the estimate between models of two
+        and three pattern components (0 for a pattern that only scales).
     std : float
-        The standard uncertainty: the larger of the first two and the third in quadrature.
+        The standard uncertainty: the larger of the first two, the others in quadrature.
     """
 
     noise: float
     robust: float
     interpolation: float
+    model: float = 0.0
 
     @property
     def std(self) -> float:
-        return float(np.hypot(max(self.noise, self.robust), self.interpolation))
+        return float(np.sqrt(max(self.noise, self.robust) ** 2 + self.interpolation**2 + self.model**2))
 
 
 def uncertainty(score: Score, tau: float, slope: float, sigma: float) -> Uncertainty:
