@@ -15,7 +15,7 @@ import pytest
 
 from irdic.errors import ConfigError, DataError, IrdicWarning
 from irdic.timing.clock import estimate_from_stores, ir_clock
-from irdic.timing.nodes import Nodes
+from irdic.timing.nodes import Mesh, Nodes
 from irdic.coupling import couple
 
 from ._clock_scenes import clock_scene, family_scene
@@ -154,12 +154,15 @@ def test_nodes_follow_an_affine_motion_exactly():
         return np.array([[1 + 0.02 * s, 0.05 * s], [-0.03 * s, 1 - 0.01 * s]])
 
     dA, b = np.array([[0.02, 0.05], [-0.03, -0.01]]), (lambda s: np.array([2 * s, s * s]))
-    nodes = Nodes(np.stack([m @ A(s).T + b(s) for s in t]), t, 1.0, 2.0)
-    q, r = nodes.motion(np.array([1.3, 3.7]))
-    for i, s in enumerate((1.3, 3.7)):
+    nodes = Nodes(Mesh(np.stack([m @ A(s).T + b(s) for s in t]), t), 1.0, 2.0)
+    times = np.array([0.2, 1.3, 3.7, 4.9])
+    q, r = nodes.at(times), nodes.reference_velocity(times, deformations=3)
+    for i, s in enumerate(times):
         np.testing.assert_allclose(q[i], nodes.reference @ A(s).T + b(s), atol=1e-9)
         w = nodes.reference @ dA.T + np.array([2.0, 2 * s])
-        np.testing.assert_allclose(r[i], np.linalg.solve(A(s), w.T).T, atol=1e-9)
+        # F^-1 linear in time between the deformations' times: exact at them, close between
+        expected = np.linalg.solve(A(s), w.T).T
+        np.testing.assert_allclose(r[i], expected, atol=1e-9 if s in (0.2, 4.9) else 0.01 * np.abs(expected).max())
     g = nodes.gradient(0.3 * nodes.reference[:, 0] - 0.7 * nodes.reference[:, 1], 4.0)
     np.testing.assert_allclose(g, np.broadcast_to([0.3, -0.7], g.shape), atol=1e-9)
 

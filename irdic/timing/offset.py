@@ -33,9 +33,17 @@ fixed weights on every node about one pixel apart and lightly smoothed
 frames (:mod:`irdic.timing.score`): the rank-one model's derivative with
 respect to the offset, with everything the model absorbs projected out. That
 estimator is linear in the pixel noise, so its variance is exact for white
-noise, and it reaches the precision the frames allow (the Cramér-Rao bound
-of the rank-one model with a free pattern) up to the few pixels along the
-cloud's outline that the smoothing must leave out.
+noise, and it comes close to the precision the frames allow (the
+Cramér-Rao bound of the rank-one model with a free pattern), short of it
+mostly by the few pixels along the cloud's outline that the smoothing must
+leave out.
+
+A pattern that changes its shape on the material (a second pattern with a
+history of its own, heat flowing in from a grip) is not rank-one: where the
+one-component model's residuals hold structure, models of two and three
+components (``X_k = a_k + sum_i b_ik P_i``) are fitted as well, and the
+distance between their estimates is part of the uncertainty
+(:func:`_model_order`).
 
 When it cannot work: a static specimen (no motion: every offset fits the
 same), a uniform temperature (no pattern to carry), or motion too small for
@@ -54,9 +62,9 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..errors import DataError
-from .nodes import Nodes, triangulation
+from .nodes import Mesh, Nodes
 from .samples import Criterion, Sampler, leading, prepared
-from .score import Score, Uncertainty, solve, uncertainty
+from .score import Score, Uncertainty, secant, solve, uncertainty
 
 __all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_FRAMES", "MAX_SAMPLES",
            "SMOOTHING_PX", "NODE_SPACING_PX", "GRADIENT_PX", "SPLINE_ORDER", "MIN_MOTION_PX", "MIN_MOTION_JITTERS"]
@@ -88,12 +96,14 @@ FIT_FLOOR_K = 0.005
 #: periods of it, or this many of its standard uncertainties
 BASIN_FRAMES, BASIN_STDS = 0.5, 4.0
 #: pattern components at most: where the residuals of the one-component model hold structure (their robust
-#: variance over this factor times the white-noise one, which it is 0.7-1.0 times for white noise, and over this
-#: many frame periods), models of two and three are fitted (:func:`_model_order`)
+#: variance over this factor times the white-noise one, which it stays below for white noise, and over this many
+#: frame periods), models of two and three are fitted (:func:`_model_order`)
 MAX_RANK, STRUCTURE_RATIO, STRUCTURE_FRAMES = 3, 1.25, 0.03
 #: frames within this many frame periods outside the DIC record at the estimate still count (positions
 #: extrapolated by the spline)
 SLACK_FRAMES = 0.25
+#: the refinement's weights are fitted again at the secant's root where it lies this many frame periods away
+REFIT_FRAMES = 0.5
 #: coarse candidates at most
 _MAX_CANDIDATES = 31
 #: basins (local minima of the coarse criterion) refined and compared at most
@@ -210,12 +220,12 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         frames, t_ir = frames[keep], t_ir[keep]
     _check_motion(motion, jitter, parameter)
     frames = np.asarray(frames, dtype=np.float32)
-    mesh = triangulation(pos[0])
-    coarse = _nodes(pos, t_dic, mesh, SEARCH_SMOOTHING_PX, count=SEARCH_NODES)
+    mesh = Mesh(pos, t_dic)
+    coarse = _nodes(mesh, SEARCH_SMOOTHING_PX, max(2.0, np.sqrt(mesh.area / SEARCH_NODES)))
     some = _spread_out(t_ir.size, SEARCH_SAMPLES // coarse.M)
     search = Sampler(frames[some], t_ir[some], coarse, SEARCH_SMOOTHING_PX)
     sigma = _frame_noise(frames)
-    fits, fine, spacing = _fits(search, frames, t_ir, pos, t_dic, mesh, centre, period, motion, parameter, sigma)
+    fits, fine, spacing = _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma)
     rank, shift = _model_order(fits, period)
     tau, score, parts, grid, crit = fits[rank]
     parts = dataclasses.replace(parts, model=shift)
@@ -232,7 +242,7 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     return out
 
 
-def _fits(search, frames, t_ir, pos, t_dic, mesh, centre, period, motion, parameter, sigma):
+def _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma):
     """The estimates of the models with one component and, where it leaves structure, two and three:
     {rank: (tau, score, Uncertainty, grid, criterion)}, the refinement's sampler and its node spacing (px)."""
     fits, failed, fine, spacing = {}, None, None, np.nan
@@ -240,7 +250,7 @@ def _fits(search, frames, t_ir, pos, t_dic, mesh, centre, period, motion, parame
         try:
             tau0, grid, crit = _search(search, centre, period, motion, parameter, rank)
             if fine is None:
-                fine, spacing = _refinement_sampler(frames, t_ir, pos, t_dic, mesh, search.inside(tau0, tau0).size)
+                fine, spacing = _refinement_sampler(frames, t_ir, mesh, search.inside(tau0, tau0).size)
             tau, score, slope = _refined(fine, tau0, period, motion, parameter, rank)
         except DataError as exc:
             failed = failed or exc
@@ -272,25 +282,18 @@ def _model_order(fits: dict, period: float) -> tuple[int, float]:
     return (2 if not _structured(fits[2][2], period) else 3), abs(fits[3][0] - fits[2][0])
 
 
-def _nodes(pos, t_dic, mesh, smoothing, count=None, spacing=None) -> Nodes:
-    """Nodes inside the cloud by the smoothing kernel's reach, ``spacing`` px apart or about ``count`` of them."""
-    inset = np.ceil(3 * smoothing) + 1
-    if spacing is None:
-        nodes = Nodes(pos, t_dic, 2.0, inset, SPLINE_ORDER, mesh)
-        if nodes.M <= count:
-            return nodes
-        spacing = 2.0 * np.sqrt(nodes.M / count)
-    return Nodes(pos, t_dic, spacing, inset, SPLINE_ORDER, mesh)
+def _nodes(mesh: Mesh, smoothing: float, spacing: float) -> Nodes:
+    """Nodes ``spacing`` px apart, inside the cloud by the reach of a Gaussian smoothing of ``smoothing`` px."""
+    return Nodes(mesh, spacing, np.ceil(3 * smoothing) + 1, SPLINE_ORDER)
 
 
-def _refinement_sampler(frames, t_ir, pos, t_dic, mesh, n_frames):
+def _refinement_sampler(frames, t_ir, mesh, n_frames):
     """The refinement's sampler: nodes :data:`NODE_SPACING_PX` apart, wider where nodes x frames would exceed
     :data:`MAX_SAMPLES` (at most twice), then frames left out evenly."""
-    nodes = _nodes(pos, t_dic, mesh, SMOOTHING_PX, spacing=NODE_SPACING_PX)
-    spacing = NODE_SPACING_PX * float(np.clip(np.sqrt(nodes.M * max(n_frames, 1) / MAX_SAMPLES), 1.0, 2.0))
-    if spacing > NODE_SPACING_PX:
-        nodes = _nodes(pos, t_dic, mesh, SMOOTHING_PX * spacing / NODE_SPACING_PX, spacing=spacing)
+    spacing = NODE_SPACING_PX * float(np.clip(np.sqrt(mesh.area * max(n_frames, 1) / MAX_SAMPLES) / NODE_SPACING_PX,
+                                              1.0, 2.0))
     smoothing = SMOOTHING_PX * spacing / NODE_SPACING_PX
+    nodes = _nodes(mesh, smoothing, spacing)
     if nodes.M * n_frames > MAX_SAMPLES:
         keep = _spread_out(t_ir.size, MAX_SAMPLES // nodes.M)
         frames, t_ir = frames[keep], t_ir[keep]
@@ -303,19 +306,22 @@ def _spread_out(n: int, count: int) -> np.ndarray:
 
 
 def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parameter: str, rank: int):
-    """The root of the fixed-weight score from ``tau0``, the weights refitted once at the first root when it lies
-    more than a tenth of a frame period away; (tau, score, slope)."""
-    tau, score, slope = tau0, None, np.nan
-    for _ in range(2):
-        idx = sampler.inside(tau, tau, SLACK_FRAMES * period)
-        if idx.size < 4:
-            tau = np.nan
-            break
-        start = tau
-        score = Score(sampler, idx, start, GRADIENT_PX, rank)
-        tau, slope = solve(score, start, period)
-        if not np.isfinite(tau) or abs(tau - start) <= 0.1 * period:
-            break
+    """The root of the fixed-weight score from ``tau0``: the weights fitted at ``tau0``, refitted at the secant's
+    root where it lies more than :data:`REFIT_FRAMES` frame periods away (weights fitted half a frame period
+    off move the root by a few thousandths of one); (tau, score, slope)."""
+    tau, score, slope = np.nan, None, np.nan
+    idx = sampler.inside(tau0, tau0, SLACK_FRAMES * period)
+    if idx.size >= 4:
+        score = Score(sampler, idx, tau0, GRADIENT_PX, rank)
+        start, rate = secant(score, tau0, period)
+        if np.isfinite(start) and abs(start - tau0) > REFIT_FRAMES * period:
+            again = sampler.inside(start, start, SLACK_FRAMES * period)
+            if again.size >= 4:
+                score = Score(sampler, again, start, GRADIENT_PX, rank)
+                if not np.array_equal(again, idx):
+                    rate = secant(score, start, period)[1]
+        if np.isfinite(start):
+            tau, slope = solve(score, start, rate, period)
     if not np.isfinite(tau):
         raise DataError(f"{parameter}: auto cannot estimate the clock offset from the data: at the best offset "
                         f"found ({tau0:.4g} s) the frames do not change with it (the DIC points move at most "
