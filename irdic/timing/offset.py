@@ -66,7 +66,7 @@ from .nodes import Mesh, Nodes
 from .samples import Criterion, Sampler, leading, prepared
 from .score import Score, Uncertainty, secant, solve, uncertainty
 
-__all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_FRAMES", "MAX_SAMPLES",
+__all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_FRAMES", "WIDEN_SAMPLES", "MAX_SAMPLES",
            "SMOOTHING_PX", "NODE_SPACING_PX", "GRADIENT_PX", "SPLINE_ORDER", "MIN_MOTION_PX", "MIN_MOTION_JITTERS"]
 
 log = logging.getLogger(__name__)
@@ -76,8 +76,9 @@ log = logging.getLogger(__name__)
 MAX_STD_FRAMES = 0.12
 #: frames used (evenly spread over the record)
 MAX_FRAMES = 600
-#: samples (nodes x frames) of the refinement at most: beyond, the nodes are spread wider, then frames left out
-MAX_SAMPLES = 4_000_000
+#: samples (nodes x frames) of the refinement: beyond the first the nodes are spread wider (up to twice), beyond
+#: the second frames are left out
+WIDEN_SAMPLES, MAX_SAMPLES = 1_000_000, 4_000_000
 #: the refinement: Gaussian smoothing of the frames (px), node spacing (px), the pattern gradient's width (px)
 SMOOTHING_PX, NODE_SPACING_PX, GRADIENT_PX = 0.5, 1.0, 4.0
 #: degree of the spline through the DIC stages that moves the nodes between them
@@ -102,8 +103,10 @@ MAX_RANK, STRUCTURE_RATIO, STRUCTURE_FRAMES = 3, 1.25, 0.03
 #: frames within this many frame periods outside the DIC record at the estimate still count (positions
 #: extrapolated by the spline)
 SLACK_FRAMES = 0.25
+#: frames (spread over the record) on which the fit and the basin are checked at most
+CHECK_FRAMES = 16
 #: the refinement's weights are fitted again at the secant's root where it lies this many frame periods away
-REFIT_FRAMES = 0.5
+REFIT_FRAMES = 0.1
 #: coarse candidates at most
 _MAX_CANDIDATES = 31
 #: basins (local minima of the coarse criterion) refined and compared at most
@@ -231,7 +234,8 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     parts = dataclasses.replace(parts, model=shift)
     _check_identified(tau, parts, period, motion, parameter)
     _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
-    _check_fit(_misfit(fine, score.idx, tau, rank), sigma, tau, period, parameter)
+    _check_fit(_misfit(fine, score.idx[_spread_out(score.idx.size, CHECK_FRAMES)], tau, rank), sigma, tau, period,
+               parameter)
     _check_basin(score, tau, parts.std, period, parameter)
     out = ClockOffset(tau, parts.std, period, motion, sigma, grid, crit, int(score.idx.size), int(fine.M), parts, rank)
     log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames: noise %.3f, robust %.3f, "
@@ -248,9 +252,12 @@ def _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma):
     fits, failed, fine, spacing = {}, None, None, np.nan
     for rank in range(1, MAX_RANK + 1):
         try:
-            tau0, grid, crit = _search(search, centre, period, motion, parameter, rank)
+            roots, grid, crit = _search(search, centre, period, motion, parameter, rank)
             if fine is None:
-                fine, spacing = _refinement_sampler(frames, t_ir, mesh, search.inside(tau0, tau0).size)
+                fine, spacing = _refinement_sampler(frames, t_ir, mesh, max(search.inside(r, r).size for r in roots)
+                                                    * t_ir.size // search.t_ir.size)
+            # the minima compared on the refinement's nodes: more samples, less smoothing, more power
+            tau0 = _tournament(fine, roots, rank)
             tau, score, slope = _refined(fine, tau0, period, motion, parameter, rank)
         except DataError as exc:
             failed = failed or exc
@@ -289,8 +296,8 @@ def _nodes(mesh: Mesh, smoothing: float, spacing: float) -> Nodes:
 
 def _refinement_sampler(frames, t_ir, mesh, n_frames):
     """The refinement's sampler: nodes :data:`NODE_SPACING_PX` apart, wider where nodes x frames would exceed
-    :data:`MAX_SAMPLES` (at most twice), then frames left out evenly."""
-    spacing = NODE_SPACING_PX * float(np.clip(np.sqrt(mesh.area * max(n_frames, 1) / MAX_SAMPLES) / NODE_SPACING_PX,
+    :data:`WIDEN_SAMPLES` (at most twice), then frames left out evenly beyond :data:`MAX_SAMPLES`."""
+    spacing = NODE_SPACING_PX * float(np.clip(np.sqrt(mesh.area * max(n_frames, 1) / WIDEN_SAMPLES) / NODE_SPACING_PX,
                                               1.0, 2.0))
     smoothing = SMOOTHING_PX * spacing / NODE_SPACING_PX
     nodes = _nodes(mesh, smoothing, spacing)
@@ -307,8 +314,8 @@ def _spread_out(n: int, count: int) -> np.ndarray:
 
 def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parameter: str, rank: int):
     """The root of the fixed-weight score from ``tau0``: the weights fitted at ``tau0``, refitted at the secant's
-    root where it lies more than :data:`REFIT_FRAMES` frame periods away (weights fitted half a frame period
-    off move the root by a few thousandths of one); (tau, score, slope)."""
+    root where it lies more than :data:`REFIT_FRAMES` frame periods away (weights fitted off the root lose
+    precision on a weak pattern); (tau, score, slope)."""
     tau, score, slope = np.nan, None, np.nan
     idx = sampler.inside(tau0, tau0, SLACK_FRAMES * period)
     if idx.size >= 4:
@@ -330,8 +337,8 @@ def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parame
 
 
 def _search(sampler: Sampler, centre: float, period: float, motion: float, parameter: str, rank: int):
-    """The best candidate's basin, refined to a twentieth of a frame: the coarse candidates' local minima
-    refined and compared on common frames. Returns it (s), the candidates (s) and their criterion."""
+    """The coarse candidates' best local minima, each refined to a twentieth of a frame period within the
+    searched range: (the minima (s), the candidates (s), their criterion)."""
     grid, crit, starts = _coarse(sampler, centre, period, parameter, rank)
     step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
     roots = [_minimum(sampler, grid[i], step, period, bounds, rank) for i in starts]
@@ -339,7 +346,7 @@ def _search(sampler: Sampler, centre: float, period: float, motion: float, param
     if not roots:
         raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
                         f"offset ({grid[starts[0]]:.4g} s); set {parameter} to a number (s)")
-    return _tournament(sampler, roots, rank), grid, crit
+    return roots, grid, crit
 
 
 def _motion(pos: np.ndarray) -> tuple[float, float]:
@@ -443,11 +450,14 @@ def _check_basin(score: Score, tau: float, std: float, period: float, parameter:
     there (each row of the weights is a score of its own: orthogonal to its frame's level and pattern)."""
     sampler = score.sampler
     rows = np.flatnonzero(np.isin(score.idx, sampler.inside(tau - period, tau + period)))
+    rows = rows[np.any(score.Y[rows] != 0, axis=1)]
     if rows.size < 4:
         return
+    rows = rows[_spread_out(rows.size, CHECK_FRAMES)]
     Y, idx = score.Y[rows], score.idx[rows]
     slope = float(np.sum(score.rate[rows]))
-    here = float(np.sum(Y * score.samples(tau)[rows]))
+    last, X = score.last  # within a Newton step of tau
+    here = float(np.sum(Y * X[rows])) + slope * (tau - last)
     for side in (-1.0, 1.0):
         start = tau + side * period
         back = start - (float(np.sum(Y * sampler(start, idx))) - here) / slope if slope > 0 else np.inf
@@ -501,12 +511,13 @@ def _judged(sampler, grid, rank):
         n, m = idx.size, sampler.M
         dof = n * m - n - rank * (n + m - rank)
         if n >= max(4, (full + 1) // 2, 2 * rank + 2) and dof > 0:
-            out[i] = Criterion(sampler, idx, rank).parts(g)[0] / dof
+            out[i] = Criterion(sampler, idx, rank)(g) * n * m / dof
     return out
 
 
 def _tournament(sampler, roots, rank):
-    """The minimum that fits best, each pair compared on the frames both place inside the DIC record."""
+    """The minimum that fits best, each pair compared on the frames both place inside the DIC record (the
+    first where fewer than 4 are common)."""
     best = roots[0]
     for r in roots[1:]:
         idx = sampler.inside(min(best, r), max(best, r))
@@ -522,7 +533,7 @@ def _minimum(sampler: Sampler, start: float, step: float, period: float, bounds:
     """The minimum of ``J`` within ``step`` of ``start`` (on the frames every offset there places inside the
     DIC record), to a twentieth of a frame period; while it lies at an end of the bracket, the bracket moves on
     by one step (at most four times, never beyond ``bounds``). NaN: fewer than 4 frames."""
-    lo, hi = start - step, start + step
+    lo, hi = max(start - step, bounds[0]), min(start + step, bounds[1])
     tau = np.nan
     for _ in range(4):
         idx = sampler.inside(lo, hi)
@@ -530,8 +541,8 @@ def _minimum(sampler: Sampler, start: float, step: float, period: float, bounds:
             break
         tau = float(minimize_scalar(Criterion(sampler, idx, rank), bounds=(lo, hi), method="bounded",
                                     options={"xatol": 0.05 * period}).x)
-        if lo + 0.02 * step < tau < hi - 0.02 * step or not bounds[0] < tau < bounds[1]:
+        up, down = tau >= hi - 0.02 * step and hi < bounds[1], tau <= lo + 0.02 * step and lo > bounds[0]
+        if not (up or down):
             break
-        shift = step if tau >= hi - 0.02 * step else -step
-        lo, hi = lo + shift, hi + shift
+        lo, hi = (lo + step, min(hi + step, bounds[1])) if up else (max(lo - step, bounds[0]), hi - step)
     return tau

@@ -82,6 +82,33 @@ class Sampler:
         top = a + fu * (b - a)
         return top + fv * (c + fu * (d - c) - top)
 
+    def gain(self, tau: float, idx: np.ndarray) -> np.ndarray:
+        """Each sample's noise variance (n, M) relative to a sample at a pixel's centre, for white pixel noise.
+
+        Notes
+        -----
+        A sample ``(1-f) p_0 + f p_1`` (per axis) of the smoothed frame has the
+        variance ``(1-f)^2 + f^2 + 2 f (1-f) c`` of one pixel's (``c`` the
+        correlation of neighbouring smoothed pixels), so samples between
+        pixels are less noisy than samples on them: a criterion that weighs
+        every sample alike would prefer offsets that put static frames
+        between pixels.
+        """
+        _, _, fu, fv = self.positions(tau, idx)
+        c = self._neighbour_correlation
+
+        def axis(f):
+            return (1 - f) ** 2 + f**2 + 2 * f * (1 - f) * c
+
+        return axis(fu) * axis(fv)
+
+    @property
+    def _neighbour_correlation(self) -> float:
+        if self.smoothing <= 0:
+            return 0.0
+        k = gaussian_filter(np.eye(1, 41, 20).ravel(), self.smoothing, mode="constant")
+        return float(np.sum(k[1:] * k[:-1]) / np.sum(k * k))
+
     def spread(self, tau: float, idx: np.ndarray, Y: np.ndarray) -> np.ndarray:
         """``G B^T Y``: weights ``Y`` (n, M) on the samples of frames ``idx`` as weights on their pixels
         (n, h, w); ``sum(Y * X) = sum(spread * frames[idx])`` for the raw frames."""
@@ -139,18 +166,16 @@ class Criterion:
         self.sampler, self.idx, self.rank = sampler, idx, rank
         self.start = None
 
-    def parts(self, tau: float):
-        """The misfit ``||X_c||^2 - sum s_i^2`` (K^2) of the rank-``rank`` model, the centred samples and the
-        singular vectors (U, V)."""
+    def __call__(self, tau: float) -> float:
+        """The misfit of the rank-``rank`` model per sample (K^2), each sample's residual squared over its noise
+        gain (:meth:`Sampler.gain`)."""
         X = self.sampler(tau, self.idx)
         Xc = X - X.mean(axis=1, keepdims=True)
         # the criterion compares candidates whose misfits differ by far more than 1e-10 of the samples' power
         s2, U, V = leading(Xc, self.rank, self.start, tol=1e-10)
         self.start = V
-        return float(np.sum(Xc * Xc) - np.sum(s2)), Xc, U, V
-
-    def __call__(self, tau: float) -> float:
-        return self.parts(tau)[0] / self.idx.size / self.sampler.M
+        R = Xc - (U * np.sqrt(s2)) @ V.T
+        return float(np.sum(R * R / self.sampler.gain(tau, self.idx))) / self.idx.size / self.sampler.M
 
 
 def prepared(positions: np.ndarray, t_dic: np.ndarray) -> np.ndarray:
