@@ -232,7 +232,7 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     rank, shift = _model_order(fits, period)
     tau, score, parts, grid, crit = fits[rank]
     parts = dataclasses.replace(parts, model=shift)
-    _check_identified(tau, parts, period, motion, parameter)
+    _check_identified(parts, period, motion, parameter)
     _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
     _check_fit(_misfit(fine, score.idx[_spread_out(score.idx.size, CHECK_FRAMES)], tau, rank), sigma, tau, period,
                parameter)
@@ -376,7 +376,7 @@ def _check_motion(motion, jitter, parameter):
             f"specimen carries no timing information. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
-def _check_identified(tau, parts, period, motion, parameter):
+def _check_identified(parts, period, motion, parameter):
     std = parts.std
     if np.isfinite(std) and std <= MAX_STD_FRAMES * period:
         return
@@ -389,12 +389,11 @@ def _check_identified(tau, parts, period, motion, parameter):
         why = ("the offset shows where the image velocity changes (the motion starts, stops or turns) on a "
                "temperature pattern; a static specimen, motion at a constant rate, a uniform temperature or too "
                "little motion for the record's noise carry no timing information")
-    found = f" (they put it at {tau:.4g} s {_fmt_std(std, period)})" if np.isfinite(std) else ""
     raise DataError(
         f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
         f"{motion:.3g} px in the IR image over the record, and the temperature pattern they carry fixes the "
-        f"offset only to {_fmt_std(std, period)}, more than {MAX_STD_FRAMES:g} IR frame period ({period:.4g} s)"
-        f"{found}: {why}. Set {parameter} to a number (s; docs/time-sync.md)")
+        f"offset only to {_fmt_std(std, period)}, more than {MAX_STD_FRAMES:g} IR frame period ({period:.4g} s): "
+        f"{why}. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
 def _check_inside(tau, grid, crit, motion, parameter):
