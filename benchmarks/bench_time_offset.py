@@ -19,15 +19,21 @@ that far behind the DIC clock and the offset estimated
 stated standard uncertainty in frame periods, their ratio, seconds), then
 per member and over all the worst error, the share within 3 std and the
 RMS of error/std. With ``--couple`` the couple stage runs per member with
-``auto`` (the largest offset, first seed) and with the true offset: the
-estimate's share of couple, and the point temperatures' RMS error against
-the truth with each.
+``auto`` (the first offset, first seed) and with the true offset: the
+estimate's share of couple (the couple stage runs the estimate also to
+check a configured offset; ``--repeat`` timings each, interleaved, the
+fastest kept), and the point temperatures' RMS error against the truth
+with each. With ``--monte-carlo N`` each member's realistic
+export is drawn with N noise seeds (the offsets taken in turn): the scatter
+of the errors against the stated std and against the Cramér-Rao bound of
+the rank-one model with a free pattern (:func:`cramer_rao`: every pixel of
+the DIC patch, every frame, the analytic temperature and motion).
 
 Usage (repository root, one BLAS thread on a shared machine)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_time_offset.py [--members weak-tiny strong-demo ...]
         [--offsets -4 -1.7 -0.3 0.3 1.7 4] [--seeds 2] [--exports realistic clean] [--couple]
-        [--frames 100] [--points 4000]
+        [--monte-carlo 24] [--repeat 3] [--frames 100] [--points 4000]
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ import platform
 import sys
 import time
 import warnings
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -106,24 +113,103 @@ def summary(label, rows, refused):
           f"RMS error/std {np.sqrt(np.mean(z ** 2)):.2f}, estimate {e[:, 2].mean():.2f} s", flush=True)
 
 
+def cramer_rao(ex, times, sigma: float = IR_NOISE) -> float:
+    """The Cramér-Rao bound (IR frame periods) of the offset from frames at ``times`` with white pixel noise
+    ``sigma`` (K), under the rank-one model with a free pattern (a level and an amplitude per frame).
+
+    The information is ``sum w Z^2 / sigma^2`` over a fine grid of the DIC patch (``w`` its pixels per grid
+    point) and the frames, ``Z`` the temperature's rate at the fixed pixel due to the motion (the material
+    coordinates' rate there times the material gradient) with every direction the model absorbs projected out:
+    per frame a level and the pattern's amplitude, per material point any pattern times the amplitudes.
+    """
+    spec, cam = ex.specimen, ex.camera
+    t = np.asarray(times, float)
+    s0, s1, h0, h1 = ex.patch
+    S, H = (a.ravel() for a in np.meshgrid(np.linspace(s0, s1, 80), np.linspace(h0, h1, 140), indexing="ij"))
+
+    def image(s, h, tt):
+        return cam.project(spec.position(s[None], h[None], tt[:, None]).reshape(-1, 3)).reshape(tt.size, -1, 2)
+
+    e, dt = 1e-3, 1e-4
+    Js = (image(S + e, H, t) - image(S - e, H, t)) / (2 * e)
+    Jh = (image(S, H + e, t) - image(S, H - e, t)) / (2 * e)
+    W = (image(S, H, t + dt) - image(S, H, t - dt)) / (2 * dt)
+    det = Js[..., 0] * Jh[..., 1] - Js[..., 1] * Jh[..., 0]
+    rate_s = (Jh[..., 1] * W[..., 0] - Jh[..., 0] * W[..., 1]) / det
+    rate_h = (-Js[..., 1] * W[..., 0] + Js[..., 0] * W[..., 1]) / det
+    Ts, Th, _ = spec.temperature_derivatives(S[None], H[None], t[:, None])
+    D = Ts * rate_s + Th * rate_h
+    w = np.abs(det).mean(axis=0) * (s1 - s0) / 79 * (h1 - h0) / 139
+    T = spec.temperature(S[None], H[None], t[:, None])
+    u, sv, vt = np.linalg.svd(T - T.mean(axis=1, keepdims=True), full_matrices=False)
+    if sv[1] > 1e-6 * sv[0]:  # a pattern that is not rank-one: no bound of this model
+        return np.nan
+    V = np.stack([np.ones_like(S), vt[0]])
+    Z = D - np.linalg.solve((V * w) @ V.T, (V * w) @ D.T).T @ V
+    Z -= np.outer(u[:, 0], u[:, 0] @ Z)
+    return float(1.0 / np.sqrt(np.sum(Z**2 * w) / sigma**2) / np.median(np.diff(t)))
+
+
+def monte_carlo(member, args):
+    """``args.monte_carlo`` noise seeds of the member's realistic export (seeds of its own: members do not share
+    a draw), the offsets in turn."""
+    rows, refused = [], 0
+    first = 1000 * (zlib.crc32(member.encode()) % 1000)
+    for i in range(args.monte_carlo):
+        k = args.offsets[i % len(args.offsets)]
+        dic, ir, cal, ex, offset, period = scene(member, k, True, first + i, args)
+        try:
+            _, a = ir_clock(dic, ir.assign_attrs(time_offset="auto"), cal, member)
+        except IrdicError:
+            refused += 1
+            continue
+        rows.append(((a["ir_time_offset"] - offset) / period, a["ir_time_offset_std"] / period))
+    bound = cramer_rao(ex, ir["time"].values + offset, np.hypot(IR_NOISE, 10.0**-DECIMALS / np.sqrt(12)))
+    cells = [member, f"{len(rows)} / {refused}"] + ["-"] * 5 + [f"{bound:.3f}", "-"]
+    if rows:
+        err, std = np.array(rows).T
+        cells[2:7] = [f"{err.mean():+.3f}", f"{err.std():.3f} +- {err.std() / np.sqrt(2 * len(err)):.3f}",
+                      f"{np.abs(err).max():.3f}", f"{std.mean():.3f}", f"{np.sqrt(np.mean((err / std) ** 2)):.2f}"]
+        cells[8] = f"{err.std() / bound:.2f}"
+    print("| " + " | ".join(cells) + " |", flush=True)
+
+
+def _timed(call):
+    t0 = time.perf_counter()
+    try:
+        return call(), time.perf_counter() - t0
+    except IrdicError as exc:
+        return exc, time.perf_counter() - t0
+
+
 def cost_and_temperatures(member, realistic, args):
-    k = max(args.offsets, key=abs)
+    """The estimate alone and the couple stage with the true offset (it checks that offset with its own
+    estimate), ``--repeat`` times each, interleaved, the fastest kept; the couple stage with ``auto``; the first
+    offset of ``--offsets``, seed 0; the point temperatures against the truth."""
+    k = args.offsets[0]
     dic, ir, cal, ex, offset, _ = scene(member, k, realistic, 0, args)
+    true_ir = ir.assign_coords(time=ir["time"].values + offset).assign_attrs(time_offset=offset)
+    est, cpl = [], []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IrdicWarning)
-        t0 = time.perf_counter()
-        auto = couple(dic, ir.assign_attrs(time_offset="auto"), cal)
-        t1 = time.perf_counter()
-        true_ir = ir.assign_coords(time=ir["time"].values + offset).assign_attrs(time_offset=offset)
-        known = couple(dic, true_ir, cal)
-        t2 = time.perf_counter()
-        ir_clock(dic, ir.assign_attrs(time_offset="auto"), cal, member)
-        est = time.perf_counter() - t2
-    a, b = rms(auto, ex), rms(known, ex)
-    print(f"{member} ({'realistic' if realistic else 'noise-free'}): couple with auto {t1 - t0:.1f} s (estimate "
-          f"{est:.2f} s = {100 * est / (t1 - t0 - est):.1f} % of couple), with the true offset {t2 - t1:.1f} s "
-          f"(its own check included); T RMS vs truth: auto {a:.5f} K, true offset {b:.5f} K "
-          f"({100 * (a - b) / b:+.1f} %)", flush=True)
+        for _ in range(args.repeat):
+            refused, sec = _timed(lambda: ir_clock(dic, ir.assign_attrs(time_offset="auto"), cal, member))
+            est.append(sec)
+            known, sec = _timed(lambda: couple(dic, true_ir, cal))
+            cpl.append(sec)
+        auto, t_auto = (None, 0.0) if isinstance(refused, IrdicError) else \
+            _timed(lambda: couple(dic, ir.assign_attrs(time_offset="auto"), cal))
+    e, c, b = min(est), min(cpl), rms(known, ex)
+    line = (f"{member} ({'realistic' if realistic else 'noise-free'}), {k:+.2f} frames: estimate {e:.2f} s, couple "
+            f"with the true offset {c:.1f} s with it: the estimate is {100 * e / (c - e):.1f} % of the rest "
+            f"(fastest of {args.repeat})")
+    if auto is None:
+        line += f"; auto refused ({str(refused)[:60]}...); T RMS vs truth, true offset {b:.5f} K"
+    else:
+        a = rms(auto, ex)
+        line += (f"; couple with auto {t_auto:.1f} s; T RMS vs truth: auto {a:.5f} K, true offset {b:.5f} K "
+                 f"({100 * (a - b) / b:+.1f} %)")
+    print(line, f"load {os.getloadavg()[0]:.1f}", flush=True)
 
 
 def main() -> None:
@@ -134,11 +220,20 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--exports", nargs="+", default=["realistic", "clean"], choices=["realistic", "clean"])
     ap.add_argument("--couple", action="store_true", help="cost and point temperatures against the true offset")
+    ap.add_argument("--monte-carlo", type=int, default=0, help="noise seeds per member (realistic exports)")
+    ap.add_argument("--repeat", type=int, default=1, help="--couple: timings per figure (the fastest kept)")
     ap.add_argument("--frames", type=int, default=100, help="moving member: IR frames = DIC stages")
     ap.add_argument("--points", type=int, default=4000, help="moving member: DIC points")
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}, "
           f"python {platform.python_version()}")
+    if args.monte_carlo:
+        print("\n| member | estimates / refused | mean error | scatter | max \\|error\\| | mean std | RMS error/std "
+              "| Cramér-Rao bound | scatter / bound |\n|---|---|---|---|---|---|---|---|---|")
+        for member in args.members:
+            monte_carlo(member, args)
+        print(f"load average at the end {os.getloadavg()[0]:.1f}")
+        return
     for exports in args.exports:
         realistic = exports == "realistic"
         everything, refused_all = [], 0

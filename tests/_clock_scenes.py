@@ -6,6 +6,57 @@ import xarray as xr
 from irdic.camera import CameraModel
 from irdic.synthetic import Tube, experiment
 from irdic.synthetic.render import realistic_stack
+from irdic.synthetic.specimens import smoothstep
+
+
+class RampTube(Tube):
+    """The tube loaded at a constant rate: the stretch and the twist ramp linearly over ``load`` (a testing
+    machine at constant crosshead speed), so the motion has kinks where the ramps start and end."""
+
+    @staticmethod
+    def _ramp(t, a, b):
+        t = np.asarray(t, np.float64)
+        return np.clip((t - a) / (b - a), 0.0, 1.0), np.where((t > a) & (t < b), 1.0 / (b - a), 0.0)
+
+    def axial_displacement(self, t):
+        S1, d1 = self._ramp(t, *self.load)
+        S2, d2 = self._ramp(t, *self.unload_force)
+        return self.u_max * S1 - self.u_recovery * S2, self.u_max * d1 - self.u_recovery * d2
+
+    def twist(self, t):
+        S1, d1 = self._ramp(t, *self.load)
+        S2, d2 = self._ramp(t, *self.unload_torque)
+        return self.phi_max * S1 - self.phi_recovery * S2, self.phi_max * d1 - self.phi_recovery * d2
+
+
+class SecondPatternTube(Tube):
+    """The default tube plus a second pattern with its own history: an axial gradient of ``second`` K that
+    heats from 3 to 7 s, after the first (a pattern of two components, not one that only scales)."""
+
+    def __init__(self, *, second: float = 1.0, **kw):
+        super().__init__(**kw)
+        self.second = float(second)
+
+    def temperature(self, s, h, t):
+        S2, _, _ = smoothstep(np.asarray(t, np.float64), 3.0, 7.0)
+        s, h, S2 = np.broadcast_arrays(s, h, S2)
+        return super().temperature(s, h, t) + self.second * S2 * (h / 20.0) * (1.0 + 0.1 * np.cos(s / self.R))
+
+
+class GripFrontTube(Tube):
+    """The default tube plus heat flowing in from the upper grip: ``grip t/6`` K at the DIC patch's upper end
+    (h = 20 mm), decaying over 2 mm at the start and 5 mm after 6 s (a front that changes its shape on the
+    material)."""
+
+    def __init__(self, *, grip: float = 1.0, **kw):
+        super().__init__(**kw)
+        self.grip = float(grip)
+
+    def temperature(self, s, h, t):
+        x = np.clip(np.asarray(t, np.float64) / 6.0, 0.0, 1.0)
+        s, h, x = np.broadcast_arrays(s, h, x)
+        return super().temperature(s, h, t) + self.grip * x * np.exp(-(20.0 - h) / (2.0 + 3.0 * x))
+
 
 #: the tube with a temperature pattern that the small scenes can see move: 40 % around the tube, 6 K of heating
 STRONG_TUBE = dict(gamma=0.4, Q=6.0)
@@ -21,6 +72,9 @@ FAMILY = {
     "twist-only": ("demo", dict(u_max=0.0, u_recovery=0.0, gamma=0.15), False),
     "fast-load": ("demo", dict(load=(0.5, 2.5)), False),  # the same motion in 2 s instead of 5
     "slow-small": ("demo", dict(load=(0.5, 9.5), u_max=1.0, phi_max_deg=10.0, Q=2.0), False),
+    "ramp-tiny": ("tiny", dict(ramp=True), False),        # constant-rate loading: kinks between the DIC stages
+    "second-pattern": ("demo", dict(second=1.0), False),  # two pattern components with their own histories
+    "grip-front": ("demo", dict(grip=1.0), False),        # heat from the grip: a front that changes its shape
 }
 
 
@@ -36,9 +90,14 @@ def clock_scene(offset, *, name="tube", scale="tiny", realistic=False, seed=0, s
     DIC times); else IR at twice the DIC rate. ``mode`` is what ingest
     would have written (``"auto"`` or the configured number). ``tube``:
     the :class:`~irdic.synthetic.Tube` parameters (default
-    :data:`STRONG_TUBE`; ``{}`` is the default tube).
+    :data:`STRONG_TUBE`; ``{}`` is the default tube; ``ramp=True`` loads it
+    at a constant rate, :class:`RampTube`; ``second``: :class:`SecondPatternTube`,
+    ``grip``: :class:`GripFrontTube`).
     """
-    spec = Tube(**(STRONG_TUBE if tube is None else tube)) if name == "tube" else None
+    params = dict(STRONG_TUBE if tube is None else tube)
+    kind = RampTube if params.pop("ramp", False) else SecondPatternTube if "second" in params else \
+        GripFrontTube if "grip" in params else Tube
+    spec = kind(**params) if name == "tube" else None
     ex = experiment(name, scale, ir_noise=IR_NOISE if realistic else 0.0, dic_noise=DIC_NOISE if realistic else 0.0,
                     seed=seed, specimen=spec)
     rng = np.random.default_rng([seed, 30])

@@ -24,7 +24,7 @@ from ..errors import DataError, IrdicWarning
 from .offset import MAX_FRAMES, crop_box, estimate_offset
 from ..footprint.visibility import project_points
 
-__all__ = ["ir_clock", "CHECK_SIGMAS"]
+__all__ = ["ir_clock", "estimate_from_stores", "CHECK_SIGMAS"]
 
 log = logging.getLogger(__name__)
 
@@ -32,8 +32,12 @@ log = logging.getLogger(__name__)
 CHECK_SIGMAS = 3.0
 
 
-def _estimate(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, key: str):
-    """:func:`irdic.timing.estimate_offset` on the stores: points projected with the calibration, frames cropped."""
+def estimate_from_stores(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, key: str, **options):
+    """:func:`irdic.timing.estimate_offset` on the stores: points projected with the calibration, frames cropped.
+
+    ``key`` is the configuration key named in errors; ``options`` go to
+    :func:`~irdic.timing.estimate_offset` (``centre``, ``max_frames``).
+    """
     camera = load_camera(calibration)
     u, v = ir["u"].values, ir["v"].values
     pr = project_points(camera, dic, u, v)
@@ -50,7 +54,8 @@ def _estimate(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, key: str
         log.info("IR clock: %d of %d frames with NaN pixels over the specimen are left out", (~finite).sum(),
                  finite.size)
     return estimate_offset(frames[finite], ir["time"].values.astype(float)[keep][finite],
-                           dic["time"].values.astype(float), local - [cols.start, rows.start], parameter=key)
+                           dic["time"].values.astype(float), local - [cols.start, rows.start], parameter=key,
+                           **options)
 
 
 def ir_clock(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, experiment: str | None = None):
@@ -82,7 +87,7 @@ def ir_clock(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, experimen
     key = f"experiments.{experiment or '<name>'}.ir.time_offset"
     mode = ir.attrs.get("time_offset")
     if mode == "auto":
-        est = _estimate(dic, ir, calibration, key)
+        est = estimate_from_stores(dic, ir, calibration, key)
         log.info("couple: IR clock offset estimated from the data: %.6g s +- %.2g s (%.3f +- %.3f IR frames), "
                  "added to the IR times", est.offset, est.std, est.offset / est.frame_period,
                  est.std / est.frame_period)
@@ -93,7 +98,7 @@ def ir_clock(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, experimen
     attrs = {"ir_time_offset": configured, "ir_time_offset_std": 0.0, "ir_time_offset_source": "configured"} \
         if configured is not None else {}
     try:
-        est = _estimate(dic, ir, calibration, key)
+        est = estimate_from_stores(dic, ir, calibration, key)
     except DataError as exc:
         log.info("couple: the data do not check the IR clock offset (%s)", exc)
         return ir, attrs

@@ -4,39 +4,46 @@ A wrong offset moves every DIC point in the IR image by its image velocity
 times the error, so the IR frames show a temperature pattern that no longer
 moves with the material. This module finds the offset ``tau`` (seconds
 added to the IR times, as a configured ``time_offset``) at which the IR
-frames and the DIC motion agree best.
+frames and the DIC motion agree best, and its standard uncertainty.
 
-Criterion
----------
+Model
+-----
 For a candidate ``tau`` every IR frame ``k`` (time ``t_k`` on the IR clock)
-is sampled bilinearly at the positions the DIC points have in the image at
-the DIC time ``t_k + tau``; the positions are interpolated between the DIC
-stages by a cubic spline in time. Row ``k`` of the matrix ``X(tau)`` (frames
-x points) is then what frame ``k`` shows at the material points. A pattern
+is sampled at the positions that material nodes have in the image at the DIC
+time ``t_k + tau`` (:mod:`irdic.timing.nodes`: a regular grid of the
+reference image carried by the DIC points' triangulation, interpolated
+between the DIC stages by a spline in time). Row ``k`` of ``X(tau)``
+(frames x nodes) is what frame ``k`` shows at the material nodes. A pattern
 carried by the material has, at the right offset, the same shape in every
 frame up to a level and an amplitude, ``X_k = a_k + b_k P + noise``; at a
 wrong offset every frame is sampled displaced by its image velocity times the
 error, and since the velocity changes during the test, the pattern seen in
-the material drifts from frame to frame. The criterion is the misfit of the
-rank-one model,
+the material drifts from frame to frame.
 
-``J(tau) = ||X_c||^2 - s_1^2(X_c)``,
-
-with ``X_c`` the rows of ``X`` less their means and ``s_1`` its largest
-singular value. The samples are taken at the DIC points and at nodes
-between them (about one smoothing width apart, :func:`irdic.timing.samples.prepared`), so that
-every pixel of the specimen counts. ``J`` is evaluated on a grid of
-candidates over a quarter of the record each way, each on the frames it
-places inside the DIC record; its few best local minima are refined and
-compared pairwise on the frames both place inside the record (frames with
+Search, then refinement
+-----------------------
+The misfit of the rank-one model ``J(tau) = ||X_c||^2 - s_1^2`` (``X_c`` the
+rows less their means, ``s_1`` the largest singular value) on a coarse set
+of nodes and strongly smoothed frames is evaluated on a grid of candidates
+over a quarter of the record each way; its few best local minima are refined
+and compared on the frames both place inside the DIC record (frames with
 little motion fit any offset, so candidates judged on different frames are
-not comparable), and the winner is refined by Gauss-Newton steps on the score ``Y . R(tau) = 0``, with ``R`` the
-rank-one residual and ``Y`` the derivative of the rank-one *model* (the
-pattern, averaged over the other frames, moved along the image velocity):
-the frames' own derivative carries the smoothed noise's gradient, whose
-share grows as the pattern weakens. The positions are continuous in time:
-no frame grid limits the resolution. The standard uncertainty comes from
-``Y`` and the pixel noise (Notes of :func:`estimate_offset`).
+not comparable). From the winner, the estimate is the root of a score with
+fixed weights on every node about one pixel apart and lightly smoothed
+frames (:mod:`irdic.timing.score`): the rank-one model's derivative with
+respect to the offset, with everything the model absorbs projected out. That
+estimator is linear in the pixel noise, so its variance is exact for white
+noise, and it comes close to the precision the frames allow (the
+Cramér-Rao bound of the rank-one model with a free pattern), short of it
+mostly by the few pixels along the cloud's outline that the smoothing must
+leave out.
+
+A pattern that changes its shape on the material (a second pattern with a
+history of its own, heat flowing in from a grip) is not rank-one: where the
+one-component model's residuals hold structure, models of two and three
+components (``X_k = a_k + sum_i b_ik P_i``) are fitted as well, and the
+distance between their estimates is part of the uncertainty
+(:func:`_model_order`).
 
 When it cannot work: a static specimen (no motion: every offset fits the
 same), a uniform temperature (no pattern to carry), or motion too small for
@@ -47,52 +54,63 @@ motion found and the uncertainty it allows.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
 from scipy.optimize import minimize_scalar
 
 from ..errors import DataError
-from .samples import Criterion, Sampler, prepared, rank_one, score_parts
+from .nodes import Mesh, Nodes
+from .samples import Criterion, Sampler, leading, prepared
+from .score import Score, Uncertainty, secant, solve, uncertainty
 
-__all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_POINTS", "MAX_FRAMES", "SMOOTHING_PX", "MODEL_STD_FRAMES", "MIN_MOTION_PX",
-           "MIN_MOTION_JITTERS"]
+__all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_FRAMES", "WIDEN_SAMPLES", "MAX_SAMPLES",
+           "SMOOTHING_PX", "NODE_SPACING_PX", "GRADIENT_PX", "SPLINE_ORDER", "MIN_MOTION_PX", "MIN_MOTION_JITTERS"]
 
 log = logging.getLogger(__name__)
 
-#: an estimate whose standard uncertainty exceeds this many IR frame periods is refused
-MAX_STD_FRAMES = 0.25
-#: points used (evenly spread over the cloud's order): the criterion's noise falls as 1/sqrt(points)
-MAX_POINTS = 8000
+#: an estimate whose standard uncertainty exceeds this many IR frame periods is refused: two standard
+#: uncertainties stay within 0.2 frame periods
+MAX_STD_FRAMES = 0.12
 #: frames used (evenly spread over the record)
 MAX_FRAMES = 600
-#: Gaussian smoothing of the frames (px) before they are sampled
-SMOOTHING_PX = 1.5
+#: samples (nodes x frames) of the refinement: beyond the first the nodes are spread wider (up to twice), beyond
+#: the second frames are left out
+WIDEN_SAMPLES, MAX_SAMPLES = 1_000_000, 4_000_000
+#: the refinement: Gaussian smoothing of the frames (px), node spacing (px), the pattern gradient's width (px)
+SMOOTHING_PX, NODE_SPACING_PX, GRADIENT_PX = 0.5, 1.0, 4.0
+#: degree of the spline through the DIC stages that moves the nodes between them
+SPLINE_ORDER = 5
+#: the search: smoothing (px), nodes and samples (nodes x frames) at most
+SEARCH_SMOOTHING_PX, SEARCH_NODES, SEARCH_SAMPLES = 1.5, 1500, 100_000
 #: an offset is estimated only where the points move at least this much in the image (px) ...
 MIN_MOTION_PX = 0.5
 #: ... and at least this many times their scatter from stage to stage (DIC noise)
 MIN_MOTION_JITTERS = 20.0
-#: the criterion's own bias, in IR frame periods, added in quadrature to the noise's share of the uncertainty:
-#: on noise-free synthetic scenes (smoothed frames of a moving, foreshortened pattern; positions interpolated
-#: between DIC stages by a cubic spline) the estimates lie within 0.03 frame periods of the truth
-MODEL_STD_FRAMES = 0.03
 #: the rank-one misfit at the estimate may exceed the frames' pixel noise by this factor at most ...
 FIT_RATIO = 1.5
 #: ... with this floor (K) under the noise (noise-free exports)
 FIT_FLOOR_K = 0.005
-#: a Gauss-Newton step from one frame period either side of the estimate must return to within this many
-#: frame periods of it, or this many of its standard uncertainties
+#: the score from one frame period either side of the estimate must point back to within this many frame
+#: periods of it, or this many of its standard uncertainties
 BASIN_FRAMES, BASIN_STDS = 0.5, 4.0
-#: coarse candidates at most (the refinement is continuous)
+#: pattern components at most: where the residuals of the one-component model hold structure (their robust
+#: variance over this factor times the white-noise one, which it stays below for white noise, and over this many
+#: frame periods), models of two and three are fitted (:func:`_model_order`)
+MAX_RANK, STRUCTURE_RATIO, STRUCTURE_FRAMES = 3, 1.25, 0.03
+#: frames within this many frame periods outside the DIC record at the estimate still count (positions
+#: extrapolated by the spline)
+SLACK_FRAMES = 0.25
+#: frames (spread over the record) on which the fit and the basin are checked at most
+CHECK_FRAMES = 16
+#: the refinement's weights are fitted again at the secant's root where it lies this many frame periods away
+REFIT_FRAMES = 0.1
+#: coarse candidates at most
 _MAX_CANDIDATES = 31
-#: points of the coarse search at most (it only has to find the basin)
-_COARSE_POINTS = 1500
 #: basins (local minima of the coarse criterion) refined and compared at most
 _STARTS = 3
-#: Gauss-Newton steps of the refinement at most
-_GN_STEPS = 8
 
 
 @dataclass(frozen=True)
@@ -110,11 +128,15 @@ class ClockOffset:
     motion_px : float
         Largest displacement of a DIC point in the IR image over the record (px).
     noise : float
-        Residual of the rank-one model per sample at the estimate (K).
+        Pixel noise of the frames (K).
     candidates, criterion : numpy.ndarray
         The coarse grid (s) and ``J`` per sample on it (K^2).
     frames, points : int
-        IR frames and DIC points the estimate used.
+        IR frames and material nodes the estimate used.
+    parts : Uncertainty
+        The parts of ``std``.
+    rank : int
+        Pattern components of the model (1: a pattern that only scales).
     """
 
     offset: float
@@ -126,6 +148,8 @@ class ClockOffset:
     criterion: np.ndarray
     frames: int
     points: int
+    parts: Uncertainty
+    rank: int = 1
 
 
 def crop_box(positions: np.ndarray, shape: tuple[int, int], margin: int = 12) -> tuple[slice, slice]:
@@ -141,8 +165,8 @@ def crop_box(positions: np.ndarray, shape: tuple[int, int], margin: int = 12) ->
 
 
 def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, positions: np.ndarray, *,
-                    centre: float = 0.0, parameter: str = "ir.time_offset", smoothing_px: float = SMOOTHING_PX,
-                    max_points: int = MAX_POINTS, max_frames: int = MAX_FRAMES) -> ClockOffset:
+                    centre: float = 0.0, parameter: str = "ir.time_offset",
+                    max_frames: int = MAX_FRAMES) -> ClockOffset:
     """Offset of the IR clock (s added to the IR times) that aligns the IR frames with the DIC motion.
 
     Parameters
@@ -158,17 +182,15 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         The DIC points' (u, v) positions in the cropped frame's pixel
         coordinates (px, pixel (0, 0) = ``frames[:, 0, 0]``) at every DIC
         time, NaN where unknown (gaps are interpolated in time; points known
-        at fewer than half of the times, or nearer the cloud's outline than
-        3 smoothing widths + 1 px, are left out).
+        at fewer than half of the times are left out).
     centre : float
         Middle of the searched offsets (s); the search covers a quarter of the
         shorter record each way.
     parameter : str
         The configuration key named in errors.
-    smoothing_px : float
-        Standard deviation (px) of the Gaussian smoothing of the frames.
-    max_points, max_frames : int
-        Points and frames used at most (evenly spread).
+    max_frames : int
+        Frames used at most (evenly spread).
+
     Returns
     -------
     ClockOffset
@@ -178,29 +200,21 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     DataError
         Not identifiable: too few points or frames, a static specimen or too
         little motion for the noise (uncertainty above :data:`MAX_STD_FRAMES`
-        frame periods), or the best candidate at the end of the range.
+        frame periods), the best candidate at the end of the range, or frames
+        that do not follow the motion at the best offset.
 
     Notes
     -----
-    Near the root the samples are ``X(tau) = X(tau*) + X' d + e`` with
-    ``d = tau - tau*``. After removing the directions the rank-one model
-    absorbs (row means, ``u w^T`` and ``z v^T`` for the fitted singular
-    vectors ``u``, ``v``), ``Y = (I - u u^T) X'_c (I - v v^T)``, with ``X'``
-    the model's derivative ``u_k s_1 grad(v^(-k)) . w`` (the pattern
-    ``v^(-k)`` from all frames but ``k``, its gradient from local planes
-    through each sample's neighbours, ``w`` the image velocity), and the
-    Gauss-Newton root has ``var(d) = var(Y . e) / ||Y||^4``. The sample errors
-    are ``e = B G n``: pixel errors ``n`` of variance ``sigma^2``, smoothed (``G``)
-    and sampled bilinearly (``B``), so ``var(Y . e) = sigma^2 ||G B^T Y||^2``.
-    ``sigma^2`` is the raw samples' rank-one misfit, each over its bilinear
-    noise gain, per degree of freedom.
-    :data:`MODEL_STD_FRAMES` frame
-    periods of model error are added in quadrature.
+    The standard uncertainty (:func:`irdic.timing.score.uncertainty`) is the
+    larger of the white-noise variance of the linear score (exact for pixel
+    noise of the level measured on the frames) and a robust one from the
+    residuals summed per image tile over all frames (spatially or temporally
+    correlated noise, a pattern the rank-one model does not describe), with
+    the shift of the estimate under a spline of lower degree through the DIC
+    stages (how well the motion between them is known) in quadrature.
     """
     t_ir, t_dic = np.asarray(t_ir, float), np.asarray(t_dic, float)
-    # the smoothing kernel of a kept point stays on the specimen
-    inset = np.ceil(3 * smoothing_px) + 1 if smoothing_px > 0 else 0.0
-    pos = prepared(np.asarray(positions, float), t_dic, max_points, inset, smoothing_px)
+    pos = prepared(np.asarray(positions, float), t_dic)
     period = float(np.median(np.diff(t_ir))) if t_ir.size > 1 else np.nan
     _check_sizes(pos, t_dic, t_ir, parameter)
     motion, jitter = _motion(pos)
@@ -208,35 +222,131 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         keep = np.linspace(0, t_ir.size - 1, max_frames).round().astype(int)
         frames, t_ir = frames[keep], t_ir[keep]
     _check_motion(motion, jitter, parameter)
-    sampler = Sampler(frames, t_ir, t_dic, pos, smoothing_px)
-    tau, J, grid, crit = _search(sampler, centre, period, motion, parameter)
-    std, noise = _uncertainty(sampler, J, tau, period)
-    _check_identified(std, period, motion, parameter)
-    _check_fit(noise, _frame_noise(sampler.raw), tau, period, parameter)
-    _check_basin(sampler, tau, std, period, parameter)
-    std = float(np.hypot(std, MODEL_STD_FRAMES * period))
-    log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames; %d frames x %d points, "
-             "motion up to %.3g px, pixel noise %.3g K)", tau, std, tau / period, std / period, J.idx.size,
-             pos.shape[1], motion, noise)
-    return ClockOffset(tau, std, period, motion, noise, grid, crit, int(J.idx.size), int(pos.shape[1]))
-
-
-def _search(sampler: Sampler, centre: float, period: float, motion: float, parameter: str):
-    """The offset (s) and its criterion: the coarse candidates' basins refined, compared, the winner refined."""
-    t_ir, t_dic = sampler.t_ir, sampler.t_dic
-    grid, crit, starts, coarse = _coarse(sampler, t_ir, t_dic, centre, period, f"{parameter}: auto", parameter)
-    step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
-    roots = [_refined(coarse, grid[i], step, period, bounds, newton=False)[0] for i in starts]
-    roots = [r for r in roots if np.isfinite(r)]
-    if roots:  # located to a twentieth of a frame: Gauss-Newton on every sample from there
-        tau, J = _refined(sampler, _tournament(coarse, roots), step, period, bounds, search=False)
-    else:
-        tau, J = _refined(sampler, grid[starts[0]], step, period, bounds)
-    if J is None:
-        raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
-                        f"offset ({tau:.4g} s); set {parameter} to a number (s)")
+    frames = np.asarray(frames, dtype=np.float32)
+    mesh = Mesh(pos, t_dic)
+    coarse = _nodes(mesh, SEARCH_SMOOTHING_PX, max(2.0, np.sqrt(mesh.area / SEARCH_NODES)))
+    some = _spread_out(t_ir.size, SEARCH_SAMPLES // coarse.M)
+    search = Sampler(frames[some], t_ir[some], coarse, SEARCH_SMOOTHING_PX)
+    sigma = _frame_noise(frames)
+    fits, fine, spacing = _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma)
+    rank, shift = _model_order(fits, period)
+    tau, score, parts, grid, crit = fits[rank]
+    parts = dataclasses.replace(parts, model=shift)
+    _check_identified(parts, period, motion, parameter)
     _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
-    return tau, J, grid, crit
+    _check_fit(_misfit(fine, score.idx[_spread_out(score.idx.size, CHECK_FRAMES)], tau, rank), sigma, tau, period,
+               parameter)
+    _check_basin(score, tau, parts.std, period, parameter)
+    out = ClockOffset(tau, parts.std, period, motion, sigma, grid, crit, int(score.idx.size), int(fine.M), parts, rank)
+    log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames: noise %.3f, robust %.3f, "
+             "motion between DIC stages %.3f; %d frames x %d nodes %.2g px apart, %d pattern component%s, motion up "
+             "to %.3g px, pixel noise %.3g K)", tau, parts.std, tau / period, parts.std / period, parts.noise / period,
+             parts.robust / period, parts.interpolation / period, out.frames, out.points, spacing, rank,
+             "s" if rank > 1 else "", motion, sigma)
+    return out
+
+
+def _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma):
+    """The estimates of the models with one component and, where it leaves structure, two and three:
+    {rank: (tau, score, Uncertainty, grid, criterion)}, the refinement's sampler and its node spacing (px)."""
+    fits, failed, fine, spacing = {}, None, None, np.nan
+    for rank in range(1, MAX_RANK + 1):
+        try:
+            roots, grid, crit = _search(search, centre, period, motion, parameter, rank)
+            if fine is None:
+                fine, spacing = _refinement_sampler(frames, t_ir, mesh, max(search.inside(r, r).size for r in roots)
+                                                    * t_ir.size // search.t_ir.size)
+            # the minima compared on the refinement's nodes: more samples, less smoothing, more power
+            tau0 = _tournament(fine, roots, rank)
+            tau, score, slope = _refined(fine, tau0, period, motion, parameter, rank)
+        except DataError as exc:
+            failed = failed or exc
+            if rank > 1:
+                break
+            continue
+        fits[rank] = (tau, score, uncertainty(score, tau, slope, sigma), grid, crit)
+        if rank == 1 and not _structured(fits[1][2], period):
+            break
+    if not fits:
+        raise failed
+    return fits, fine, spacing
+
+
+def _structured(parts: Uncertainty, period: float) -> bool:
+    """Whether the residuals hold structure the model misses (module constants :data:`STRUCTURE_RATIO`,
+    :data:`STRUCTURE_FRAMES`)."""
+    return parts.robust > max(STRUCTURE_RATIO * parts.noise, STRUCTURE_FRAMES * period)
+
+
+def _model_order(fits: dict, period: float) -> tuple[int, float]:
+    """The model kept and the shift (s) of its estimate to that of the neighbouring order: one component
+    where it leaves no structure (no shift); else two where they leave none, three otherwise, each with the
+    distance between the two- and three-component estimates (infinite where either failed)."""
+    if len(fits) == 1 and not _structured(fits[1][2], period):
+        return 1, 0.0
+    if 2 not in fits or 3 not in fits:
+        return max(fits), np.inf
+    return (2 if not _structured(fits[2][2], period) else 3), abs(fits[3][0] - fits[2][0])
+
+
+def _nodes(mesh: Mesh, smoothing: float, spacing: float) -> Nodes:
+    """Nodes ``spacing`` px apart, inside the cloud by the reach of a Gaussian smoothing of ``smoothing`` px."""
+    return Nodes(mesh, spacing, np.ceil(3 * smoothing) + 1, SPLINE_ORDER)
+
+
+def _refinement_sampler(frames, t_ir, mesh, n_frames):
+    """The refinement's sampler: nodes :data:`NODE_SPACING_PX` apart, wider where nodes x frames would exceed
+    :data:`WIDEN_SAMPLES` (at most twice), then frames left out evenly beyond :data:`MAX_SAMPLES`."""
+    spacing = NODE_SPACING_PX * float(np.clip(np.sqrt(mesh.area * max(n_frames, 1) / WIDEN_SAMPLES) / NODE_SPACING_PX,
+                                              1.0, 2.0))
+    smoothing = SMOOTHING_PX * spacing / NODE_SPACING_PX
+    nodes = _nodes(mesh, smoothing, spacing)
+    if nodes.M * n_frames > MAX_SAMPLES:
+        keep = _spread_out(t_ir.size, MAX_SAMPLES // nodes.M)
+        frames, t_ir = frames[keep], t_ir[keep]
+    return Sampler(frames, t_ir, nodes, smoothing), spacing
+
+
+def _spread_out(n: int, count: int) -> np.ndarray:
+    """At most ``count`` (at least 8) of ``n`` indices, evenly spread, first and last included."""
+    return np.unique(np.linspace(0, n - 1, min(n, max(8, count))).round().astype(int))
+
+
+def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parameter: str, rank: int):
+    """The root of the fixed-weight score from ``tau0``: the weights fitted at ``tau0``, refitted at the secant's
+    root where it lies more than :data:`REFIT_FRAMES` frame periods away (weights fitted off the root lose
+    precision on a weak pattern); (tau, score, slope)."""
+    tau, score, slope = np.nan, None, np.nan
+    idx = sampler.inside(tau0, tau0, SLACK_FRAMES * period)
+    if idx.size >= 4:
+        score = Score(sampler, idx, tau0, GRADIENT_PX, rank)
+        start, rate = secant(score, tau0, period)
+        if np.isfinite(start) and abs(start - tau0) > REFIT_FRAMES * period:
+            again = sampler.inside(start, start, SLACK_FRAMES * period)
+            if again.size >= 4:
+                score = Score(sampler, again, start, GRADIENT_PX, rank)
+                if not np.array_equal(again, idx):
+                    rate = secant(score, start, period)[1]
+        if np.isfinite(start):
+            tau, slope = solve(score, start, rate, period)
+    if not np.isfinite(tau):
+        raise DataError(f"{parameter}: auto cannot estimate the clock offset from the data: at the best offset "
+                        f"found ({tau0:.4g} s) the frames do not change with it (the DIC points move at most "
+                        f"{motion:.3g} px in the IR image). Set {parameter} to a number (s; docs/time-sync.md)")
+    return tau, score, slope
+
+
+def _search(sampler: Sampler, centre: float, period: float, motion: float, parameter: str, rank: int):
+    """The coarse candidates' best local minima, each refined to a twentieth of a frame period within the
+    searched range: (the minima (s), the candidates (s), their criterion)."""
+    grid, crit, starts = _coarse(sampler, centre, period, parameter, rank)
+    step, bounds = grid[1] - grid[0], (grid[0], grid[-1])
+    roots = [_minimum(sampler, grid[i], step, period, bounds, rank) for i in starts]
+    roots = [r for r in roots if np.isfinite(r)]
+    if not roots:
+        raise DataError(f"{parameter}: auto: fewer than 4 IR frames lie inside the DIC record around the best "
+                        f"offset ({grid[starts[0]]:.4g} s); set {parameter} to a number (s)")
+    return roots, grid, crit
 
 
 def _motion(pos: np.ndarray) -> tuple[float, float]:
@@ -252,9 +362,9 @@ def _motion(pos: np.ndarray) -> tuple[float, float]:
 
 def _check_sizes(pos, t_dic, t_ir, parameter):
     if pos.shape[1] < 10 or t_dic.size < 2 or t_ir.size < 4:
-        raise DataError(f"{parameter}: auto needs at least 10 DIC points seen at every DIC time and away from the "
-                        f"cloud's outline, 2 DIC times and 4 IR frames; found {pos.shape[1]} points, {t_dic.size} "
-                        f"DIC times, {t_ir.size} IR frames: set {parameter} to a number (s)")
+        raise DataError(f"{parameter}: auto needs at least 10 DIC points seen at half the DIC times or more, 2 DIC "
+                        f"times and 4 IR frames; found {pos.shape[1]} points, {t_dic.size} DIC times, "
+                        f"{t_ir.size} IR frames: set {parameter} to a number (s)")
 
 
 def _check_motion(motion, jitter, parameter):
@@ -266,14 +376,24 @@ def _check_motion(motion, jitter, parameter):
             f"specimen carries no timing information. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
-def _check_identified(std, period, motion, parameter):
-    if not np.isfinite(std) or std > MAX_STD_FRAMES * period:
-        raise DataError(
-            f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
-            f"{motion:.3g} px in the IR image over the record, and the temperature pattern they carry fixes the "
-            f"offset only to {_fmt_std(std, period)}, more than {MAX_STD_FRAMES:g} IR frame period ({period:.4g} s); "
-            f"a static specimen, a uniform temperature or too little motion for the record's noise carry no "
-            f"timing information. Set {parameter} to a number (s; docs/time-sync.md)")
+def _check_identified(parts, period, motion, parameter):
+    std = parts.std
+    if np.isfinite(std) and std <= MAX_STD_FRAMES * period:
+        return
+    if parts.model > max(parts.noise, parts.robust, parts.interpolation):
+        why = (f"the temperature pattern changes its shape on the material (heat flowing in from a grip, a "
+               f"travelling band): models of two and three pattern components "
+               + (f"put the offset {parts.model:.3g} s apart" if np.isfinite(parts.model) else "do not fit")
+               + ", so the motion cannot be told from the pattern's change")
+    else:
+        why = ("the offset shows where the image velocity changes (the motion starts, stops or turns) on a "
+               "temperature pattern; a static specimen, motion at a constant rate, a uniform temperature or too "
+               "little motion for the record's noise carry no timing information")
+    raise DataError(
+        f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
+        f"{motion:.3g} px in the IR image over the record, and the temperature pattern they carry fixes the "
+        f"offset only to {_fmt_std(std, period)}, more than {MAX_STD_FRAMES:g} IR frame period ({period:.4g} s): "
+        f"{why}. Set {parameter} to a number (s; docs/time-sync.md)")
 
 
 def _check_inside(tau, grid, crit, motion, parameter):
@@ -295,6 +415,21 @@ def _frame_noise(frames: np.ndarray, max_frames: int = 20) -> float:
     return float(1.4826 * np.median(np.abs(r)) / np.sqrt(1.25)) if r.size else np.nan
 
 
+def _misfit(sampler: Sampler, idx: np.ndarray, tau: float, rank: int) -> float:
+    """Pixel noise (K) the model of ``rank`` components leaves at ``tau``: the raw samples' misfit, each over
+    its bilinear noise gain, per degree of freedom."""
+    X = sampler(tau, idx, raw=True)
+    Xc = X - X.mean(axis=1, keepdims=True)
+    s2, U, V = leading(Xc, rank)
+    R = Xc - (U * np.sqrt(s2)) @ V.T
+    q = sampler.nodes.at(sampler.t_ir[idx] + tau)
+    fu, fv = q[..., 0] % 1.0, q[..., 1] % 1.0
+    gain = ((1 - fu) ** 2 + fu**2) * ((1 - fv) ** 2 + fv**2)  # a sample between pixels averages their noise
+    n, m = X.shape
+    dof = n * m - n - rank * (n + m - rank)
+    return float(np.sqrt(np.sum(R * R / gain) / dof)) if dof > 0 else np.nan
+
+
 def _check_fit(misfit, noise, tau, period, parameter):
     """At the estimate the rank-one model must explain the frames to their pixel noise: a larger misfit means a
     wrong basin (an offset beyond the searched range) or a pattern that does not move with the material."""
@@ -307,24 +442,31 @@ def _check_fit(misfit, noise, tau, period, parameter):
             f"to a number (s; docs/time-sync.md)")
 
 
-def _check_basin(sampler, tau, std, period, parameter):
-    """A Gauss-Newton step from one frame period either side must come back to ``tau``: in the basin of the
-    true offset the score is linear in the offset over several frames, at a minimum the noise made (the true
-    one beyond the searched range, or no pattern to speak of) the steps run off."""
+def _check_basin(score: Score, tau: float, std: float, period: float, parameter: str):
+    """The score from one frame period either side must point back to ``tau``: in the basin of the true offset
+    the score is linear in the offset over several frames, at a root the noise made (the true offset beyond
+    the searched range, or no pattern to speak of) it is not. Judged on the frames inside the DIC record
+    there (each row of the weights is a score of its own: orthogonal to its frame's level and pattern)."""
+    sampler = score.sampler
+    rows = np.flatnonzero(np.isin(score.idx, sampler.inside(tau - period, tau + period)))
+    rows = rows[np.any(score.Y[rows] != 0, axis=1)]
+    if rows.size < 4:
+        return
+    rows = rows[_spread_out(rows.size, CHECK_FRAMES)]
+    Y, idx = score.Y[rows], score.idx[rows]
+    slope = float(np.sum(score.rate[rows]))
+    last, X = score.last  # within a Newton step of tau
+    here = float(np.sum(Y * X[rows])) + slope * (tau - last)
     for side in (-1.0, 1.0):
         start = tau + side * period
-        idx = sampler.inside(min(tau, start), max(tau, start))
-        if idx.size < 4:
-            continue
-        Y, R, _ = score_parts(sampler, Criterion(sampler, idx), start)
-        S = float(np.sum(Y * Y))
-        back = start - float(np.sum(Y * R)) / S if S > 0 else np.inf
+        back = start - (float(np.sum(Y * sampler(start, idx))) - here) / slope if slope > 0 else np.inf
         if not abs(back - tau) <= max(BASIN_FRAMES * period, BASIN_STDS * std):
             raise DataError(
                 f"{parameter}: auto cannot estimate the clock offset from the data: they do not single out one "
-                f"offset (from {start:.4g} s the fit goes to {back:.4g} s, not back to {tau:.4g} s): the offset "
-                f"lies beyond the searched quarter of the record, or the pattern is too weak for the record's "
-                f"noise. Set {parameter} to a number (s; docs/time-sync.md)")
+                f"offset (from {start:.4g} s the score points to {back:.4g} s, not back to {tau:.4g} s): the offset "
+                f"lies beyond the searched quarter of the record, the pattern is too weak for the record's noise, "
+                f"or the motion changes too quickly between the DIC stages to be interpolated. Set {parameter} to a "
+                f"number (s; docs/time-sync.md)")
 
 
 def _fmt_std(std: float, period: float) -> str:
@@ -333,118 +475,73 @@ def _fmt_std(std: float, period: float) -> str:
     return f"+- {std:.3g} s ({std / period:.2f} IR frames)"
 
 
-def _coarse(sampler, t_ir, t_dic, centre, period, where, parameter):
+def _coarse(sampler, centre, period, parameter, rank):
     """The candidates (s) over a quarter of the shorter record each way, ``J`` per degree of freedom of each on
     the frames it places inside the DIC record, and the starts: the candidates at its local minima, best
-    first (at most :data:`_STARTS`), judged with at most :data:`_COARSE_POINTS` points.
+    first (at most :data:`_STARTS`).
 
     Each candidate is judged on its own frames, so that frames with motion count wherever they lie in the
     record; frames with little motion fit any offset, so the order of the starts is only a first guess
     (:func:`_tournament` decides on common frames).
     """
-    span = min(t_dic[-1] - t_dic[0], t_ir[-1] - t_ir[0])
+    t_ir, t0, t1 = sampler.t_ir, sampler.t0, sampler.t1
+    span = min(t1 - t0, t_ir[-1] - t_ir[0])
     half = max(0.25 * span, 2.0 * period)
     n = int(np.clip(np.ceil(2 * half / period) + 1, 9, _MAX_CANDIDATES))
     grid = centre + np.linspace(-half, half, n)
-    coarse = sampler.subset(_COARSE_POINTS)
-    crit = _judged(coarse, grid)
+    crit = _judged(sampler, grid, rank)
     if not np.isfinite(crit).any():
-        raise DataError(f"{where}: the IR record ({t_ir[0]:.4g}..{t_ir[-1]:.4g} s) and the DIC record "
-                        f"({t_dic[0]:.4g}..{t_dic[-1]:.4g} s) overlap in fewer than 4 IR frames around an offset "
-                        f"of {centre:.4g} s; set {parameter} to a number (s)")
+        raise DataError(f"{parameter}: auto: the IR record ({t_ir[0]:.4g}..{t_ir[-1]:.4g} s) and the DIC record "
+                        f"({t0:.4g}..{t1:.4g} s) overlap in fewer than 4 IR frames around an offset of "
+                        f"{centre:.4g} s; set {parameter} to a number (s)")
     c = np.where(np.isfinite(crit), crit, np.inf)
     left, right = np.r_[np.inf, c[:-1]], np.r_[c[1:], np.inf]
     minima = np.flatnonzero((c <= left) & (c <= right) & np.isfinite(c))
-    starts = minima[np.argsort(c[minima])][:_STARTS]
-    return grid, crit, starts, coarse
+    return grid, crit, minima[np.argsort(c[minima])][:_STARTS]
 
 
-def _judged(sampler, grid):
-    """``J`` per degree of freedom of the rank-one fit at each candidate, on its own frames (NaN: fewer than
-    half the frames the best-placed candidate has)."""
+def _judged(sampler, grid, rank):
+    """``J`` per degree of freedom of the rank-``rank`` fit at each candidate, on its own frames (NaN: fewer
+    than half the frames the best-placed candidate has)."""
     frames = [sampler.inside(g, g) for g in grid]
     full = max(idx.size for idx in frames)
     out = np.full(grid.size, np.nan)
     for i, (g, idx) in enumerate(zip(grid, frames)):
         n, m = idx.size, sampler.M
-        if n >= max(4, (full + 1) // 2) and n * m > n + (n + m - 1):
-            out[i] = Criterion(sampler, idx).parts(g)[0] / (n * m - n - (n + m - 1))
+        dof = n * m - n - rank * (n + m - rank)
+        if n >= max(4, (full + 1) // 2, 2 * rank + 2) and dof > 0:
+            out[i] = Criterion(sampler, idx, rank)(g) * n * m / dof
     return out
 
 
-def _tournament(sampler, roots):
-    """The root that fits best, each pair compared on the frames both place inside the DIC record."""
+def _tournament(sampler, roots, rank):
+    """The minimum that fits best, each pair compared on the frames both place inside the DIC record (the
+    first where fewer than 4 are common)."""
     best = roots[0]
     for r in roots[1:]:
         idx = sampler.inside(min(best, r), max(best, r))
         if idx.size >= 4:
-            J = Criterion(sampler, idx)
+            J = Criterion(sampler, idx, rank)
             if J(r) < J(best):
                 best = r
     return best
 
 
-def _refined(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float],
-             newton: bool = True, search: bool = True):
+def _minimum(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float],
+             rank: int) -> float:
     """The minimum of ``J`` within ``step`` of ``start`` (on the frames every offset there places inside the
-    DIC record), then Gauss-Newton steps on the model's derivative (:func:`model_derivative`) to the root
-    of the score; while the minimum lies at an end of the bracket, the bracket moves on by one step (at most
-    four times, never beyond ``bounds``); without ``newton`` the minimum only (to a twentieth of a frame),
-    without ``search`` the Gauss-Newton steps from ``start`` only."""
-    lo, hi = start - step, start + step
-    tau, J = start, None
-    if not search and sampler.inside(lo, hi).size >= 4:
-        J = Criterion(sampler, sampler.inside(lo, hi))
-    for _ in range(4 if search else 0):
+    DIC record), to a twentieth of a frame period; while it lies at an end of the bracket, the bracket moves on
+    by one step (at most four times, never beyond ``bounds``). NaN: fewer than 4 frames."""
+    lo, hi = max(start - step, bounds[0]), min(start + step, bounds[1])
+    tau = np.nan
+    for _ in range(4):
         idx = sampler.inside(lo, hi)
         if idx.size < 4:
             break
-        J = Criterion(sampler, idx)
-        tau = float(minimize_scalar(J, bounds=(lo, hi), method="bounded",
-                                    options={"xatol": (0.01 if newton else 0.05) * period}).x)
-        if lo + 0.02 * step < tau < hi - 0.02 * step or not bounds[0] < tau < bounds[1]:
+        tau = float(minimize_scalar(Criterion(sampler, idx, rank), bounds=(lo, hi), method="bounded",
+                                    options={"xatol": 0.05 * period}).x)
+        up, down = tau >= hi - 0.02 * step and hi < bounds[1], tau <= lo + 0.02 * step and lo > bounds[0]
+        if not (up or down):
             break
-        shift = step if tau >= hi - 0.02 * step else -step
-        lo, hi = lo + shift, hi + shift
-    if J is None:
-        return np.nan, None
-    for _ in range(_GN_STEPS if newton else 0):
-        Y, R, _ = score_parts(sampler, J, tau)
-        S = float(np.sum(Y * Y))
-        if not S > 0:
-            break
-        new = float(np.clip(tau - float(np.sum(Y * R)) / S, lo, hi))
-        done = abs(new - tau) <= 1e-4 * period
-        tau = new
-        if done:
-            break
-    return tau, J
-
-
-def _uncertainty(sampler: Sampler, J: Criterion, tau: float, period: float) -> tuple[float, float]:
-    """Standard uncertainty of ``tau`` (s) and the pixel noise (K) (see :func:`estimate_offset`)."""
-    Y, _, _ = score_parts(sampler, J, tau)
-    flat, wts = sampler.weights(tau, J.idx)
-    sigma = _pixel_noise(sampler, J.idx, tau, wts)
-    S = float(np.sum(Y * Y))
-    if S <= 0 or not np.isfinite(sigma):
-        return np.inf, sigma
-    # the estimate's error is -sum(Y e) / S with e the smoothed pixel noise at the samples: e = G B n
-    acc = np.bincount(flat.ravel(), weights=(wts * Y[..., None]).ravel(), minlength=sampler.frames.size)
-    acc = acc.reshape(sampler.frames.shape)  # float64: the weights of all samples on each pixel
-    if sampler.smoothing > 0:
-        acc = gaussian_filter(acc, (0, sampler.smoothing, sampler.smoothing), mode="constant")
-    var = sigma**2 * float(np.sum(acc * acc)) / S**2
-    return float(np.sqrt(var)), sigma
-
-
-def _pixel_noise(sampler: Sampler, idx: np.ndarray, tau: float, wts: np.ndarray) -> float:
-    """Pixel noise (K): the raw samples' misfit of the rank-one model, each over its bilinear noise gain."""
-    X = sampler(tau, idx, raw=True)
-    Xc = X - X.mean(axis=1, keepdims=True)
-    s2, u, v = rank_one(Xc)
-    R = Xc - np.sqrt(s2) * np.outer(u, v)
-    gain = np.einsum("nmc,nmc->nm", wts, wts)  # a sample between pixels averages their noise
-    n, m = X.shape
-    dof = n * m - n - (n + m - 1)
-    return float(np.sqrt(np.sum(R * R / gain) / dof)) if dof > 0 else np.nan
+        lo, hi = (lo + step, min(hi + step, bounds[1])) if up else (max(lo - step, bounds[0]), hi - step)
+    return tau
