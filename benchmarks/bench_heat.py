@@ -55,6 +55,7 @@ from bench_noisy_fields import realistic_stack  # noqa: E402
 
 from irdic.camera import CameraModel  # noqa: E402
 from irdic.heat import smooth_in_time, surface_laplacian  # noqa: E402
+from irdic.heat.laplacian import judging_weights  # noqa: E402
 from irdic.heat.dataset import _aligned_points, heat_dataset  # noqa: E402
 from irdic.coupling import couple  # noqa: E402
 from irdic.fields import fields  # noqa: E402
@@ -130,7 +131,8 @@ def measure(name, scale, seed, realistic, sigma, spacings=(), time_spacing="gcv"
 
     out = {"scene": name, "seed": seed, "data": "realistic" if realistic else "clean",
            "points": int(pts.point.size), "times": int(pts.time.size),
-           "source": rel(h["heat_source"].values, src_true), "laplacian": rel(h["temperature_laplacian"].values, lap_true),
+           "source": rel(h["heat_source"].values, src_true),
+           "laplacian": rel(h["temperature_laplacian"].values, lap_true),
            "lab_source": rel(lab_src, src_true), "lab_laplacian": rel(lab_lap, lap_true),
            "spacing": h.attrs["laplacian_spacing_chosen"].split(",")[0] + "; "
            + h.attrs["laplacian_smoothing_time_chosen"].replace("centres every ", ""),
@@ -152,7 +154,7 @@ def truly_biased(f, pts, tr, lap_true, m, sep):
     psi = f["surface_parameter"].transpose("point", "param").values
     t = f["time"].values
     res, k_t = smooth_in_time(surface_laplacian(psi, _aligned_points(f, pts), f["x"].transpose(
-        "time", "point", "component").values, separation=sep), t)
+        "time", "point", "component").values, separation=sep, time_weights=judging_weights(t)), t)
     clean = surface_laplacian(psi, tr.temperature.values, tr.x.transpose("time", "point", "component").values,
                               spacing=res.spacing)
     clean = smooth_in_time(clean, t, k_t if k_t > 1.0 else None)[0]
@@ -260,11 +262,12 @@ def measure_surfaces(seed):
     from irdic.surface import edge_distance
 
     rows = []
-    for (label, psi, x, th, true), (_, _, x0, th0, _) in zip(surface_family(seed), surface_family(seed, 0.0, 0.0, None)):
+    exact = surface_family(seed, 0.0, 0.0, None)
+    for (label, psi, x, th, true), (_, _, x0, th0, _) in zip(surface_family(seed), exact):
         T = th.shape[0]
         t = np.arange(T, dtype=float)
         ops = {}
-        res, k_t = smooth_in_time(surface_laplacian(psi, th, x, ops=ops), t)
+        res, k_t = smooth_in_time(surface_laplacian(psi, th, x, ops=ops, time_weights=judging_weights(t)), t)
         bias = laplacian_bias(psi, th, x, res, ops=ops)
         clean = smooth_in_time(surface_laplacian(psi, th0, x0, spacing=res.spacing), t, k_t if k_t > 1 else None)[0]
         full = with_bias(res, bias)
@@ -299,7 +302,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
     if a.scenes:
         print("| scene | seed | data | points x times | source | Laplacian | lab source | lab Laplacian | source std "
-              "1 / 2 / RMS z (all; unflagged) | flagged | Laplacian std 1 / 2 / RMS z (all; unflagged) | flagged (truly) | "
+              "1 / 2 / RMS z (all; unflagged) | flagged | Laplacian std 1 / 2 / RMS z (all; unflagged) | "
+              "flagged (truly) | "
               "spacing (space; time) | fields s | heat s |")
         print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for data in a.data:
@@ -319,7 +323,8 @@ def main(argv=None):
                      lab_source=float("nan"), lab_laplacian=float("nan"))
             _row(w, worst=True)
     if a.surfaces:
-        print("\n| surface | seed | points x times | Laplacian | std 1 / 2 / RMS z (all; unflagged) | flagged (truly) | "
+        print("\n| surface | seed | points x times | Laplacian | std 1 / 2 / RMS z (all; unflagged) | "
+              "flagged (truly) | "
               "spacing |")
         print("|---|---|---|---|---|---|---|")
         rows = []

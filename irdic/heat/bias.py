@@ -112,7 +112,8 @@ def laplacian_bias(psi, theta, x, result: Laplacian, *, c=0.95, R0=1.0, ops=None
         return out
     p = p_all[have]
     seen = np.isfinite(th[np.ix_(tt, have)])
-    th_f, x_f = fill_missing({} if ops is None else ops, p, th[np.ix_(tt, have)], float_array(x, "x")[tt][:, have], c, R0)
+    th_f, x_f = fill_missing({} if ops is None else ops, p, th[np.ix_(tt, have)],
+                             float_array(x, "x")[tt][:, have], c, R0)
     h = median_spacing(p)
     design = ls_design(p, result.spacing, h, c, R0)
     th_f = refit_missing(th_f, seen, design[3])

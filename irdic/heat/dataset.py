@@ -21,7 +21,7 @@ from ..surface.parametrisation import median_spacing
 from ..vocabulary import cf_attrs
 from .balance import MM2_PER_M2, heat_balance, loss_time_constant
 from .bias import laplacian_bias, with_bias
-from .laplacian import JUDGED_MARGIN, smooth_in_time, surface_laplacian
+from .laplacian import JUDGED_MARGIN, judging_weights, smooth_in_time, surface_laplacian
 
 __all__ = ["heat_dataset", "HEAT_VARIABLES"]
 
@@ -118,9 +118,10 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
     x = fields["x"].transpose("time", "point", "component").values.astype(float)
     raw = _aligned_points(fields, points)
     ops = {}
-    lap = surface_laplacian(psi, raw, x, spacing=material["laplacian_smoothing"], c=c, R0=R0,
-                            separation=separation, ops=ops)
     t = fields["time"].values.astype(float)
+    judge = judging_weights(t, material.get("laplacian_smoothing_time"), c=c_t, R0=R0_t)
+    lap = surface_laplacian(psi, raw, x, spacing=material["laplacian_smoothing"], c=c, R0=R0,
+                            separation=separation, ops=ops, time_weights=judge)
     lap, k_t = smooth_in_time(lap, t, material.get("laplacian_smoothing_time"), c=c_t, R0=R0_t)
     bias = laplacian_bias(psi, raw, x, lap, c=c, R0=R0, ops=ops)
     noise_std, lap = lap.std, with_bias(lap, bias)
