@@ -124,22 +124,10 @@ def laplacian_bias(psi, theta, x, result: Laplacian, *, c=0.95, R0=1.0, ops=None
     probes = sigma[None, :, None] * np.sqrt(profile) * rng.standard_normal((BIAS_PROBES, tt.size, p.shape[0]))
     series = np.einsum("ts,ksn->ktn", P, np.concatenate([th_f[None], probes]))
     gain = (P ** 2) @ sigma ** 2  # the projected series' noise variance per unit profile
-    a, v = None, None
-    for ratio in REFERENCE_RATIO:
-        try:
-            ref = ls_design(p, ratio * result.spacing, h, c, R0)
-        except GeometryError:
-            log.info("temperature Laplacian: the bias reference at %.3g spacings does not fit",
-                     ratio * result.spacing)
-            continue
-        d, var = laplacian_difference(p, design, ref, series, x_f, profile, c, R0)
-        var = var * gain[:, None]
-        a = d ** 2 - var if a is None else a + d ** 2 - var
-        v = var if v is None else v + var
+    a, v = _squared_differences(p, design, series, x_f, profile, gain, result.spacing, h, c, R0)
     if a is None:
         log.warning("temperature Laplacian: no bias estimate (no reference regression fits the points)")
         return np.where(np.isfinite(result.laplacian), 0.0, np.nan)
-    k = len(REFERENCE_RATIO)
     H = result.spacing * h
     # the one-sided fit's bias near the cloud's edge is of another kind and size than inside: each band of
     # distance to the edge is averaged on its own
@@ -147,11 +135,30 @@ def laplacian_bias(psi, theta, x, result: Laplacian, *, c=0.95, R0=1.0, ops=None
     est = np.zeros(a.shape[1:])
     for j in np.unique(band):
         on = band == j
-        est[:, on] = _shrunk_means(a[..., on] / k, v[..., on] / k, p[on], H)
+        est[:, on] = _shrunk_means(a[..., on], v[..., on], p[on], H)
     log.info("temperature Laplacian: bias estimated on %d temporal mode(s) of %d times", rank, tt.size)
     out[tt[:, None], np.flatnonzero(have)] = np.sqrt(BIAS_SHARE * est)
     out[~np.isfinite(result.laplacian)] = np.nan
     return out
+
+
+def _squared_differences(p, design, series, x, profile, gain, spacing, h, c, R0):
+    """``(a, v)``: the mean over the :data:`REFERENCE_RATIO` references of the squared differences of the
+    Laplacians of ``series`` (S, T, n) less their noise variance, (S, T, n), and that variance (T, n), for
+    noise of variance ``gain`` (T,) times ``profile`` (n,); (None, None) when no reference fits."""
+    a, v, k = None, None, 0
+    for ratio in REFERENCE_RATIO:
+        try:
+            ref = ls_design(p, ratio * spacing, h, c, R0)
+        except GeometryError:
+            log.info("temperature Laplacian: the bias reference at %.3g spacings does not fit", ratio * spacing)
+            continue
+        d, var = laplacian_difference(p, design, ref, series, x, profile, c, R0)
+        var = var * gain[:, None]
+        a = d ** 2 - var if a is None else a + d ** 2 - var
+        v = var if v is None else v + var
+        k += 1
+    return (None, None) if a is None else (a / k, v / k)
 
 
 def _box_means(values, p, half):

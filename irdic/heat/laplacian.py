@@ -418,16 +418,13 @@ def surface_laplacian(psi, theta, x, *, spacing="auto", c=0.95, R0=1.0, separati
         log.warning("temperature Laplacian: too few points with a temperature; left NaN")
         return Laplacian(lap, std, float("nan"), noise, [], profile)
     tt = np.flatnonzero(good)
-    th_f = _nearest_filled(p, th[np.ix_(tt, have)], visible[tt])
-    x_in = xx[tt][:, have]
-    x_ok = np.isfinite(x_in).all(axis=2)
-    x_f = _filled(ops, p, x_in, x_ok, c, R0)
+    th_f, x_f = fill_missing(ops, p, th[np.ix_(tt, have)], xx[tt][:, have], c, R0)
     judged = _judged(p)
     table = []
     if spacing == "auto":
         # (a time without enough temperatures leaves the regression in time undefined: each time's own then)
-        judged_th = th_f if time_weights is None or tt.size < T else np.asarray(time_weights) @ th_f
-        k, table = _choose_spacing(p, judged_th, judged, c, R0, separation)
+        k, table = _choose_spacing(p, th_f if time_weights is None or tt.size < T else time_weights @ th_f,
+                                   judged, c, R0, separation)
     else:
         k = float(spacing)
     h = median_spacing(p)
