@@ -119,12 +119,13 @@ def laplacian_bias(psi, theta, x, result: Laplacian, *, c=0.95, R0=1.0, ops=None
     th_f = refit_missing(th_f, seen, design[3])
     sigma = result.noise[tt]
     profile = np.nan_to_num(result.profile[have], nan=1.0)
-    P, rank = temporal_modes(th_f, sigma, design[3], profile)
+    B, C = temporal_modes(th_f, sigma, design[3], profile)
+    rank = B.shape[1]
     rng = np.random.default_rng(seed)
     probes = sigma[None, :, None] * np.sqrt(profile) * rng.standard_normal((BIAS_PROBES, tt.size, p.shape[0]))
-    series = np.einsum("ts,ksn->ktn", P, np.concatenate([th_f[None], probes]))
-    gain = (P ** 2) @ sigma ** 2  # the projected series' noise variance per unit profile
-    a, v = _squared_differences(p, design, series, x_f, profile, gain, result.spacing, h, c, R0)
+    modes = np.einsum("mt,stn->smn", C, np.concatenate([th_f[None], probes]))  # the series are B @ modes
+    gain = ((B @ C) ** 2) @ sigma ** 2  # the projected series' noise variance per unit profile
+    a, v = _squared_differences(p, design, modes, x_f, profile, gain, result.spacing, h, c, R0, B)
     if a is None:
         log.warning("temperature Laplacian: no bias estimate (no reference regression fits the points)")
         return np.where(np.isfinite(result.laplacian), 0.0, np.nan)
@@ -142,10 +143,11 @@ def laplacian_bias(psi, theta, x, result: Laplacian, *, c=0.95, R0=1.0, ops=None
     return out
 
 
-def _squared_differences(p, design, series, x, profile, gain, spacing, h, c, R0):
+def _squared_differences(p, design, modes, x, profile, gain, spacing, h, c, R0, basis):
     """``(a, v)``: the mean over the :data:`REFERENCE_RATIO` references of the squared differences of the
-    Laplacians of ``series`` (S, T, n) less their noise variance, (S, T, n), and that variance (T, n), for
-    noise of variance ``gain`` (T,) times ``profile`` (n,); (None, None) when no reference fits."""
+    Laplacians of the series ``basis @ modes[s]`` (``modes`` (S, r, n), ``basis`` (T, r)) less their noise
+    variance, (S, T, n), and that variance (T, n), for noise of variance ``gain`` (T,) times ``profile`` (n,);
+    (None, None) when no reference fits."""
     a, v, k = None, None, 0
     for ratio in REFERENCE_RATIO:
         try:
@@ -153,7 +155,7 @@ def _squared_differences(p, design, series, x, profile, gain, spacing, h, c, R0)
         except GeometryError:
             log.info("temperature Laplacian: the bias reference at %.3g spacings does not fit", ratio * spacing)
             continue
-        d, var = laplacian_difference(p, design, ref, series, x, profile, c, R0)
+        d, var = laplacian_difference(p, design, ref, modes, x, profile, c, R0, basis)
         var = var * gain[:, None]
         a = d ** 2 - var if a is None else a + d ** 2 - var
         v = var if v is None else v + var

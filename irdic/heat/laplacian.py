@@ -239,7 +239,7 @@ def _floored(sigma):
 
 
 def temporal_modes(theta, sigma, Q, profile=None, *, edge=MODE_EDGE):
-    """The projection ``P`` (T, T) of each point's series on the data's leading temporal modes, and their number.
+    """The projection of each point's series on the data's leading temporal modes, as two factors.
 
     Parameters
     ----------
@@ -257,7 +257,9 @@ def temporal_modes(theta, sigma, Q, profile=None, *, edge=MODE_EDGE):
 
     Returns
     -------
-    (P, r)
+    (B, C)
+        ``B`` (T, r) and ``C`` (r, T): the projection is ``P = B C``; ``C θ``
+        holds a series' ``r`` mode coefficients, ``B`` makes them times again.
 
     Notes
     -----
@@ -276,13 +278,13 @@ def temporal_modes(theta, sigma, Q, profile=None, *, edge=MODE_EDGE):
     """
     T = theta.shape[0]
     if T < 2:
-        return np.eye(T), T
+        return np.eye(T), np.eye(T)
     sigma = _floored(sigma)
     w = theta if profile is None else theta / np.sqrt(profile)
     U, sv, _ = np.linalg.svd((w @ Q) / sigma[:, None], full_matrices=False)
     r = int(np.clip(np.sum(sv > edge * (np.sqrt(T) + np.sqrt(Q.shape[1]))), 1, T))
     Ur = U[:, :r]
-    return sigma[:, None] * (Ur @ Ur.T) / sigma[None, :], r
+    return sigma[:, None] * Ur, Ur.T / sigma[None, :]
 
 
 def _noise(theta, Q, visible, judged, profile=None):
@@ -302,7 +304,8 @@ def _noise(theta, Q, visible, judged, profile=None):
     sigma = np.sqrt(np.sum(np.where(use, resid, 0.0) ** 2, axis=1) / dof)
     T = theta.shape[0]
     seen = visible.sum(axis=0)
-    P, r = temporal_modes(theta, sigma, Q, profile)
+    B, C = temporal_modes(theta, sigma, Q, profile)
+    P, r = B @ C, B.shape[1]
     sigma_f = _floored(sigma)
     if T - r >= PROFILE_MIN_DOF:
         # the residual's bias is persistent (in the modes), its noise white: the rest is noise alone
@@ -327,15 +330,28 @@ def noise_gram(Q, profile, Q2=None):
     return Q.T @ (profile[:, None] * (Q if Q2 is None else Q2))
 
 
+def _rows_times(M, coef):
+    """``M`` (5, n, p) times ``coef`` (p, ...) -> (..., n, 5): the derivatives at the points, by one matrix
+    product (einsum's loop over the five rows costs the paper-scale tube's bias estimate 6 of its 12 s)."""
+    k, n, p = M.shape
+    out = (M.reshape(k * n, p) @ coef.reshape(p, -1)).reshape((k, n) + coef.shape[1:])
+    return np.moveaxis(out, (0, 1), (-1, -2))
+
+
+def _pair_gram(A, B):
+    """``A[:, i] B[:, i]ᵀ`` (n, 5, 5) of two (5, n, p) row stacks, per point, by batched products."""
+    return np.matmul(A.transpose(1, 0, 2), B.transpose(1, 2, 0))
+
+
 def _block_laplacian(M, Mx, coef, coef_x, noise, gram):
     """Laplacian and std (T, nb) of one block of points; ``M``, ``Mx`` (5, nb, p) the derivative rows of the
     temperature's and the surface's designs, their coefficients (p, T) and (p, T, 3); ``gram`` (p, p) the
     coefficients' noise covariance per unit ``noise²`` (:func:`noise_gram`)."""
     nb = M.shape[1]
-    dth = np.einsum("knp,pt->tnk", M, coef)
-    dx = np.einsum("knp,ptc->tnkc", Mx, coef_x)
+    dth = _rows_times(M, coef)
+    dx = np.moveaxis(_rows_times(Mx, coef_x), 1, -1)  # (T, n, 5, 3)
     lap, w = laplace_beltrami(dth[..., :2], dth[..., 2:], dx[:, :, :2], dx[:, :, 2:])
-    cov = np.einsum("knp,lnp->nkl", M @ gram, M)
+    cov = _pair_gram(M @ gram, M)
     var = np.einsum("tnk,nkl,tnl->tn", w, cov, w)
     return lap, noise[:, None] * np.sqrt(np.maximum(var, 0.0)), nb
 
@@ -519,32 +535,36 @@ def fill_missing(ops, p, th, x, c, R0):
     return _nearest_filled(p, th, np.isfinite(th)), _filled(ops, p, x, np.isfinite(x).all(axis=2), c, R0)
 
 
-def laplacian_difference(p, design, ref, th, x, profile, c, R0):
+def laplacian_difference(p, design, ref, th, x, profile, c, R0, basis=None):
     """The Laplacian of the regression ``design`` minus that of ``ref`` (QRs of
     :func:`~irdic.surface.regression.ls_design`), both on ``design``'s surface.
 
-    ``th`` (S, T, n): S series of T times (the data, then noise probes); ``x`` (T, n, 3); ``profile`` (n,) the
-    points' relative noise variance. Returns the difference (S, T, n) and its variance per unit noise variance
-    (T, n), ``(r_k − r_ref) diag(profile) (r_k − r_ref)ᵀ`` of the two rows.
+    ``th`` (S, T, n): S series of T times (the data, then noise probes), or with ``basis`` (T, r) their ``r``
+    temporal mode coefficients (S, r, n), the series being ``basis @ th[s]`` (:func:`temporal_modes`: the
+    regressions run on ``r`` instead of ``T`` columns); ``x`` (T, n, 3); ``profile`` (n,) the points' relative
+    noise variance. Returns the difference (S, T, n) and its variance per unit noise variance (T, n),
+    ``(r_k − r_ref) diag(profile) (r_k − r_ref)ᵀ`` of the two rows.
     """
-    S, T, n = th.shape
-    flat = th.reshape(S * T, n).T
+    S, R, n = th.shape
+    T = x.shape[0]
+    flat = th.reshape(S * R, n).T
     coef, coef_r = design[3].T @ flat, ref[3].T @ flat
     coef_x = np.einsum("np,tnc->ptc", design[3], x)
     g_kk, g_rr = noise_gram(design[3], profile), noise_gram(ref[3], profile)
     g_kr = noise_gram(design[3], profile, ref[3])
     diff, var = np.empty((S, T, n)), np.empty((T, n))
-    nb = int(np.clip((1 << 21) // (20 * S * T), 1, 1024))
+    nb = int(np.clip((1 << 22) // (5 * S * T), 16, 1024))  # points per block: ~32 MB of differences
     for s in range(0, n, nb):
         pb = p[s:s + nb]
         M, Mr = hessian_operator(pb, design, c, R0), hessian_operator(pb, ref, c, R0)
-        dx = np.einsum("knp,ptc->tnkc", M, coef_x)
-        dth = np.einsum("knp,pt->tnk", M, coef).reshape(S, T, -1, 5)
-        dth_r = np.einsum("knp,pt->tnk", Mr, coef_r).reshape(S, T, -1, 5)
-        _, w = laplace_beltrami(dth[0, ..., :2], dth[0, ..., 2:], dx[:, :, :2], dx[:, :, 2:])
-        diff[:, :, s:s + nb] = _dot(w[None], dth - dth_r)
-        X = np.einsum("knq,lnq->nkl", M @ g_kr, Mr)
-        G = np.einsum("knp,lnp->nkl", M @ g_kk, M) + np.einsum("knp,lnp->nkl", Mr @ g_rr, Mr) - X \
-            - np.swapaxes(X, 1, 2)
+        dx = np.moveaxis(_rows_times(M, coef_x), 1, -1)
+        delta = _rows_times(M, coef.reshape(-1, S, R)) - _rows_times(Mr, coef_r.reshape(-1, S, R))
+        if basis is not None:
+            delta = np.einsum("tm,smnk->stnk", basis, delta)
+        zero = np.zeros(dx.shape[:2] + (5,))
+        _, w = laplace_beltrami(zero[..., :2], zero[..., 2:], dx[:, :, :2], dx[:, :, 2:])
+        diff[:, :, s:s + nb] = _dot(w[None], delta)
+        X = _pair_gram(M @ g_kr, Mr)
+        G = _pair_gram(M @ g_kk, M) + _pair_gram(Mr @ g_rr, Mr) - X - np.swapaxes(X, 1, 2)
         var[:, s:s + nb] = np.maximum(np.einsum("tnk,nkl,tnl->tn", w, G, w), 0.0)
     return diff, var
