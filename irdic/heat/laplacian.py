@@ -338,6 +338,12 @@ def _rows_times(M, coef):
     return np.moveaxis(out, (0, 1), (-1, -2))
 
 
+def _surface_coefficients(Q, x):
+    """``Qᵀ x`` (p, T, 3) of the positions ``x`` (T, n, 3), by one matrix product."""
+    T, n, _ = x.shape
+    return (Q.T @ np.moveaxis(x, 1, 0).reshape(n, T * 3)).reshape(-1, T, 3)
+
+
 def _pair_gram(A, B):
     """``A[:, i] B[:, i]ᵀ`` (n, 5, 5) of two (5, n, p) row stacks, per point, by batched products."""
     return np.matmul(A.transpose(1, 0, 2), B.transpose(1, 2, 0))
@@ -361,7 +367,7 @@ def _evaluate(p, design, design_x, theta, x, noise, profile, c, R0):
     ``design`` and of ``x`` (T, n, 3) with ``design_x``, in blocks of points; ``noise`` (T,) and ``profile``
     (n,) the data's noise (:func:`_noise`)."""
     coef = design[3].T @ theta.T  # (p, T); the rows of hessian_operator hold R⁻¹
-    coef_x = np.einsum("np,tnc->ptc", design_x[3], x)
+    coef_x = _surface_coefficients(design_x[3], x)
     gram = noise_gram(design[3], profile)
     T, n = theta.shape
     lap, std = np.empty((T, n)), np.empty((T, n))
@@ -549,7 +555,7 @@ def laplacian_difference(p, design, ref, th, x, profile, c, R0, basis=None):
     T = x.shape[0]
     flat = th.reshape(S * R, n).T
     coef, coef_r = design[3].T @ flat, ref[3].T @ flat
-    coef_x = np.einsum("np,tnc->ptc", design[3], x)
+    coef_x = _surface_coefficients(design[3], x)
     g_kk, g_rr = noise_gram(design[3], profile), noise_gram(ref[3], profile)
     g_kr = noise_gram(design[3], profile, ref[3])
     diff, var = np.empty((S, T, n)), np.empty((T, n))
@@ -560,7 +566,7 @@ def laplacian_difference(p, design, ref, th, x, profile, c, R0, basis=None):
         dx = np.moveaxis(_rows_times(M, coef_x), 1, -1)
         delta = _rows_times(M, coef.reshape(-1, S, R)) - _rows_times(Mr, coef_r.reshape(-1, S, R))
         if basis is not None:
-            delta = np.einsum("tm,smnk->stnk", basis, delta)
+            delta = np.moveaxis(np.tensordot(basis, delta, axes=(1, 1)), 0, 1)  # (S, T, nb, 5)
         zero = np.zeros(dx.shape[:2] + (5,))
         _, w = laplace_beltrami(zero[..., :2], zero[..., 2:], dx[:, :, :2], dx[:, :, 2:])
         diff[:, :, s:s + nb] = _dot(w[None], delta)
