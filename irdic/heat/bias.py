@@ -25,7 +25,7 @@ from ..errors import GeometryError
 from ..surface import edge_distance
 from ..surface.parametrisation import median_spacing
 from ..surface.regression import ls_design
-from ..uncertainty.probes import BIAS_PROBES
+from ..uncertainty.probes import BIAS_PROBES, probe_times
 from ..validation import float_array, psi_array
 from .laplacian import Laplacian, fill_missing, laplacian_difference, refit_missing, temporal_modes
 
@@ -125,7 +125,10 @@ def laplacian_bias(psi, theta, x, result: Laplacian, *, c=0.95, R0=1.0, ops=None
     probes = sigma[None, :, None] * np.sqrt(profile) * rng.standard_normal((BIAS_PROBES, tt.size, p.shape[0]))
     modes = np.einsum("mt,stn->smn", C, np.concatenate([th_f[None], probes]))  # the series are B @ modes
     gain = ((B @ C) ** 2) @ sigma ** 2  # the projected series' noise variance per unit profile
-    a, v = _squared_differences(p, design, modes, x_f, profile, gain, result.spacing, h, c, R0, B)
+    # the projected differences vary as slowly as the modes and the surface: evaluated at PROBE_TIMES times,
+    # the estimate is interpolated between them
+    sub = probe_times(tt.size)[0]
+    a, v = _squared_differences(p, design, modes, x_f[sub], profile, gain[sub], result.spacing, h, c, R0, B[sub])
     if a is None:
         log.warning("temperature Laplacian: no bias estimate (no reference regression fits the points)")
         return np.where(np.isfinite(result.laplacian), 0.0, np.nan)
@@ -138,9 +141,19 @@ def laplacian_bias(psi, theta, x, result: Laplacian, *, c=0.95, R0=1.0, ops=None
         on = band == j
         est[:, on] = _shrunk_means(a[..., on], v[..., on], p[on], H)
     log.info("temperature Laplacian: bias estimated on %d temporal mode(s) of %d times", rank, tt.size)
-    out[tt[:, None], np.flatnonzero(have)] = np.sqrt(BIAS_SHARE * est)
+    out[tt[:, None], np.flatnonzero(have)] = _between(np.sqrt(BIAS_SHARE * est), sub, tt.size)
     out[~np.isfinite(result.laplacian)] = np.nan
     return out
+
+
+def _between(values, sub, T):
+    """``values`` (len(sub), n) at the times ``sub`` (increasing, first and last included) -> (T, n), linearly
+    between them."""
+    if sub.size == T:
+        return values
+    i = np.clip(np.searchsorted(sub, np.arange(T), side="right") - 1, 0, sub.size - 2)
+    w = ((np.arange(T) - sub[i]) / (sub[i + 1] - sub[i]))[:, None]
+    return (1.0 - w) * values[i] + w * values[i + 1]
 
 
 def _squared_differences(p, design, modes, x, profile, gain, spacing, h, c, R0, basis):

@@ -186,10 +186,12 @@ def refit_missing(theta, visible, Q):
     if not miss.any():
         return theta
     th = theta.copy()
-    for t in np.flatnonzero(miss.any(axis=1)):
+    rows = np.flatnonzero(miss.any(axis=1))
+    full = theta[rows] @ Q  # Qᵀ θ of every point, less the missing ones' below
+    for t, qt in zip(rows, full):
         m = miss[t]
         Qm = Q[m]
-        rhs = Q[~m].T @ theta[t, ~m]
+        rhs = qt - theta[t, m] @ Qm
         evals, evecs = np.linalg.eigh(np.eye(Qm.shape[0]) - Qm @ Qm.T)
         keep = evals > 1e-10
         y = evecs[:, keep] @ ((evecs[:, keep].T @ (Qm @ rhs)) / evals[keep])
