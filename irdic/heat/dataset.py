@@ -20,7 +20,8 @@ from ..errors import ConfigError, DataError
 from ..surface.parametrisation import median_spacing
 from ..vocabulary import cf_attrs
 from .balance import MM2_PER_M2, heat_balance, loss_time_constant
-from .laplacian import JUDGED_MARGIN, laplacian_bias, smooth_in_time, surface_laplacian, with_bias
+from .bias import laplacian_bias, with_bias
+from .laplacian import JUDGED_MARGIN, judging_weights, smooth_in_time, surface_laplacian
 
 __all__ = ["heat_dataset", "HEAT_VARIABLES"]
 
@@ -117,11 +118,12 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
     x = fields["x"].transpose("time", "point", "component").values.astype(float)
     raw = _aligned_points(fields, points)
     ops = {}
-    lap = surface_laplacian(psi, raw, x, spacing=material["laplacian_smoothing"], c=c, R0=R0,
-                            separation=separation, ops=ops)
     t = fields["time"].values.astype(float)
+    judge = judging_weights(t, material.get("laplacian_smoothing_time"), c=c_t, R0=R0_t)
+    lap = surface_laplacian(psi, raw, x, spacing=material["laplacian_smoothing"], c=c, R0=R0,
+                            separation=separation, ops=ops, time_weights=judge)
     lap, k_t = smooth_in_time(lap, t, material.get("laplacian_smoothing_time"), c=c_t, R0=R0_t)
-    bias = laplacian_bias(psi, raw, x, lap, t, k_t, c=c, R0=R0, c_t=c_t, R0_t=R0_t, ops=ops)
+    bias = laplacian_bias(psi, raw, x, lap, c=c, R0=R0, ops=ops)
     noise_std, lap = lap.std, with_bias(lap, bias)
     theta = fields["temperature"].values.astype(float)
     rate = fields["temperature_rate"].values.astype(float)
@@ -148,7 +150,7 @@ def heat_dataset(fields: xr.Dataset, points: xr.Dataset, material: dict, *, c=0.
 def _bias_flags(fields, terms, conduction_bias, laplacian_noise, laplacian_bias, with_losses, shape):
     """``_bias_dominated`` of each variable: where its estimated bias exceeds its noise std.
 
-    The Laplacian and the conduction: :func:`~irdic.heat.laplacian.laplacian_bias` against the noise std.
+    The Laplacian and the conduction: :func:`~irdic.heat.bias.laplacian_bias` against the noise std.
     The storage and the losses: the fields' flags of the rate and the temperature (whose stds hold their bias
     where flagged). The source: its bias, the conduction's and, where flagged, the storage's and the losses'
     stds, against the rest of its variance.

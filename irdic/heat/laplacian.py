@@ -9,11 +9,12 @@ the surface positions of the same time by the same design, and the operator
 is evaluated from the closed-form first and second derivatives of the two
 regressions. The Ψ are Lagrangian, so one QR factorisation serves every time
 and both fields. The centre spacing is chosen by the estimated risk of the
-Laplacian (:func:`irdic.surface.regression.laplacian_risk_spatial`), each
-point's series is regressed in time (:func:`smooth_in_time`), and the
-regression's bias is estimated from its differences to the regressions at
-nearby spacings (:func:`laplacian_bias`) and added to the std
-(:func:`with_bias`).
+Laplacian (:func:`irdic.surface.regression.laplacian_risk_spatial`); the
+temperatures a time lacks are the fit of the others (:func:`refit_missing`), a
+point's few-frame spikes are left out (:func:`_noise`), the noise is
+propagated with each point's own level (a mixed pixel on the rim carries
+several times the IR noise), and each point's series is regressed in time
+(:func:`smooth_in_time`). The regression's bias: :mod:`irdic.heat.bias`.
 """
 
 from __future__ import annotations
@@ -23,14 +24,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import DataError, GeometryError
+from ..errors import DataError
 from ..surface import edge_distance, shared_interpolant
 from ..surface.parametrisation import MIN_POINTS, median_spacing
 from ..surface.regression import hessian_operator, laplacian_risk_spatial, ls_design
 from ..validation import float_array, psi_array
 
-__all__ = ["Laplacian", "laplace_beltrami", "surface_laplacian", "smooth_in_time", "laplacian_bias",
-           "with_bias", "JUDGED_MARGIN", "TIME_CANDIDATES", "REFERENCE_RATIO", "BIAS_REACH"]
+__all__ = ["Laplacian", "laplace_beltrami", "surface_laplacian", "smooth_in_time", "judging_weights",
+           "temporal_modes", "fill_missing",
+           "refit_missing", "noise_gram", "laplacian_difference", "JUDGED_MARGIN", "TIME_CANDIDATES"]
 
 log = logging.getLogger(__name__)
 
@@ -45,33 +47,32 @@ JUDGED_MARGIN = 3.0
 RISK_MAX_POINTS = 16000
 
 
+#: A temporal mode is kept where its singular value exceeds this many times white noise's largest
+#: (:func:`temporal_modes`).
+MODE_EDGE = 1.5
+
+#: Times a point's residual series needs off the data's temporal modes for its noise level to be read there
+#: (:func:`_noise`); fewer: the whole residual.
+PROFILE_MIN_DOF = 3
+
+#: A point temperature whose residual exceeds this many times the point's own robust noise level is a spike
+#: (:func:`_noise`): about one in two million Gaussian ones.
+SPIKE_Z = 5.0
+
+#: Rounds of :func:`_noise`'s spike search, each on the data without the spikes found before.
+SPIKE_PASSES = 3
+
+#: Leverage ``1 − H_ii`` below which a point's residual no longer tells its noise level (:func:`_noise`): the
+#: regression nearly interpolates it.
+PROFILE_MIN_LEVER = 0.2
+
+
 #: Centre spacings (DIC times) GCV tries for the Laplacian's regression in time (:func:`smooth_in_time`). The
 #: per-time Laplacian is noise-dominated, so GCV of the series alone goes to the widest spacing it may (12-16
 #: DIC times on the demo tube and half-shell), where the temporal bias outgrows the std that the regression
 #: shrinks: on the realistic half-shell the source's std covered 0.27 / 0.49 of its errors within 1 / 2 std at
 #: 16, 0.35 / 0.62 at 4, for the same accuracy (tube Laplacian 10.7 % at 12, 10.1 % at 4).
 TIME_CANDIDATES = (1.5, 2.0, 3.0, 4.0)
-
-#: The references of the Laplacian's bias estimate (:func:`laplacian_bias`): the regressions at these fractions of
-#: the chosen centre spacing. At the spacings the risk criterion picks, the Laplacian's approximation error is a
-#: ripple of the centres whose size hardly changes with the spacing, uncorrelated from one spacing to another (on
-#: the true temperatures of the demo half-shell R 65 mm: 2.2e-3, 2.0e-3 and 2.2e-3 K/mm² RMS at 5, 4 and 2.5
-#: spacings; the difference at 5 and 2.5, 1.6 times either). Spacings near the chosen one keep the difference's
-#: noise close to the regression's own, so a bias of the order of the noise is resolved; half the spacing (8 times
-#: the noise in its Laplacian) also passes more of the data's persistent errors, the coupling's and the mixed
-#: pixels': the half-shells' estimates were twice the error, the tube's four times. Two references, the smaller
-#: estimate: a reference whose ripple happens to be the larger doubles the other's (the sphere cap and the moving
-#: tube of the benchmark's point clouds, 10 spacings: 0.81 and 0.86 of the errors within 1 std with 0.8 alone,
-#: 0.70 and 0.68 with both); within one centre spacing of the edge the larger (the paper-scale R 65 mm
-#: half-shell: 0.57 / 0.85 of the errors within 1 / 2 std with the smaller there, 0.64 / 0.89 with the larger).
-REFERENCE_RATIO = (0.8, 1.25)
-
-#: Where a point's neighbours do not resolve the bias, :func:`laplacian_bias` averages over the points within this
-#: many centre spacings (at most :data:`irdic.uncertainty.regression_bias.WIDE_MAX`), not over the whole specimen:
-#: a hot feature's bias stays on the feature, and the specimen's average spread it where there was none (the
-#: demo's 4 mm hot band: 0.84 of the source's errors within 1 std, 0.72 so; the other scenes within 0.03).
-BIAS_REACH = 3.0
-
 
 class Laplacian(NamedTuple):
     """Result of :func:`surface_laplacian`."""
@@ -86,6 +87,9 @@ class Laplacian(NamedTuple):
     """The temperature noise estimated from each time's regression residual (T,), K."""
     table: list
     """The risk criterion's ``(spacing, parameters, risk K²/mm⁴)`` rows; empty for a given spacing."""
+    profile: np.ndarray
+    """Each point's noise variance relative to ``noise²`` (N,): 1 inside on average, larger where the data carry
+    more than the IR noise (mixed pixels on the rim); NaN without parameters."""
 
 
 def _dot(a, b):
@@ -144,6 +148,78 @@ def _filled(ops, p, values, valid, c, R0):
     return shared_interpolant(ops, p, c=c, R0=R0).fill(values, valid)[0]
 
 
+def _nearest_filled(p, values, valid):
+    """``values`` (T, n) with each missing entry taken from the nearest point visible at that time: a start
+    for :func:`refit_missing` (which replaces them by the fit of the rest) and for the spacing's choice, where
+    a few per cent of entries carry about the noise more (the interpolant costs 8 s of the paper-scale tube's
+    42)."""
+    if valid.all():
+        return values
+    from scipy.spatial import cKDTree
+
+    out = values.copy()
+    for t in np.flatnonzero(~valid.all(axis=1)):
+        ok = valid[t]
+        if ok.any():
+            out[t, ~ok] = values[t, ok][cKDTree(p[ok]).query(p[~ok])[1]]
+    return out
+
+
+def refit_missing(theta, visible, Q):
+    """``theta`` (T, n) with its missing entries replaced by the least-squares fit of the visible ones alone
+    (design ``Q``, orthonormal columns).
+
+    The interpolant's fill extrapolates the noise of the visible neighbours into the gap (at a moving
+    specimen's silhouette, where points drop out and come back, up to several times the noise), and the
+    regression took those values for data: the moving tube's per-time Laplacian noise was 1.25 times its std
+    at the times with a gap, 0.91 at the others.
+
+    Notes
+    -----
+    The fit of the visible rows ``v`` has coefficients ``(Q_vᵀ Q_v)⁻¹ Q_vᵀ θ_v``
+    with ``Q_vᵀ Q_v = I − Q_mᵀ Q_m`` (``m`` the missing rows); by the Woodbury
+    identity ``(I − Q_mᵀ Q_m)⁻¹ = I + Q_mᵀ (I − Q_m Q_mᵀ)⁻¹ Q_m``, an ``m × m``
+    system per time (the pseudo-inverse: a combination of centres that only
+    missing points support gets no coefficient).
+    """
+    miss = ~visible
+    if not miss.any():
+        return theta
+    th = theta.copy()
+    rows = np.flatnonzero(miss.any(axis=1))
+    full = theta[rows] @ Q  # Qᵀ θ of every point, less the missing ones' below
+    for t, qt in zip(rows, full):
+        m = miss[t]
+        Qm = Q[m]
+        rhs = qt - theta[t, m] @ Qm
+        evals, evecs = np.linalg.eigh(np.eye(Qm.shape[0]) - Qm @ Qm.T)
+        keep = evals > 1e-10
+        y = evecs[:, keep] @ ((evecs[:, keep].T @ (Qm @ rhs)) / evals[keep])
+        th[t, m] = Qm @ (rhs + Qm.T @ y)
+    return th
+
+
+def _clean_data(theta, seen, Q, judged):
+    """``(theta, sigma, profile)``: the temperatures (T, n) with the missing entries and the spikes refitted
+    (:func:`refit_missing`), and the noise level (T,) and profile (n,) of :func:`_noise` without the spikes."""
+    theta = refit_missing(theta, seen, Q)
+    sigma, profile, spikes = _noise(theta, Q, seen, judged)
+    left_out = 0
+    for _ in range(SPIKE_PASSES):
+        if not spikes.any():
+            break
+        # a few frames' errors are left out and refitted, the level read again without them (the largest
+        # spikes first: many in one frame make a temporal mode of their own, which hides the others)
+        left_out += int(spikes.sum())
+        seen = seen & ~spikes
+        theta = refit_missing(theta, seen, Q)
+        sigma, profile, spikes = _noise(theta, Q, seen, judged, profile)
+    if left_out:
+        log.info("temperature Laplacian: %d point temperatures (%.2g %%) left out as spikes", left_out,
+                 100.0 * left_out / max(seen.sum() + left_out, 1))
+    return theta, sigma, profile
+
+
 def _judged(p):
     judged = edge_distance(p) >= JUDGED_MARGIN * median_spacing(p)
     return judged if judged.sum() >= MIN_POINTS else np.ones(p.shape[0], bool)
@@ -157,43 +233,156 @@ def _choose_spacing(p, theta, judged, c, R0, separation):
     return k, table
 
 
-def _noise(theta, Q, visible, judged):
-    """Noise (T,) from each time's residual over its visible judged points (K)."""
+def _floored(sigma):
+    """``sigma`` with its zeros (noise-free times: the first of a record heated from uniform) raised to a
+    millionth of its largest (1 when all are zero), so that dividing by it stays finite."""
+    top = float(np.max(sigma, initial=0.0))
+    return np.maximum(sigma, 1e-6 * top) if top > 0 else np.ones_like(sigma)
+
+
+def temporal_modes(theta, sigma, Q, profile=None, *, edge=MODE_EDGE):
+    """The projection of each point's series on the data's leading temporal modes, as two factors.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (T, n)
+        Point temperatures (filled), K.
+    sigma : ndarray, shape (T,)
+        Their noise level at each time (K).
+    Q : ndarray, shape (n, p)
+        The spatial regression's orthonormal design (:func:`~irdic.surface.regression.ls_design`).
+    profile : ndarray, shape (n,), optional
+        Each point's noise variance relative to ``sigma²`` (default 1).
+    edge : float
+        A mode is kept where its singular value exceeds ``edge`` times the
+        largest one white noise would give, ``√T + √p``.
+
+    Returns
+    -------
+    (B, C)
+        ``B`` (T, r) and ``C`` (r, T): the projection is ``P = B C``; ``C θ``
+        holds a series' ``r`` mode coefficients, ``B`` makes them times again.
+
+    Notes
+    -----
+    The temperature of a heating pattern that evolves smoothly is a sum of a
+    few products ``a_m(t) φ_m(Ψ)`` (one amplitude history per pattern), and
+    so is everything linear in it that the regressions do not change from
+    time to time: the regression's bias, its residual's bias. White noise
+    spreads evenly over all ``T`` temporal directions, so projecting a
+    point's series on the ``r`` leading ones keeps its persistent part and
+    ``r/T`` of its noise, and ``I − P`` keeps noise alone. The modes are the
+    left singular vectors of the regression's coefficients ``(θ / √profile) Q``
+    scaled to unit noise at each time (white noise there: ``Q`` has
+    orthonormal columns): a spatial linear map leaves the temporal modes as
+    they are, and a point's few-frame spike, which would make a mode of its
+    own frame, weighs only its leverage in the coefficients.
+    """
+    T = theta.shape[0]
+    if T < 2:
+        return np.eye(T), np.eye(T)
+    sigma = _floored(sigma)
+    w = theta if profile is None else theta / np.sqrt(profile)
+    U, sv, _ = np.linalg.svd((w @ Q) / sigma[:, None], full_matrices=False)
+    r = int(np.clip(np.sum(sv > edge * (np.sqrt(T) + np.sqrt(Q.shape[1]))), 1, T))
+    Ur = U[:, :r]
+    return sigma[:, None] * Ur, Ur.T / sigma[None, :]
+
+
+def _noise(theta, Q, visible, judged, profile=None):
+    """The data's noise: ``(sigma, profile, spikes)``.
+
+    ``sigma`` (T,): each time's level from its residual over the visible judged points (K). ``profile`` (n,):
+    each point's variance relative to it, from the part of its residual series off the data's temporal modes
+    (:func:`temporal_modes`, weighed by a previous ``profile`` if given; 1 where never seen). ``spikes``
+    (T, n): entries whose residual there exceeds
+    :data:`SPIKE_Z` times the point's own robust level (its median absolute value, at least ``sigma``): errors
+    of a few frames (a mixed pixel at a moving silhouette) that no Gaussian level describes.
+    """
     resid = theta - (theta @ Q) @ Q.T
     use = visible & judged
-    lever = 1.0 - np.sum(Q * Q, axis=1)
+    lever = np.maximum(1.0 - np.sum(Q * Q, axis=1), PROFILE_MIN_LEVER)
     dof = np.maximum((use * lever).sum(axis=1), 1.0)
-    return np.sqrt(np.sum(np.where(use, resid, 0.0) ** 2, axis=1) / dof)
+    sigma = np.sqrt(np.sum(np.where(use, resid, 0.0) ** 2, axis=1) / dof)
+    T = theta.shape[0]
+    seen = visible.sum(axis=0)
+    B, C = temporal_modes(theta, sigma, Q, profile)
+    P, r = B @ C, B.shape[1]
+    sigma_f = _floored(sigma)
+    if T - r >= PROFILE_MIN_DOF:
+        # the residual's bias is persistent (in the modes), its noise white: the rest is noise alone
+        hp = np.eye(T) - P
+        resid = hp @ np.where(visible, resid, 0.0)
+        expect = (hp ** 2) @ sigma_f ** 2  # per unit profile and leverage, at each time
+    else:
+        expect = sigma_f ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.where(visible, resid / np.sqrt(expect[:, None] * lever), np.nan)
+        profile = np.where(seen > 0, np.nanmean(z ** 2, axis=0), 1.0)
+        level = 1.4826 * np.nanmedian(np.abs(z), axis=0)
+    # judged against the point's own level, and at least the common one (noise-free data have none)
+    level = np.maximum(np.nan_to_num(level, nan=np.inf), 1.0)
+    spikes = visible & (np.abs(np.nan_to_num(z)) > SPIKE_Z * level) if T - r >= PROFILE_MIN_DOF \
+        else np.zeros_like(visible)
+    return sigma, np.nan_to_num(profile, nan=1.0), spikes
 
 
-def _block_laplacian(M, Mx, coef, coef_x, noise):
+def noise_gram(Q, profile, Q2=None):
+    """``Qᵀ diag(profile) Q2`` (p, p2): the noise covariance of the regression coefficients per unit ``noise²``."""
+    return Q.T @ (profile[:, None] * (Q if Q2 is None else Q2))
+
+
+def _rows_times(M, coef):
+    """``M`` (5, n, p) times ``coef`` (p, ...) -> (..., n, 5): the derivatives at the points, by one matrix
+    product (einsum's loop over the five rows costs the paper-scale tube's bias estimate 6 of its 12 s)."""
+    k, n, p = M.shape
+    out = (M.reshape(k * n, p) @ coef.reshape(p, -1)).reshape((k, n) + coef.shape[1:])
+    return np.moveaxis(out, (0, 1), (-1, -2))
+
+
+def _surface_coefficients(Q, x):
+    """``Qᵀ x`` (p, T, 3) of the positions ``x`` (T, n, 3), by one matrix product."""
+    T, n, _ = x.shape
+    return (Q.T @ np.moveaxis(x, 1, 0).reshape(n, T * 3)).reshape(-1, T, 3)
+
+
+def _pair_gram(A, B):
+    """``A[:, i] B[:, i]ᵀ`` (n, 5, 5) of two (5, n, p) row stacks, per point, by batched products."""
+    return np.matmul(A.transpose(1, 0, 2), B.transpose(1, 2, 0))
+
+
+def _block_laplacian(M, Mx, coef, coef_x, noise, gram):
     """Laplacian and std (T, nb) of one block of points; ``M``, ``Mx`` (5, nb, p) the derivative rows of the
-    temperature's and the surface's designs, their coefficients (p, T) and (p, T, 3)."""
+    temperature's and the surface's designs, their coefficients (p, T) and (p, T, 3); ``gram`` (p, p) the
+    coefficients' noise covariance per unit ``noise²`` (:func:`noise_gram`)."""
     nb = M.shape[1]
-    dth = np.einsum("knp,pt->tnk", M, coef)
-    dx = np.einsum("knp,ptc->tnkc", Mx, coef_x)
+    dth = _rows_times(M, coef)
+    dx = np.moveaxis(_rows_times(Mx, coef_x), 1, -1)  # (T, n, 5, 3)
     lap, w = laplace_beltrami(dth[..., :2], dth[..., 2:], dx[:, :, :2], dx[:, :, 2:])
-    gram = np.einsum("knp,lnp->nkl", M, M)
-    var = np.einsum("tnk,nkl,tnl->tn", w, gram, w)
+    cov = _pair_gram(M @ gram, M)
+    var = np.einsum("tnk,nkl,tnl->tn", w, cov, w)
     return lap, noise[:, None] * np.sqrt(np.maximum(var, 0.0)), nb
 
 
-def _evaluate(p, design, design_x, theta, x, noise, c, R0):
+def _evaluate(p, design, design_x, theta, x, noise, profile, c, R0):
     """Laplacian and std (T, n) at the points ``p`` of the regressions of ``theta`` (T, n) with the QR
-    ``design`` and of ``x`` (T, n, 3) with ``design_x``, in blocks of points."""
+    ``design`` and of ``x`` (T, n, 3) with ``design_x``, in blocks of points; ``noise`` (T,) and ``profile``
+    (n,) the data's noise (:func:`_noise`)."""
     coef = design[3].T @ theta.T  # (p, T); the rows of hessian_operator hold R⁻¹
-    coef_x = np.einsum("np,tnc->ptc", design_x[3], x)
+    coef_x = _surface_coefficients(design_x[3], x)
+    gram = noise_gram(design[3], profile)
     T, n = theta.shape
     lap, std = np.empty((T, n)), np.empty((T, n))
     nb = int(np.clip((1 << 21) // (20 * T), 1, 2048))  # points per block: ~16 MB of derivatives
     for s in range(0, n, nb):
         M = hessian_operator(p[s:s + nb], design, c, R0)
         Mx = M if design_x is design else hessian_operator(p[s:s + nb], design_x, c, R0)
-        lap[:, s:s + nb], std[:, s:s + nb], _ = _block_laplacian(M, Mx, coef, coef_x, noise)
+        lap[:, s:s + nb], std[:, s:s + nb], _ = _block_laplacian(M, Mx, coef, coef_x, noise, gram)
     return lap, std
 
 
-def surface_laplacian(psi, theta, x, *, spacing="auto", c=0.95, R0=1.0, separation=None, ops=None) -> Laplacian:
+def surface_laplacian(psi, theta, x, *, spacing="auto", c=0.95, R0=1.0, separation=None, ops=None,
+                      time_weights=None) -> Laplacian:
     """Δ_s Θ of the point temperatures on the current surface, with its standard uncertainty.
 
     Parameters
@@ -213,6 +402,9 @@ def surface_laplacian(psi, theta, x, *, spacing="auto", c=0.95, R0=1.0, separati
         Distance (mm) below which the temperature noise is correlated (one IR pixel).
     ops : dict, optional
         A cache of spatial operators (:func:`irdic.surface.shared_interpolant`).
+    time_weights : ndarray, shape (T, T), optional
+        The regression in time the Laplacian will get (:func:`judging_weights`): "auto" judges the spacing on
+        the temperatures so regressed, whose noise is the one left in the result.
 
     Returns
     -------
@@ -245,29 +437,54 @@ def surface_laplacian(psi, theta, x, *, spacing="auto", c=0.95, R0=1.0, separati
     lap = np.full((T, N), np.nan)
     std = np.full((T, N), np.nan)
     noise = np.full(T, np.nan)
+    profile = np.full(N, np.nan)
     if p.shape[0] < 2 * MIN_POINTS or not good.any():
         log.warning("temperature Laplacian: too few points with a temperature; left NaN")
-        return Laplacian(lap, std, float("nan"), noise, [])
+        return Laplacian(lap, std, float("nan"), noise, [], profile)
     tt = np.flatnonzero(good)
-    th_f = _filled(ops, p, th[np.ix_(tt, have)], visible[tt], c, R0)
-    x_in = xx[tt][:, have]
-    x_ok = np.isfinite(x_in).all(axis=2)
-    x_f = _filled(ops, p, x_in, x_ok, c, R0)
+    th_f, x_f = fill_missing(ops, p, th[np.ix_(tt, have)], xx[tt][:, have], c, R0)
     judged = _judged(p)
     table = []
     if spacing == "auto":
-        k, table = _choose_spacing(p, th_f, judged, c, R0, separation)
+        # (a time without enough temperatures leaves the regression in time undefined: each time's own then)
+        k, table = _choose_spacing(p, th_f if time_weights is None or tt.size < T else time_weights @ th_f,
+                                   judged, c, R0, separation)
     else:
         k = float(spacing)
     h = median_spacing(p)
     design = ls_design(p, k, h, c, R0)
-    noise[tt] = _noise(th_f, design[3], visible[tt], judged)
-    lb, sb = _evaluate(p, design, design, th_f, x_f, noise[tt], c, R0)
+    th_f, noise[tt], profile[have] = _clean_data(th_f, visible[tt], design[3], judged)
+    lb, sb = _evaluate(p, design, design, th_f, x_f, noise[tt], profile[have], c, R0)
     cols = np.flatnonzero(have)
     lap[tt[:, None], cols], std[tt[:, None], cols] = lb, sb
     lap[~np.isfinite(th)] = np.nan
     std[~np.isfinite(lap)] = np.nan
-    return Laplacian(lap, std, k, noise, table)
+    return Laplacian(lap, std, k, noise, table, profile)
+
+
+def judging_weights(times, smoothing="gcv", *, c=1.0, R0=1.0):
+    """The regression in time (T, T) on whose result :func:`surface_laplacian` judges its spacing, for
+    :func:`smooth_in_time`'s ``smoothing``; None where there is none.
+
+    Notes
+    -----
+    The risk criterion balances the regression's bias against its noise,
+    and the regression in time removes much of the noise but none of the
+    spatial bias: judged on each time's noise, the spacing was too wide for
+    the result (the demo's R 40 and 30 mm half-shells: 6 and 8 point
+    spacings, the bias twice the noise left after the regression in time;
+    judged on the regressed temperatures, 5 and 6, the bias 0.6 and 0.8 of
+    it). GCV chooses the regression in time from the Laplacian's own series,
+    after the spacing; the widest of its candidates, which it takes for a
+    noise-dominated Laplacian, stands in for it.
+    """
+    from ..numerics.temporal import TemporalInterpolant
+
+    t = float_array(times, "times")
+    k = max(TIME_CANDIDATES) if smoothing == "gcv" else (None if smoothing is None else float(smoothing))
+    if k is None or k <= 1.0 or t.size < 4:
+        return None
+    return TemporalInterpolant(t, c=c, R0=R0, smoothing=k).weights(t)
 
 
 def smooth_in_time(result: Laplacian, times, smoothing="gcv", *, c=1.0, R0=1.0) -> tuple[Laplacian, float]:
@@ -319,136 +536,43 @@ def smooth_in_time(result: Laplacian, times, smoothing="gcv", *, c=1.0, R0=1.0) 
     return result._replace(laplacian=lap, std=std), k
 
 
-def _difference(p, design, ref, th, x, c, R0):
-    """The Laplacian of the regression ``design`` minus that of ``ref``, both on ``design``'s surface.
+def fill_missing(ops, p, th, x, c, R0):
+    """The temperatures (T, n) and positions (T, n, 3) with their missing entries filled: the temperatures by
+    the nearest visible point (to be refitted: :func:`refit_missing`), the positions by each time's
+    interpolant (:func:`_filled`)."""
+    return _nearest_filled(p, th, np.isfinite(th)), _filled(ops, p, x, np.isfinite(x).all(axis=2), c, R0)
 
-    ``th`` (S, T, n): S series of T times (the data, then noise probes); ``x`` (T, n, 3). Returns the
-    difference (S, T, n) and its variance per unit white noise (T, n), ``‖r_k − r_ref‖²`` of the two rows.
+
+def laplacian_difference(p, design, ref, th, x, profile, c, R0, basis=None):
+    """The Laplacian of the regression ``design`` minus that of ``ref`` (QRs of
+    :func:`~irdic.surface.regression.ls_design`), both on ``design``'s surface.
+
+    ``th`` (S, T, n): S series of T times (the data, then noise probes), or with ``basis`` (T, r) their ``r``
+    temporal mode coefficients (S, r, n), the series being ``basis @ th[s]`` (:func:`temporal_modes`: the
+    regressions run on ``r`` instead of ``T`` columns); ``x`` (T, n, 3); ``profile`` (n,) the points' relative
+    noise variance. Returns the difference (S, T, n) and its variance per unit noise variance (T, n),
+    ``(r_k − r_ref) diag(profile) (r_k − r_ref)ᵀ`` of the two rows.
     """
-    S, T, n = th.shape
-    flat = th.reshape(S * T, n).T
+    S, R, n = th.shape
+    T = x.shape[0]
+    flat = th.reshape(S * R, n).T
     coef, coef_r = design[3].T @ flat, ref[3].T @ flat
-    coef_x = np.einsum("np,tnc->ptc", design[3], x)
-    cross = design[3].T @ ref[3]
+    coef_x = _surface_coefficients(design[3], x)
+    g_kk, g_rr = noise_gram(design[3], profile), noise_gram(ref[3], profile)
+    g_kr = noise_gram(design[3], profile, ref[3])
     diff, var = np.empty((S, T, n)), np.empty((T, n))
-    nb = int(np.clip((1 << 21) // (20 * S * T), 1, 1024))
+    nb = int(np.clip((1 << 22) // (5 * S * T), 16, 1024))  # points per block: ~32 MB of differences
     for s in range(0, n, nb):
         pb = p[s:s + nb]
         M, Mr = hessian_operator(pb, design, c, R0), hessian_operator(pb, ref, c, R0)
-        dx = np.einsum("knp,ptc->tnkc", M, coef_x)
-        dth = np.einsum("knp,pt->tnk", M, coef).reshape(S, T, -1, 5)
-        dth_r = np.einsum("knp,pt->tnk", Mr, coef_r).reshape(S, T, -1, 5)
-        _, w = laplace_beltrami(dth[0, ..., :2], dth[0, ..., 2:], dx[:, :, :2], dx[:, :, 2:])
-        diff[:, :, s:s + nb] = _dot(w[None], dth - dth_r)
-        X = np.einsum("knq,lnq->nkl", np.einsum("knp,pq->knq", M, cross), Mr)
-        G = np.einsum("knp,lnp->nkl", M, M) + np.einsum("knp,lnp->nkl", Mr, Mr) - X - np.swapaxes(X, 1, 2)
+        dx = np.moveaxis(_rows_times(M, coef_x), 1, -1)
+        delta = _rows_times(M, coef.reshape(-1, S, R)) - _rows_times(Mr, coef_r.reshape(-1, S, R))
+        if basis is not None:
+            delta = np.moveaxis(np.tensordot(basis, delta, axes=(1, 1)), 0, 1)  # (S, T, nb, 5)
+        zero = np.zeros(dx.shape[:2] + (5,))
+        _, w = laplace_beltrami(zero[..., :2], zero[..., 2:], dx[:, :, :2], dx[:, :, 2:])
+        diff[:, :, s:s + nb] = _dot(w[None], delta)
+        X = _pair_gram(M @ g_kr, Mr)
+        G = _pair_gram(M @ g_kk, M) + _pair_gram(Mr @ g_rr, Mr) - X - np.swapaxes(X, 1, 2)
         var[:, s:s + nb] = np.maximum(np.einsum("tnk,nkl,tnl->tn", w, G, w), 0.0)
     return diff, var
-
-
-def laplacian_bias(psi, theta, x, result: Laplacian, times, k_time=1.0, *, c=0.95, R0=1.0, c_t=1.0, R0_t=1.0,
-                   ops=None, seed=0):
-    """Local RMS of the spatial regression's bias in the Laplacian of :func:`surface_laplacian` (after the
-    regression in time of :func:`smooth_in_time`, spacing ``k_time``), K/mm².
-
-    Parameters
-    ----------
-    psi, theta, x, c, R0, ops
-        As :func:`surface_laplacian`; ``result`` its result (the spacing and the noise level); ``seed`` the probes'.
-    times : array_like, shape (T,)
-        DIC times (s); ``k_time`` the regression in time's spacing (1: none), ``c_t``, ``R0_t`` its kernel.
-
-    Returns
-    -------
-    ndarray, shape (T, N)
-        The bias estimate; 0 where not resolved, NaN where the Laplacian is NaN.
-
-    Notes
-    -----
-    The references are the same regression at :data:`REFERENCE_RATIO` times
-    the spacing, on the same surface; their centres are other subsets of the
-    points, so a difference ``d`` holds both regressions' approximation
-    errors (at the chosen spacings a ripple of the centres, alike in size
-    and uncorrelated from one spacing to another) and the part of both
-    noises that differs. As for the gradient
-    (:func:`irdic.uncertainty.regression_bias.reference_options`) the bias
-    squared is :data:`~irdic.uncertainty.regression_bias.REFERENCE_SHARE` of
-    ``<d² − var d>``; of the two references the smaller estimate counts,
-    except within one centre spacing of the cloud's edge, where the
-    one-sided fit's bias grows with the spacing and the references share it:
-    there the larger. ``d`` is regressed in time as the Laplacian is (the
-    bias persists, the noise does not), then
-    :func:`~irdic.uncertainty.regression_bias.local_bias` averages
-    ``d² − var d`` locally, keeps it where it exceeds its scatter on
-    :data:`~irdic.uncertainty.probes.BIAS_PROBES` noise probes through the
-    same operators, and where no neighbourhood resolves it averages over the
-    points within :data:`BIAS_REACH` centre spacings. ``var d = σ² ‖r_k −
-    r_ref‖²`` of the two regressions' rows, exact.
-    """
-    from ..numerics.temporal import TemporalInterpolant
-    from ..uncertainty.probes import BIAS_PROBES
-
-    p_all = psi_array(psi, "psi")
-    th = float_array(theta, "theta")
-    T, N = th.shape
-    out = np.full((T, N), np.nan)
-    have = np.isfinite(p_all).all(axis=1)
-    tt = np.flatnonzero(np.isfinite(result.noise))
-    refs = [r * result.spacing for r in REFERENCE_RATIO if r * result.spacing > 1.0] \
-        if np.isfinite(result.spacing) else []
-    if not refs or tt.size == 0:
-        return out
-    p = p_all[have]
-    th_f, x_f = _inputs({} if ops is None else ops, p, th[np.ix_(tt, have)], float_array(x, "x")[tt][:, have], c, R0)
-    h = median_spacing(p)
-    design = ls_design(p, result.spacing, h, c, R0)
-    rng = np.random.default_rng(seed)
-    sigma = result.noise[tt]
-    probes = sigma[None, :, None] * rng.standard_normal((BIAS_PROBES, tt.size, p.shape[0]))
-    series = np.concatenate([th_f[None], probes])
-    full = np.isfinite(result.laplacian[np.ix_(tt, np.flatnonzero(have))]).all(axis=0)
-    W = TemporalInterpolant(float_array(times, "times")[tt], c=c_t, R0=R0_t, smoothing=k_time).weights() \
-        if k_time > 1.0 and full.any() else None
-    b = None
-    rim = edge_distance(p) < result.spacing * h
-    for k_ref in refs:
-        try:
-            ref = ls_design(p, k_ref, h, c, R0)
-        except GeometryError:
-            log.info("temperature Laplacian: the bias reference at %.3g spacings does not fit", k_ref)
-            continue
-        bk = _reference_bias(p, design, ref, series, x_f, sigma, W, full, result.spacing, c, R0)
-        b = bk if b is None else np.where(rim, np.maximum(b, bk), np.minimum(b, bk))
-    if b is None:
-        log.warning("temperature Laplacian: no bias estimate (no reference regression fits the points)")
-        return np.where(np.isfinite(result.laplacian), 0.0, np.nan)
-    out[tt[:, None], np.flatnonzero(have)] = b
-    out[~np.isfinite(result.laplacian)] = np.nan
-    return out
-
-
-def _inputs(ops, p, th, x, c, R0):
-    """The temperatures (T, n) and positions (T, n, 3) with their missing entries filled by each time's
-    interpolant (:func:`_filled`)."""
-    return _filled(ops, p, th, np.isfinite(th), c, R0), _filled(ops, p, x, np.isfinite(x).all(axis=2), c, R0)
-
-
-def _reference_bias(p, design, ref, series, x, sigma, W, full, spacing, c, R0):
-    """:func:`~irdic.uncertainty.regression_bias.local_bias` (T, n) of the difference of ``design`` to ``ref``
-    (:func:`_difference` of ``series``: the data, then the probes), regressed in time by ``W`` (T, T; None: not)
-    at the points ``full`` that have every time; ``sigma`` (T,) the noise."""
-    from ..uncertainty.regression_bias import BIAS_Z, REFERENCE_SHARE, local_bias
-
-    diff, var = _difference(p, design, ref, series, x, c, R0)
-    var = var * sigma[:, None] ** 2
-    if W is not None:
-        diff[:, :, full] = np.einsum("ts,ksn->ktn", W, diff[:, :, full])
-        var[:, full] = (W ** 2) @ var[:, full]
-    return local_bias(diff[0], var, p, null=np.square(diff[1:]), spacing=BIAS_REACH * spacing, z=BIAS_Z,
-                      share=REFERENCE_SHARE)
-
-
-def with_bias(result: Laplacian, bias) -> Laplacian:
-    """``result`` with the bias estimate of :func:`laplacian_bias` added to its std in quadrature."""
-    b = np.where(np.isfinite(bias), bias, 0.0)
-    return result._replace(std=np.sqrt(result.std ** 2 + b ** 2))
