@@ -70,11 +70,11 @@ def write_experiment(root: Path, frames: int, points: int, ir_noise: float = 0.0
                     {"v": r.v.astype(np.int64), "u": r.u.astype(np.int64)}, var_attrs={"units": "degC"}) as fs:
         for i, frame in enumerate(ex.ir_frames(noise=ir_noise > 0)):
             fs.write(i, float(ex.ir_times[i]), frame.values)
-    write_dataset(ex.dic(), root / "dic.zarr", stage="bench")
+    write_dataset(ex.dic(), root / "dic.zarr", stage="ingest-dic")
     cam = ex.camera
     cal = CameraModel(K=cam.K, R=cam.R, C=cam.C).to_dataset()
     cal.attrs.update(sensor_width=1024, sensor_height=768)
-    write_dataset(cal, root / "cal.zarr", stage="bench")
+    write_dataset(cal, root / "cal.zarr", stage="calibrate")
     return ex
 
 
