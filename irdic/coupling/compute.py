@@ -298,10 +298,14 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
     query = np.where(seen[..., None], pr.local, np.nan)
     outside = seen & ~in_mask(masks, pr.local)
     samples, cols = extrapolation_samples(pr.local, masks, outside, p["max_extrapolation_px"])
+    # the extrapolation uses the derivatives of its first sample only (at the nearest masked pixel)
+    need = np.zeros(M + samples.shape[0] * samples.shape[2], dtype=bool)
+    need[:M + samples.shape[2]] = True
     res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
                           method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
                           R0_time=p["R0_time"], time_window=p["time_window"], halo=p["halo"], u=u, v=v,
-                          name="ir: frames", pixel_operator=(op := FootprintOperator(side)) if side > 1 else None)
+                          name="ir: frames", pixel_operator=(op := FootprintOperator(side)) if side > 1 else None,
+                          derivatives=need)
     theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)

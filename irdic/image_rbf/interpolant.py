@@ -357,12 +357,14 @@ class MaskedGridInterpolant:
                 du, dv = du[0], dv[0]
         return Evaluation(val, du, dv, edge)
 
-    def evaluate_grouped(self, pts, g, derivs, edges=None):
+    def evaluate_grouped(self, pts, g, derivs, edges=None, need=None):
         """Fields ``group * g + slot`` at ``pts[group]``; returns (G, g, M) x 3 and (G, M).
 
-        ``edges``: an :class:`EdgeBatch` that collects the points near the mask
-        edge instead of evaluating them; the returned arrays (views of the
-        ones it writes into) hold their values once ``edges.run()`` returns.
+        ``edges``: an :class:`~irdic.image_rbf.tiles.EdgeBatch` that collects
+        the points near the mask edge instead of evaluating them; the returned
+        arrays (views of the ones it writes into) hold their values once
+        ``edges.run()`` returns. ``need`` (M,) bool: the points whose
+        derivatives are wanted (default all; the others' may be left NaN).
         """
         G, M, _ = pts.shape
         flat = pts.reshape(-1, 2)
@@ -382,7 +384,8 @@ class MaskedGridInterpolant:
                 inner = self._interior[pv[idx], pu[idx]]
                 self._eval_interior(idx[inner], grp[inner], u, v, pu, pv, g, derivs, val, du, dv)
                 batch = EdgeBatch() if edges is None else edges
-                batch.add(self, idx[~inner], grp[~inner], G, u, v, pu, pv, g, derivs, (val, du, dv))
+                batch.add(self, idx[~inner], grp[~inner], G, u, v, pu, pv, g, derivs, (val, du, dv),
+                          None if need is None else np.tile(np.asarray(need, bool), G))
                 if edges is None:
                     batch.run()
             elif self.method == "bilinear":

@@ -170,7 +170,7 @@ def _combined_frames(F, sel, Wv, Wd, n_mask, extra=None):
 
 def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rbf", c=2.0, R0=1.0, c_time=1.0,
                     R0_time=1.0, time_window=None, halo=12, tile=8, chunk=32, u=None, v=None, name="frames",
-                    pixel_operator=None):
+                    pixel_operator=None, derivatives=None):
     """Temperatures, gradients and rates at moving points over a frame series.
 
     Parameters
@@ -215,6 +215,9 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
         ``(union mask (H, W), its pixels (n, 2) (u, v)) -> sparse (n, n)``, a linear operator on the pixel
         values; the frames through it are interpolated in the same pass, extra right-hand sides of the same
         tile factorisations (``theta_extra``, no derivatives).
+    derivatives : array_like of bool, shape (M,), optional
+        The points whose ``dTheta/du``, ``dTheta/dv`` are wanted (default all);
+        the others' may be NaN (e.g. samples where only values matter).
 
     Returns
     -------
@@ -245,8 +248,13 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     union = _union(masks)
     F, lookup = _pixel_series(frames, union, ft, *((None, None) if u is None or v is None else (u, v)), name)
     extra = None if pixel_operator is None else pixel_operator(union, np.c_[np.nonzero(union)[::-1]])  # F's rows
+    need = None
+    if derivatives is not None:
+        need = np.asarray(derivatives, dtype=bool)
+        if need.shape != (pts.shape[1],):
+            raise ConfigError(f"derivatives must have shape (M,) = ({pts.shape[1]},) like the points, got {need.shape}")
     out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk,
-                    dict(method=method, c=c, R0=R0, halo=halo, tile=tile), extra)
+                    dict(method=method, c=c, R0=R0, halo=halo, tile=tile), extra, need)
     return SeriesEvaluation(*out[:5], in_span, out[5] if extra is not None else None)
 
 
@@ -274,7 +282,7 @@ def _frame_times(frame_times, n_frames):
 
 
 @blas_threads(1)  # many small triangular solves and products: threaded BLAS only synchronises
-def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra=None):
+def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra=None, need=None):
     """theta, d/du, d/dv, d/dt, edge distance and theta through ``extra`` (sparse, on the rows of ``F``)
     (n_times, M) for the in-span times, chunk by chunk.
 
@@ -315,7 +323,7 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
             vals = G[run] if sel.size == F.shape[0] else G[run][:, :, sel]  # the mask is the union: no copy
             interp.fit_values(vals.reshape(g * run.size, -1))
             runs.append((ch[run], interp.evaluate_grouped(pts[ch[run]], g, (True,) + (False,) * (g - 1),
-                                                          edges=edges)))
+                                                          edges=edges, need=need)))
         del G
         edges.run()
         for times, (val, du, dv, ed) in runs:

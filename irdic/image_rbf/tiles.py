@@ -400,7 +400,7 @@ def edge_windows(ce, tile, halo):
     return EdgeWindows(ce, tile, halo)
 
 
-def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
+def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out, need=None):
     """Evaluate points ``sel`` of one tile from its coefficients, into ``out = (val, du, dv)``.
 
     Parameters
@@ -422,6 +422,8 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
     derivs : sequence of bool, length g
         Which slots want ``d/du``, ``d/dv``.
     out : tuple of ndarray, shape (n_points, g)
+    need : ndarray of bool, shape (sel.size,), optional
+        Which points want the derivatives (default all); the others' stay as they are.
 
     Notes
     -----
@@ -429,27 +431,13 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
     ``s_j = 1 / sqrt(ce^2 + |x - c_j|^2)``; ``df/du = -ce sum_j alpha_j s_j^3
     (xu - cu_j) + beta_u``.
     """
-    xu, xv = u[sel], v[sel]
-    s, s3 = _kernel_rows(tile, ce, xu, xv, any(derivs))
-    _write_rows(tile, s, s3, alpha, beta, ce, xu - tile.ou, xv - tile.ov, sel, gb, g, derivs, out)
-
-
-def _kernel_rows(tile, ce, u, v, derivatives):
-    """``s_j = 1 / sqrt(ce^2 + |x - c_j|^2)`` (points x centres) at points ``(u, v)`` (frame px), and ``s^3``."""
-    # np.column_stack, not np.c_: this runs ~10^4 times per evaluation pass
-    s = cdist(np.column_stack([u - tile.ou, v - tile.ov]), np.column_stack([tile.cu, tile.cv]), "sqeuclidean")
-    imq_scaled_inverse(s, ce, out=s)
-    s3 = None
-    if derivatives:
-        s3 = s * s
-        s3 *= s
-    return s, s3
-
-
-def _write_rows(tile, s, s3, alpha, beta, ce, xu, xv, sel, gb, g, derivs, out):
-    """Values (and derivatives) from the kernel rows ``s``, ``s3`` of the points ``sel`` (local ``xu``, ``xv``)."""
     val, du, dv = out
     want = np.flatnonzero(np.array(derivs, bool))
+    xu = u[sel] - tile.ou
+    xv = v[sel] - tile.ov
+    # np.column_stack, not np.c_: this runs ~10^4 times per evaluation pass
+    s = cdist(np.column_stack([xu, xv]), np.column_stack([tile.cu, tile.cv]), "sqeuclidean")
+    imq_scaled_inverse(s, ce, out=s)
     # Points come sorted by group (time) within a tile: one matrix product per
     # run of a group instead of a gather of coefficient rows per point.
     if gb is None:
@@ -463,11 +451,15 @@ def _write_rows(tile, s, s3, alpha, beta, ce, xu, xv, sel, gb, g, derivs, out):
         rows = sel[r0:r1]
         x1, x2 = xu[r0:r1, None], xv[r0:r1, None]
         val[rows] = ce * (s[r0:r1] @ A) + B[:, 0] + x1 * B[:, 1] + x2 * B[:, 2]
-        if want.size:
+        d = slice(r0, r1) if need is None else r0 + np.flatnonzero(need[r0:r1])
+        if want.size and (need is None or d.size):
+            s3 = s[d]
+            s3 = s3 * s3 * s3
             Aw = A[:, want]
             # sum_j alpha_j s_j^3 (1, cu_j, cv_j) for the wanted slots at once
-            T = s3[r0:r1] @ np.concatenate([Aw, tile.cu[:, None] * Aw, tile.cv[:, None] * Aw], axis=1)
+            T = s3 @ np.concatenate([Aw, tile.cu[:, None] * Aw, tile.cv[:, None] * Aw], axis=1)
             k = want.size
+            rows, x1, x2 = sel[d], xu[d, None], xv[d, None]
             du[rows[:, None], want] = -ce * (x1 * T[:, :k] - T[:, k:2 * k]) + B[want, 1]
             dv[rows[:, None], want] = -ce * (x2 * T[:, :k] - T[:, 2 * k:]) + B[want, 2]
 
@@ -489,8 +481,9 @@ class EdgeBatch:
     def __init__(self):
         self._entries = []
 
-    def add(self, interp, idx, grp, G, u, v, pu, pv, g, derivs, out):
-        """Points ``idx`` (groups ``grp`` of ``G``) of ``interp``, to be written into ``out = (val, du, dv)``.
+    def add(self, interp, idx, grp, G, u, v, pu, pv, g, derivs, out, need=None):
+        """Points ``idx`` (groups ``grp`` of ``G``) of ``interp``, to be written into ``out = (val, du, dv)``;
+        ``need`` (indexed like ``u``): the points whose derivatives are wanted (default all).
 
         The interpolant's fitted data are held as they are now (a later
         :meth:`MaskedGridInterpolant.fit` does not change what is solved here).
@@ -507,7 +500,8 @@ class EdgeBatch:
         ends = np.append(starts[1:], key.size)
         self._entries.append(_EdgeEntry(interp._grid, interp._mask_r, interp._rv0, interp._ru0, interp.tile,
                                         interp.halo, interp._ce, interp._windows, ty[starts], tx[starts], starts,
-                                        ends, idx, None if G == 1 else grp, u, v, g, derivs, out))
+                                        ends, idx, None if G == 1 else grp, u, v, g, derivs, out,
+                                        None if need is None else need[idx]))
 
     def run(self):
         """Solve every collected tile and evaluate its points."""
@@ -565,7 +559,7 @@ class EdgeBatch:
             for b0 in range(e.starts[i], e.ends[i], EDGE_BLOCK):
                 b1 = min(b0 + EDGE_BLOCK, e.ends[i])
                 eval_tile_block(w, A, B, e.ce, e.u, e.v, e.idx[b0:b1], None if e.grp is None else e.grp[b0:b1],
-                                e.g, e.derivs, e.out)
+                                e.g, e.derivs, e.out, None if e.need is None else e.need[b0:b1])
 
 
 class _EdgeEntry(NamedTuple):
@@ -590,3 +584,4 @@ class _EdgeEntry(NamedTuple):
     g: int
     derivs: tuple
     out: tuple
+    need: np.ndarray | None  # per point (like idx): derivatives wanted
