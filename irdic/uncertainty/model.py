@@ -79,7 +79,7 @@ from ..numerics.threads import parallel_map
 from ..vocabulary import Status
 from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
-from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
+from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_times, spread
 from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
                               scaled_probes)
 from .strain import noise_floor_note, strain_std
@@ -388,7 +388,8 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     if n_bias:
         acc["g_var"] = acc["g_var"] / n_bias
     out = {k: spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
-    return {**out, **{f"{k}_null": np.array([spread(a, near) for a in n]) if n else None for k, n in nulls.items()}}
+    # the nulls stay at the probed times: local_bias reads them at a few times only (SpreadStack)
+    return {**out, **{f"{k}_null": SpreadStack(np.array(n), near) if n else None for k, n in nulls.items()}}
 
 
 def _values(points, name):

@@ -67,8 +67,14 @@ def noise_scale(theta, acc, regress_space, ks, trusted):
 
 
 def scaled_probes(acc, k2):
-    """The probes' mean squares ``acc`` (:func:`irdic.uncertainty.model._spatial_probes`) with the noise variance scaled by ``k2``."""
-    return {k: (None if a is None else a * k2) for k, a in acc.items()}
+    """The probes' mean squares ``acc`` (:func:`irdic.uncertainty.model._spatial_probes`) with the noise variance
+    scaled by ``k2``, arrays in place (at paper scale they are GBs)."""
+    for k, a in acc.items():
+        if isinstance(a, np.ndarray) or hasattr(a, "rows"):
+            a *= k2
+        elif a is not None:
+            acc[k] = a * k2
+    return acc
 
 
 def reference_spacing(k):
@@ -222,7 +228,8 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
         est = _local_mean(np.where(ok, a, 0.0), ok, nb, count)
         if null is None or len(null) < 2:
             return np.sqrt(share * np.maximum(est, 0.0))
-        se = _null_scale(np.asarray(null), ok, nb) * _local_mean(np.where(ok, noise_var, 0.0), ok, nb, count)
+        se = _null_scale(null if hasattr(null, "rows") else np.asarray(null), ok, nb) * \
+            _local_mean(np.where(ok, noise_var, 0.0), ok, nb, count)
         est = np.where(est > z * se, est, 0.0)
         out = est if out is None else np.where(out > 0, out, est)
     return np.sqrt(share * out)
@@ -231,13 +238,12 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
 def _null_scale(null, ok, nb):
     """Standard error of the local bias estimate on pure noise relative to the local noise variance, pooled.
 
-    ``null`` (K, T, N[, C]): the probes' squared differences. Each probe's
-    estimate ``L(null_j - v̄)`` scatters about 0 as the data's does under no
-    bias; the data's ``v`` is the mean of the probes, whose own error adds
-    ``1/K`` of that variance.
+    ``null`` (K, T, N[, C], or a :class:`~irdic.uncertainty.probes.SpreadStack`):
+    the probes' squared differences. Each probe's estimate ``L(null_j - v̄)``
+    scatters about 0 as the data's does under no bias; the data's ``v`` is the
+    mean of the probes, whose own error adds ``1/K`` of that variance.
     """
     K = null.shape[0]
-    ok = ok & np.isfinite(null).all(axis=0)
     # a pooled ratio: the times of at most NULL_TIMES windows (each time with its neighbours) hold enough
     # points, at a fraction of the sparse products over every time and probe (43 of 163 s of the fields stage
     # on the moving tube, 300 times x 13,104 points, 452 neighbours)
@@ -245,10 +251,13 @@ def _null_scale(null, ok, nb):
     if T > NULL_TIMES + 2:
         mid = np.linspace(1, T - 2, NULL_TIMES).round().astype(int)
         sel = np.unique(np.clip(mid[:, None] + [-1, 0, 1], 0, T - 1))
-        ok, null = ok[sel], null[:, sel]
+        null = null.rows(sel) if hasattr(null, "rows") else null[:, sel]
+        ok = ok[sel]
         centre = np.isin(sel, mid)
     else:
+        null = np.asarray(null)
         centre = np.ones(T, bool)
+    ok = ok & np.isfinite(null).all(axis=0)
     mean = np.where(ok, null.mean(axis=0), 0.0)
     count = _local_count(ok, nb)
     lv = _local_mean(mean, ok, nb, count)
