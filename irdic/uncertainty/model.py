@@ -252,6 +252,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     grad_std = s_g * np.sqrt(Lu ** 2 + Lv ** 2)
     rate_std = np.sqrt(s_r ** 2 + s_g ** 2 * (cu ** 2 + cv ** 2))
     temp_std = np.full((T, N), s_T)
+    del e, Lu, Lv, cu, cv  # GBs at paper scale while the probes run
 
     kt, ks = chosen_k.get("temperature_smoothing"), chosen_k.get("temperature_smoothing_space")
     W = rate_biased = None
@@ -290,9 +291,9 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             acc_fp = scaled_probes(acc_fp, noise_scale(own, acc_fp, regress_space, ks, trusted))
             acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null",
                                                "rs_var_null")})
-        temp_std, grad_std = np.sqrt(acc["v"]), np.sqrt(acc["g"])
+        temp_std, grad_std = np.sqrt(acc.pop("v")), np.sqrt(acc.pop("g"))
         if W is not None:
-            rate_std = np.sqrt(acc["r"])
+            rate_std = np.sqrt(acc.pop("r"))
         if spatial is not None:
             theta, grad, value_in, value = spatial[:4]
             # against the lighter regression of the gradient's input after the same regression in time (the

@@ -209,30 +209,56 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     ``L(d_j² - v̄)``; ``b²`` counts where it exceeds ``z`` such errors,
     else 0.
     """
-    a = np.square(d) - noise_var
-    ok = np.isfinite(a)
+    d = np.asarray(d)
+    noise_var = np.broadcast_to(noise_var, d.shape)
+    ok = np.isfinite(np.square(d) - noise_var)
     if trusted is not None:
-        ok &= np.asarray(trusted, dtype=bool).reshape(trusted.shape + (1,) * (a.ndim - 2))
+        ok &= np.asarray(trusted, dtype=bool).reshape(trusted.shape + (1,) * (d.ndim - 2))
     if not np.isfinite(psi).all(axis=1).any():
-        return np.zeros_like(a)
-    out = None
+        return np.zeros(d.shape)
     # the neighbourhood, then a wider one where the bias is below the neighbourhood's resolution, then all points
     wide = [] if spacing is None else [min(WIDE_MAX, int(np.pi * float(np.max(spacing)) ** 2))]
+    nbs = []
     for k in [BIAS_NEIGHBOURS] + [n for n in wide if n > BIAS_NEIGHBOURS] + ([None] if pooled else []):
         nb = None if neighbourhoods is None or k is None else neighbourhoods.get(k)
         if nb is None and k is not None:
             nb = _neighbours(psi, k)
             if neighbourhoods is not None:
                 neighbourhoods[k] = nb
-        count = _local_count(ok, nb)
-        est = _local_mean(np.where(ok, a, 0.0), ok, nb, count)
-        if null is None or len(null) < 2:
-            return np.sqrt(share * np.maximum(est, 0.0))
-        se = _null_scale(null if hasattr(null, "rows") else np.asarray(null), ok, nb) * \
-            _local_mean(np.where(ok, noise_var, 0.0), ok, nb, count)
-        est = np.where(est > z * se, est, 0.0)
-        out = est if out is None else np.where(out > 0, out, est)
-    return np.sqrt(share * out)
+        nbs.append(nb)
+    simple = null is None or len(null) < 2
+    if simple:
+        nbs = nbs[:1]
+        scales = [None]
+    else:  # the pooled scatter on noise, one number per neighbourhood
+        null = null if hasattr(null, "rows") else np.asarray(null)
+        scales = [_null_scale(null, ok, nb) for nb in nbs]
+    # block by block of times (each with its neighbouring times, which the local means include): the work
+    # arrays of a block, not of the record (at paper scale ~10 arrays of 100 MB per call otherwise)
+    out = np.empty(d.shape)
+    T = d.shape[0]
+    step = max(1, _BIAS_BLOCK // max(1, ok[0].size))
+    for t0 in range(0, T, step):
+        t1 = min(T, t0 + step)
+        e0, e1 = max(0, t0 - 1), min(T, t1 + 1)
+        okb, vb = ok[e0:e1], noise_var[e0:e1]
+        ab = np.where(okb, np.square(d[e0:e1]) - vb, 0.0)
+        res = None
+        for nb, scale in zip(nbs, scales):
+            count = _local_count(okb, nb)
+            est = _local_mean(ab, okb, nb, count)
+            if simple:
+                res = np.maximum(est, 0.0)
+                break
+            se = scale * _local_mean(np.where(okb, vb, 0.0), okb, nb, count)
+            est = np.where(est > z * se, est, 0.0)
+            res = est if res is None else np.where(res > 0, res, est)
+        out[t0:t1] = np.sqrt(share * res[t0 - e0:t1 - e0])
+    return out
+
+
+#: Values per time block of :func:`local_bias` (its work arrays are a few of this size)
+_BIAS_BLOCK = 1 << 21
 
 
 def _null_scale(null, ok, nb):
