@@ -29,7 +29,10 @@ fastest outline. Per stage the wall and CPU seconds, peak RSS and where the time
 goes (couple: the IR clock, the masks, the interpolation; fields: the
 uncertainty probes); the load average before and after each row.
 ``--quick``: 60 frames and 3,000 points, the scipy way on 2 times (a minute or
-two per row; for a check, not for the figures).
+two per row; for a check, not for the figures). With ``--two-jobs`` the
+fastest row's job runs twice at once (one thread each) against once alone on
+one thread. Each stage's progress lines give its ETA's worst error from the
+first tenth of the run on (against the time that was left).
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import re
 import shutil
 import subprocess
 import sys
@@ -75,12 +79,13 @@ if stage == "couple":
 else:
     timed("irdic.fields.space_time", "uncertainties", "probes")
 t0 = time.perf_counter()
+log = root + f"/{stage}{tag}.log"
 if stage == "couple":
     couple.run({"dic": root + "/dic.zarr", "ir": root + "/ir.zarr", "calibration": root + "/cal.zarr"},
-               {"store": root + f"/points{tag}.zarr"}, threads=threads)
+               {"store": root + f"/points{tag}.zarr"}, threads=threads, log=log)
 else:
     fields.run({"points": root + f"/points{tag}.zarr", "calibration": root + "/cal.zarr"},
-               {"store": root + f"/fields{tag}.zarr"}, threads=threads)
+               {"store": root + f"/fields{tag}.zarr"}, threads=threads, log=log)
 ru = resource.getrusage(resource.RUSAGE_SELF)
 print(json.dumps({"seconds": time.perf_counter() - t0, "cpu": ru.ru_utime + ru.ru_stime,
                   "peak_gb": ru.ru_maxrss / 2**20, "parts": parts}))
@@ -123,7 +128,26 @@ def run_stage(stage: str, root: Path, tag: str = "", threads: int = 1) -> dict:
                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     if proc.returncode:
         raise SystemExit(f"{stage} subprocess failed ({proc.returncode})")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out["eta"] = eta_error(root / f"{stage}{tag}.log", stage, out["seconds"])
+    return out
+
+
+_ETA_LINE = re.compile(r"(?P<stage>\w+): (?P<pct>\d+) % of the work, (?P<el>[\d.]+) s elapsed, ETA (?P<eta>\d+) s")
+
+
+def eta_error(log: Path, stage: str, seconds: float) -> tuple[float, float]:
+    """The stage's progress lines against its run time: the worst relative error of the ETA (against the time
+    that was left) over the lines from the first tenth of the run to the last tenth, and the part of the run
+    that had passed at its first line (NaN, NaN without lines)."""
+    lines = [m for m in map(_ETA_LINE.search, log.read_text().splitlines() if log.exists() else []) if m
+             and m["stage"] == stage]
+    if not lines:
+        return float("nan"), float("nan")
+    first = float(lines[0]["el"]) / seconds
+    errs = [abs(float(m["el"]) + float(m["eta"]) - seconds) / (seconds - float(m["el"])) for m in lines
+            if 0.1 * seconds <= float(m["el"]) <= 0.9 * seconds]
+    return (max(errs) if errs else float("nan")), first
 
 
 def run_job(root: Path, tag: str = "", threads: int = 1) -> dict:
@@ -131,7 +155,7 @@ def run_job(root: Path, tag: str = "", threads: int = 1) -> dict:
     c, f = run_stage("couple", root, tag, threads), run_stage("fields", root, tag, threads)
     return {"couple": c["seconds"], "fields": f["seconds"], "peak_couple": c["peak_gb"],
             "peak_fields": f["peak_gb"], "peak_gb": max(c["peak_gb"], f["peak_gb"]), "cpu_couple": c["cpu"],
-            "cpu_fields": f["cpu"], "parts": {**c["parts"], **f["parts"]}}
+            "cpu_fields": f["cpu"], "parts": {**c["parts"], **f["parts"]}, "eta": (c["eta"], f["eta"])}
 
 
 def scipy_way(root: Path, ex, subset: int, cpu: bool = False) -> tuple[float, float]:
@@ -209,7 +233,26 @@ def one(frames: int, points: int, threads: int, subset: int, two_jobs: bool = Fa
 SPEEDS = (0.0, 0.2, 0.5, 1.0, 2.0)
 
 
-def sweep(speeds, frames: int, points: int, threads: int, subset: int) -> None:
+def two_at_once(root: Path) -> None:
+    """Two couple + fields jobs at once on the same stores, one thread each, against one such job alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    load0 = os.getloadavg()[0]
+    alone = run_job(root, "_1", 1)
+    t1 = alone["couple"] + alone["fields"]
+    with ThreadPoolExecutor(2) as pool:
+        both = list(pool.map(lambda tag: run_job(root, tag, 1), ("_a", "_b")))
+    print(f"two jobs at once (1 thread each) against one alone on 1 thread ({t1:.1f} s, peak "
+          f"{alone['peak_gb']:.2f} GB): " + ", ".join(f"{(r['couple'] + r['fields']) / t1:.2f} x" for r in both)
+          + f" (load {load0:.1f} / {os.getloadavg()[0]:.1f})", flush=True)
+
+
+def _eta(e):
+    """``worst error % (first line at % of the run)``."""
+    return f"{100 * e[0]:.0f} % (first at {100 * e[1]:.0f} %)"
+
+
+def sweep(speeds, frames: int, points: int, threads: int, subset: int, two_jobs: bool = False) -> None:
     """Couple + fields and the scipy way on the sweep tube at each outline speed; every row and the worst.
 
     Wall seconds (CPU seconds in brackets, all threads); the scipy way's ratio
@@ -218,8 +261,8 @@ def sweep(speeds, frames: int, points: int, threads: int, subset: int) -> None:
     rows = []
     print("| outline px/frame | couple s | clock / masks / interpolation s | fields s | probes s | total s | "
           "peak RSS GB (couple / fields) | scipy s per DIC time | scipy / couple | couple s per DIC time | "
-          "load before / after |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "ETA worst error from the first tenth (couple / fields) | load before / after |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 
     def both(p, k):
         return f"{p.get(k, 0):.1f} ({p.get(k + '_cpu', 0):.0f})"
@@ -250,7 +293,9 @@ def sweep(speeds, frames: int, points: int, threads: int, subset: int) -> None:
                   f"{job['couple'] + job['fields']:.1f} ({job['cpu_couple'] + job['cpu_fields']:.0f}) | "
                   f"{job['peak_couple']:.2f} / {job['peak_fields']:.2f} | {per:.2f} ({per_cpu:.2f}) | "
                   f"{row['ratio']:.1f} ({row['ratio_cpu']:.1f}) | {row['per_time']:.3f} ({row['per_time_cpu']:.3f}) | "
-                  f"{load0:.1f} / {load1:.1f} |", flush=True)
+                  f"{_eta(job['eta'][0])} / {_eta(job['eta'][1])} | {load0:.1f} / {load1:.1f} |", flush=True)
+            if two_jobs and speed == max(speeds):
+                two_at_once(root)
         finally:
             shutil.rmtree(root, ignore_errors=True)
     worst = max(rows, key=lambda r: r["couple"] + r["fields"])
@@ -281,7 +326,7 @@ def main() -> None:
     if args.sweep:
         quick = args.quick
         sweep(args.speeds, 60 if quick else args.frames, 3000 if quick else args.points, args.threads,
-              min(args.subset, 2) if quick else args.subset)
+              min(args.subset, 2) if quick else args.subset, args.two_jobs)
         return
     one(args.frames, args.points, args.threads, args.subset, args.two_jobs)
     if args.scaling:

@@ -17,7 +17,8 @@ from scipy.spatial import cKDTree
 from ..errors import ConfigError, DataError
 from ..validation import as_int, bool_mask, choice, float_array, positive
 from .stencil import chebyshev, interior_stencil
-from .tiles import EdgeBatch, check_unisolvent, edge_windows
+from .batch import EdgeBatch
+from .tiles import check_unisolvent, edge_windows
 
 __all__ = ["METHODS", "Evaluation", "MaskedGridInterpolant", "MaskedGridRBF"]
 
@@ -360,7 +361,7 @@ class MaskedGridInterpolant:
     def evaluate_grouped(self, pts, g, derivs, edges=None, need=None):
         """Fields ``group * g + slot`` at ``pts[group]``; returns (G, g, M) x 3 and (G, M).
 
-        ``edges``: an :class:`~irdic.image_rbf.tiles.EdgeBatch` that collects
+        ``edges``: an :class:`~irdic.image_rbf.batch.EdgeBatch` that collects
         the points near the mask edge instead of evaluating them; the returned
         arrays (views of the ones it writes into) hold their values once
         ``edges.run()`` returns. ``need`` (M,) bool: the points whose

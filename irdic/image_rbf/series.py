@@ -3,6 +3,11 @@
 For each evaluation time ``t_k`` the frames are combined by the temporal
 cardinal weights, ``G_k = F l_t(t_k)`` and ``G'_k = F l_t'(t_k)``, and both are
 interpolated in space at the points ``P_k`` (see :mod:`irdic.image_rbf`).
+
+With a moving mask the tensor product interpolates each pixel's series over
+all frames, so pixels that changed between specimen and background within a
+few frames of ``t_k`` carry mixed values in ``G_k``; an eroded mask avoids
+that.
 """
 
 from __future__ import annotations
@@ -15,13 +20,15 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import ConfigError, DataError, IrdicWarning
-from ..logs import Progress
+from ..logs import Progress, report
 from ..numerics.temporal import TemporalInterpolant
 from ..numerics.threads import parallel_map
 from ..threads import blas_threads
 from ..validation import as_int, bool_mask, choice, float_array
 from .interpolant import METHODS, MaskedGridInterpolant
-from .tiles import EdgeBatch
+from .stencil import interior_stencil
+from .batch import EdgeBatch
+from .tiles import edge_windows
 
 
 __all__ = ["SeriesEvaluation", "evaluate_series"]
@@ -216,8 +223,7 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
         values; the frames through it are interpolated in the same pass, extra right-hand sides of the same
         tile factorisations (``theta_extra``, no derivatives).
     derivatives : array_like of bool, shape (M,), optional
-        The points whose ``dTheta/du``, ``dTheta/dv`` are wanted (default all);
-        the others' may be NaN (e.g. samples where only values matter).
+        Points whose ``dTheta/du``, ``dTheta/dv`` are wanted (default all; the others' may be NaN).
 
     Returns
     -------
@@ -228,13 +234,6 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     DataError
         A masked pixel with a non-finite value (naming the first: frame,
         frame time, pixel), or a mask without 3 pixels off a line.
-
-    Notes
-    -----
-    With a moving mask the tensor product interpolates each pixel's series
-    over all frames, so pixels that changed between specimen and background
-    within a few frames of ``t_k`` carry mixed values in ``G_k``; an eroded
-    mask avoids that.
     """
     method = choice(method, "method", METHODS)
     chunk = as_int(chunk, "chunk", 1)
@@ -248,14 +247,20 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     union = _union(masks)
     F, lookup = _pixel_series(frames, union, ft, *((None, None) if u is None or v is None else (u, v)), name)
     extra = None if pixel_operator is None else pixel_operator(union, np.c_[np.nonzero(union)[::-1]])  # F's rows
-    need = None
-    if derivatives is not None:
-        need = np.asarray(derivatives, dtype=bool)
-        if need.shape != (pts.shape[1],):
-            raise ConfigError(f"derivatives must have shape (M,) = ({pts.shape[1]},) like the points, got {need.shape}")
+    need = _wanted(derivatives, pts.shape[1])
     out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk,
                     dict(method=method, c=c, R0=R0, halo=halo, tile=tile), extra, need)
     return SeriesEvaluation(*out[:5], in_span, out[5] if extra is not None else None)
+
+
+def _wanted(derivatives, M):
+    """The points (M,) whose derivatives are wanted, or None for all."""
+    if derivatives is None:
+        return None
+    need = np.asarray(derivatives, dtype=bool)
+    if need.shape != (M,):
+        raise ConfigError(f"derivatives must have shape (M,) = ({M},) like the points, got {need.shape}")
+    return need
 
 
 def _eval_times(eval_times):
@@ -289,7 +294,7 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
     The chunks run on the stage's worker threads (:func:`~irdic.numerics.threads.parallel_map`),
     each thread with the interpolant of its current mask; a chunk's edge
     tiles, of all its times whatever their masks, are solved together
-    (:class:`~irdic.image_rbf.interpolant.EdgeBatch`). Chunks write disjoint rows of the results.
+    (:class:`~irdic.image_rbf.batch.EdgeBatch`). Chunks write disjoint rows of the results.
     """
     ks = np.flatnonzero(in_span)
     Wv = temporal.weights(te[ks], 0) if ks.size else None
@@ -299,6 +304,10 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
     g = 2 if extra is None else 3
     # theta, d/du, d/dv, d/dt, edge distance, and theta through extra when there is one
     out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(5 if extra is None else 6)]
+    if interp_args["method"] == "rbf":
+        # the shared factors (stencils, edge windows) built here, on one BLAS thread, before the workers start
+        interior_stencil(interp_args["c"] * interp_args["R0"], interp_args["halo"])
+        edge_windows(interp_args["c"] * interp_args["R0"], interp_args["tile"], interp_args["halo"])
     progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
     done = [0]
     lock = threading.Lock()
@@ -332,6 +341,7 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
         with lock:
             done[0] += ch.size
             progress.update(done[0])
+            report("interpolation", done[0] / ks.size)
 
     parallel_map(work, _pieces(ks, chunk))
     log.info("evaluate_series: %d times x %d points, %d masked px (union), %d mask(s)", te.size, pts.shape[1],

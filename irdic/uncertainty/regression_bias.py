@@ -216,16 +216,7 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
         ok &= np.asarray(trusted, dtype=bool).reshape(trusted.shape + (1,) * (d.ndim - 2))
     if not np.isfinite(psi).all(axis=1).any():
         return np.zeros(d.shape)
-    # the neighbourhood, then a wider one where the bias is below the neighbourhood's resolution, then all points
-    wide = [] if spacing is None else [min(WIDE_MAX, int(np.pi * float(np.max(spacing)) ** 2))]
-    nbs = []
-    for k in [BIAS_NEIGHBOURS] + [n for n in wide if n > BIAS_NEIGHBOURS] + ([None] if pooled else []):
-        nb = None if neighbourhoods is None or k is None else neighbourhoods.get(k)
-        if nb is None and k is not None:
-            nb = _neighbours(psi, k)
-            if neighbourhoods is not None:
-                neighbourhoods[k] = nb
-        nbs.append(nb)
+    nbs = _neighbourhoods(psi, spacing, pooled, neighbourhoods)
     simple = null is None or len(null) < 2
     if simple:
         nbs = nbs[:1]
@@ -241,20 +232,41 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     for t0 in range(0, T, step):
         t1 = min(T, t0 + step)
         e0, e1 = max(0, t0 - 1), min(T, t1 + 1)
-        okb, vb = ok[e0:e1], noise_var[e0:e1]
-        ab = np.where(okb, np.square(d[e0:e1]) - vb, 0.0)
-        res = None
-        for nb, scale in zip(nbs, scales):
-            count = _local_count(okb, nb)
-            est = _local_mean(ab, okb, nb, count)
-            if simple:
-                res = np.maximum(est, 0.0)
-                break
-            se = scale * _local_mean(np.where(okb, vb, 0.0), okb, nb, count)
-            est = np.where(est > z * se, est, 0.0)
-            res = est if res is None else np.where(res > 0, res, est)
+        res = _local_estimate(d[e0:e1], noise_var[e0:e1], ok[e0:e1], nbs, scales, z)
         out[t0:t1] = np.sqrt(share * res[t0 - e0:t1 - e0])
     return out
+
+
+def _neighbourhoods(psi, spacing, pooled, cache):
+    """The neighbourhoods :func:`local_bias` averages over, in order: the :data:`BIAS_NEIGHBOURS` nearest
+    points, then a wider one where the bias is below their resolution, then (``pooled``) all points (None);
+    from ``cache`` by size where built before."""
+    wide = [] if spacing is None else [min(WIDE_MAX, int(np.pi * float(np.max(spacing)) ** 2))]
+    nbs = []
+    for k in [BIAS_NEIGHBOURS] + [n for n in wide if n > BIAS_NEIGHBOURS] + ([None] if pooled else []):
+        nb = None if cache is None or k is None else cache.get(k)
+        if nb is None and k is not None:
+            nb = _neighbours(psi, k)
+            if cache is not None:
+                cache[k] = nb
+        nbs.append(nb)
+    return nbs
+
+
+def _local_estimate(d, noise_var, ok, nbs, scales, z):
+    """``b²`` of :func:`local_bias` on a block of times: the first neighbourhood's estimate where it exceeds
+    ``z`` standard errors (``scales``: their factors; None: no null, the estimate as it is), else the next's."""
+    a = np.where(ok, np.square(d) - noise_var, 0.0)
+    res = None
+    for nb, scale in zip(nbs, scales):
+        count = _local_count(ok, nb)
+        est = _local_mean(a, ok, nb, count)
+        if scale is None:
+            return np.maximum(est, 0.0)
+        se = scale * _local_mean(np.where(ok, noise_var, 0.0), ok, nb, count)
+        est = np.where(est > z * se, est, 0.0)
+        res = est if res is None else np.where(res > 0, res, est)
+    return res
 
 
 #: Values per time block of :func:`local_bias` (its work arrays are a few of this size)
