@@ -15,6 +15,7 @@ import logging
 import os
 import re
 import sys
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -23,7 +24,8 @@ from typing import Callable, Iterator
 from .errors import IrdicError
 from .threads import stage_threads
 
-__all__ = ["stage_logging", "configure", "Progress", "failures", "show_last", "exit_on_error"]
+__all__ = ["stage_logging", "configure", "Progress", "StageProgress", "report", "failures", "show_last",
+           "exit_on_error"]
 
 _FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
 
@@ -203,3 +205,131 @@ class Progress:
             line = f"{self.what}: {done}/{self.total} {self.unit}, {el:.1f} s elapsed"
         self.log.info("%s", line)
         return line
+
+
+class StageProgress:
+    """Progress lines and an ETA for a whole stage: its parts weighted by a cost model.
+
+    Parameters
+    ----------
+    what : str
+        Prefix of the lines (the stage's name).
+    parts : dict of str to float
+        The stage's parts and their expected cost (seconds of one core, from
+        the part's size; only their ratios matter).
+    threads : int
+        The stage's threads (:func:`irdic.threads.thread_budget`); with
+        ``shares`` it turns the costs into wall time.
+    shares : dict of str to float, optional
+        The part of each part's cost that runs on all threads (the rest on one;
+        default all of it).
+    logger : logging.Logger
+    clock : callable
+        Seconds (monotonic); a test may pass a fake one.
+    tick : float or None
+        Seconds between checks for a line while a part runs without reporting
+        (a thread of its own while the stage runs; None: no thread, lines on
+        reports only).
+
+    Notes
+    -----
+    Parts report the fraction of themselves done (:func:`report`; 0 when they
+    start). With ``W`` the expected wall time of all parts, ``w`` that of the
+    work reported done and ``s = w / elapsed`` the speed so far, the ETA is
+    ``(W - w') / s``, where ``w'`` adds to ``w`` the running part's expected
+    share of the time since its last report (at the same speed, at most 90 % of
+    the part): a part that reports only its end still moves the ETA on. It is
+    right as far as the model's ratios of the parts are, whatever the
+    machine's speed. Lines at about every tenth of ``w' / W``. Used as a
+    context manager it is the stage's current one, which :func:`report` feeds
+    from anywhere in the stage (its worker threads too).
+    """
+
+    def __init__(self, what: str, parts: dict, *, threads: int = 1, shares: dict | None = None,
+                 logger: logging.Logger | None = None, clock: Callable[[], float] = time.perf_counter,
+                 tick: float | None = 1.0):
+        self.what = what
+        shares = shares or {}
+        n = max(1, int(threads))
+        # expected wall time of each part: the parallel share on n threads, the rest on one
+        self.weights = {k: float(c) * ((1.0 - shares.get(k, 1.0)) + shares.get(k, 1.0) / n) for k, c in parts.items()}
+        self.total = sum(self.weights.values()) or 1.0
+        self.done = dict.fromkeys(self.weights, 0.0)
+        self.log = logger if logger is not None else logging.getLogger("irdic")
+        self.clock = clock
+        self.tick = tick
+        self.started = clock()
+        self._next = 0.1
+        self._lock = threading.Lock()
+        self._previous = None
+        self._running = None  # (part, time of its last report)
+        self._last = None  # (work done, time) at the last report
+        self._stop = threading.Event()
+
+    def fraction(self, now: float | None = None) -> float:
+        """The expected part of the stage's wall time done (0..1), the running part extrapolated to ``now``."""
+        return self._state(self.clock() if now is None else now)[0]
+
+    def _state(self, now):
+        w = sum(self.weights[k] * self.done[k] for k in self.weights)
+        if self._last is None or w <= 0:
+            return w / self.total, None
+        w_last, t_last = self._last
+        speed = w_last / max(t_last - self.started, 1e-9)
+        if self._running is not None:
+            part, since = self._running
+            left = self.weights[part] * (1.0 - self.done[part])
+            w += min(0.9 * left, max(0.0, now - since) * speed)
+        return min(1.0, w / self.total), (self.total - w) / speed
+
+    def update(self, part: str, fraction: float) -> str | None:
+        """Report that ``fraction`` (0..1) of ``part`` is done; returns the line logged, if any."""
+        with self._lock:
+            if part not in self.done:
+                return None
+            now = self.clock()
+            self.done[part] = max(self.done[part], min(1.0, float(fraction)))
+            self._running = (part, now) if self.done[part] < 1.0 else None
+            w = sum(self.weights[k] * self.done[k] for k in self.weights)
+            if w > 0:
+                self._last = (w, now)
+            return self._line(now)
+
+    def _line(self, now):
+        """The line due at ``now`` (logged), if the work crossed the next tenth; call with the lock held."""
+        f, eta = self._state(now)
+        if f < self._next or eta is None:
+            return None
+        self._next = (int(f * 10) + 1) / 10
+        line = f"{self.what}: {100 * f:.0f} % of the work, {now - self.started:.1f} s elapsed, ETA {eta:.0f} s"
+        self.log.info("%s", line)
+        return line
+
+    def _ticker(self):
+        while not self._stop.wait(self.tick):
+            with self._lock:
+                self._line(self.clock())
+
+    def __enter__(self):
+        global _current
+        self._previous, _current = _current, self
+        if self.tick:
+            threading.Thread(target=self._ticker, daemon=True, name=f"{self.what} progress").start()
+        return self
+
+    def __exit__(self, *exc):
+        global _current
+        self._stop.set()
+        _current = self._previous
+        return False
+
+
+#: the StageProgress of the stage being run (None outside one)
+_current: StageProgress | None = None
+
+
+def report(part: str, fraction: float) -> None:
+    """Tell the running stage's :class:`StageProgress` that ``fraction`` of ``part`` is done (no-op without one)."""
+    cur = _current
+    if cur is not None:
+        cur.update(part, fraction)

@@ -50,6 +50,8 @@ from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..numerics.temporal import temporal_window
 from ..parameters import settings
 from ..timing.clock import ir_clock
+from ..logs import StageProgress, report
+from ..threads import thread_budget
 from ..vocabulary import Status, cf_attrs
 from .dataset import count_attrs, points_dataset
 
@@ -118,19 +120,57 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
     """
     p = settings("interpolation", params)
     _check_params(p["method"], p["mask_erosion_px"], p["max_extrapolation_px"], p["max_view_angle_deg"])
-    ir, clock = ir_clock(dic, ir, calibration, experiment)
-    ds = _couple_chunk(dic, ir, calibration, chunk, p) if chunk is not None else _couple(dic, ir, calibration, p)
+    only = None if chunk is None else _chunk_times(dic, chunk)
+    n_t = dic.sizes["time"] if only is None else only.stop - only.start
+    with StageProgress("couple", stage_costs(n_t, dic.sizes["point"], ir.sizes["time"]), threads=thread_budget(),
+                       shares=STAGE_SHARES, logger=log):
+        # the masks first: they do not depend on the IR clock, and their steady progress dates the stage early
+        footprint = _footprint(dic, ir, calibration, p, only)
+        report("clock", 0.0)
+        ir, clock = ir_clock(dic, ir, calibration, experiment)
+        report("clock", 1.0)
+        ds = _couple_chunk(dic, ir, calibration, chunk, p, footprint) if chunk is not None else \
+            _couple(dic, ir, calibration, p, footprint=footprint)
+        report("rest", 1.0)
     ds.attrs.update(clock)
     return ds
 
 
-def _couple_chunk(dic, ir, calibration, chunk, p) -> xr.Dataset:
+#: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
+#: DIC time and point (masks, interpolation with the extrapolation's samples, the rest) and per IR frame and
+#: point the IR clock reads (:data:`irdic.timing.offset.MAX_FRAMES`, :data:`~irdic.timing.offset.MAX_POINTS`);
+#: their ratios, measured on the moving tube of the benchmarks, are what the ETA rests on
+STAGE_COSTS = {"masks": 8e-6, "clock": 2.2e-5, "interpolation": 1.2e-5, "rest": 2e-6}
+#: the part of each that runs on the stage's threads (the masks' triangulations do not)
+STAGE_SHARES = {"masks": 0.6, "clock": 0.5, "interpolation": 0.9, "rest": 0.3}
+
+
+def stage_costs(n_t: int, n_points: int, n_frames: int) -> dict:
+    """Expected seconds of one core of the stage's parts for ``n_t`` DIC times, ``n_points`` points and
+    ``n_frames`` IR frames (:data:`STAGE_COSTS`)."""
+    from ..timing.offset import MAX_FRAMES, MAX_POINTS
+
+    tm = float(n_t) * n_points
+    return {"masks": STAGE_COSTS["masks"] * tm,
+            "clock": STAGE_COSTS["clock"] * min(n_frames, MAX_FRAMES) * min(n_points, MAX_POINTS),
+            "interpolation": STAGE_COSTS["interpolation"] * tm, "rest": STAGE_COSTS["rest"] * tm}
+
+
+def _chunk_times(dic, chunk) -> slice:
+    """The DIC times a time chunk's couple reads: its own with one neighbour each side (a time's mask is
+    intersected with its neighbours')."""
+    n = dic.sizes["time"]
+    sl = chunk_slice(n, *chunk)
+    return slice(max(sl.start - 1, 0), min(sl.stop + 1, n))
+
+
+def _couple_chunk(dic, ir, calibration, chunk, p, footprint=None) -> xr.Dataset:
     """:func:`couple` of one time chunk: its DIC times with one neighbour each side (the masks) and its IR window."""
     t_dic = dic["time"].values.astype(float)
     t_ir = ir["time"].values.astype(float)
     sl = chunk_slice(t_dic.size, *chunk)
-    # one neighbour each side: a time's mask is intersected with its neighbours'
-    a, b = max(sl.start - 1, 0), min(sl.stop + 1, t_dic.size)
+    only = _chunk_times(dic, chunk)
+    a, b = only.start, only.stop
     reach = temporal_window(t_ir, c=p["c_time"], R0=p["R0_time"])
     frames = window(t_ir, t_dic[sl.start], t_dic[sl.stop - 1], reach)
     if reach is None and chunk[1] > 1:
@@ -144,30 +184,39 @@ def _couple_chunk(dic, ir, calibration, chunk, p) -> xr.Dataset:
     whole = bool(((t_dic >= t_ir[0]) & (t_dic <= t_ir[-1])).any())
     # DIC positions of the whole record (small next to the IR frames): gaps are filled from the nearest valid
     # time and the choice of reused masks runs from the first time
-    ds = _couple(dic, ir.isel(time=frames), calibration, p, require_span=not whole, only=slice(a, b),
-                 record_times=t_ir)
+    ds = _couple(dic, ir.isel(time=frames), calibration, p, require_span=not whole, only=only,
+                 record_times=t_ir, footprint=footprint)
     ds = ds.isel(time=slice(sl.start - a, sl.stop - a))
     ds.attrs.update(ir_time_span_s=[float(t_ir[0]), float(t_ir[-1])], ir_frames=int(t_ir.size),
                     chunk=[int(chunk[0]), int(chunk[1])])
     return ds
 
 
-def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=None) -> xr.Dataset:
-    """The couple stage on ``ir``'s frames; ``only`` (a slice of DIC times) and ``record_times`` (the whole
-    record's IR frame times, for the noise gains) when ``ir`` is a chunk's window."""
-    started = _time.perf_counter()
+def _footprint(dic, ir, calibration, p, only=None):
+    """``(pr, side, masks, facing)``: the DIC points projected into the IR frames (of every time), the
+    footprint's box side, and the specimen masks and facing flags of the times ``only`` (all: None)."""
     camera = load_camera(calibration)
     u, v = ir["u"].values, ir["v"].values
-    t_ir = ir["time"].values.astype(float)
     _check_sensor(calibration, u, v)
     pr = project_points(camera, dic, u, v)
     _check_extent(pr)
-    n_t, M, _ = pr.x.shape
     side = footprint_side(pr)  # from the record's first stage: the same in every chunk
     masks, facing = masks_and_facing(
         pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
         np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],
         max_angle=p["max_view_angle_deg"], only=only)
+    return pr, side, masks, facing
+
+
+def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=None, footprint=None) -> xr.Dataset:
+    """The couple stage on ``ir``'s frames; ``only`` (a slice of DIC times) and ``record_times`` (the whole
+    record's IR frame times, for the noise gains) when ``ir`` is a chunk's window; ``footprint``: what
+    :func:`_footprint` gave for ``only`` (computed here without it)."""
+    started = _time.perf_counter()
+    camera = load_camera(calibration)
+    t_ir = ir["time"].values.astype(float)
+    pr, side, masks, facing = _footprint(dic, ir, calibration, p, only) if footprint is None else footprint
+    n_t, M, _ = pr.x.shape
     if only is not None:
         pr, dic = pr.times(only), dic.isel(time=only)
         n_t = pr.x.shape[0]
@@ -194,6 +243,7 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
     # the gains are a property of the operator and the record's frame spacing: the same in every chunk
     gains = interpolation_noise_gains(t_ir if record_times is None else record_times, method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
                                       R0_time=p["R0_time"], halo=p["halo"])
+    report("rest", 0.5)
     counts = {k[len("count_"):]: n for k, n in count_attrs(status).items()}
     log.info("couple: %d DIC times x %d points in %.1f s; %s", n_t, M, _time.perf_counter() - started,
              ", ".join(f"{k} {v}" for k, v in counts.items() if v))
@@ -298,10 +348,14 @@ def _interpolate(ir: xr.Dataset, t_dic: np.ndarray, pr: Projection, masks: np.nd
     query = np.where(seen[..., None], pr.local, np.nan)
     outside = seen & ~in_mask(masks, pr.local)
     samples, cols = extrapolation_samples(pr.local, masks, outside, p["max_extrapolation_px"])
+    # the extrapolation uses the derivatives of its first sample only (at the nearest masked pixel)
+    need = np.zeros(M + samples.shape[0] * samples.shape[2], dtype=bool)
+    need[:M + samples.shape[2]] = True
     res = evaluate_series(ir["temperature"], t_ir, t_dic, np.concatenate([query] + list(samples), axis=1), masks,
                           method=p["method"], c=p["c_space"], R0=p["R0_space"], c_time=p["c_time"],
                           R0_time=p["R0_time"], time_window=p["time_window"], halo=p["halo"], u=u, v=v,
-                          name="ir: frames", pixel_operator=(op := FootprintOperator(side)) if side > 1 else None)
+                          name="ir: frames", pixel_operator=(op := FootprintOperator(side)) if side > 1 else None,
+                          derivatives=need)
     theta, gu, gv, rate, edge = (np.array(a[:, :M], dtype=float) for a in
                                  (res.theta, res.dtheta_du, res.dtheta_dv, res.dtheta_dt, res.edge_distance))
     in_span = np.asarray(res.in_span)

@@ -29,6 +29,8 @@ import numpy as np
 import xarray as xr
 
 from ..chunks import chunk_slice, window
+from ..logs import StageProgress, report
+from ..threads import thread_budget
 from ..footprint.fields import footprint_temperatures, window_extras
 from ..noise import auto_smoothing
 from ..numerics.temporal import temporal_window
@@ -100,6 +102,32 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
     every chunk and in the whole-record run.
     """
     p = checked_settings(points, params)
+    n_t = points.sizes["time"] if chunk is None else chunk_slice(points.sizes["time"], *chunk).stop - \
+        chunk_slice(points.sizes["time"], *chunk).start
+    with StageProgress("fields", stage_costs(n_t, points.sizes["point"]), threads=thread_budget(),
+                       shares=STAGE_SHARES, logger=log):
+        ds, unc = _fields(points, calibration, chunk, p)
+        out = with_uncertainty(ds, unc)
+        report("rest", 1.0)
+    return out
+
+
+#: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
+#: DIC time and point of each part with the default settings (regressions, their noise probes and bias
+#: estimates), measured on the moving tube of the benchmarks; the ETA rests on their ratios
+STAGE_COSTS = {"setup": 1e-6, "fill": 2.7e-6, "surface": 7e-6, "regression": 3.8e-6, "uncertainty": 2.1e-5,
+               "rest": 2e-6}
+#: the part of each that runs on the stage's threads
+STAGE_SHARES = {"setup": 0.2, "fill": 0.9, "surface": 0.6, "regression": 0.6, "uncertainty": 0.6, "rest": 0.3}
+
+
+def stage_costs(n_t: int, n_points: int) -> dict:
+    """Expected seconds of one core of the stage's parts for ``n_t`` DIC times and ``n_points`` points."""
+    return {k: c * float(n_t) * n_points for k, c in STAGE_COSTS.items()}
+
+
+def _fields(points, calibration, chunk, p):
+    """:func:`fields` without its progress lines: the dataset and the uncertainties."""
     started = _time.perf_counter()
     t = points["time"].values.astype(float)
     x = points["x"].transpose("time", "point", "component").values.astype(float)
@@ -109,19 +137,24 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
     p.update(chosen)
     points = footprint_temperatures(points) if p["temperature_smoothing_space"] is not None else points
     configured = p["temperature_smoothing"]
+    report("setup", 1.0)
     ops = _fill_operators(points, x, p)
+    report("fill", 1.0)
+    report("surface", 0.0)
     points, sf, p, series = _surface(points, x, t, chunk, p, ops)
+    report("surface", 1.0)
     t = points["time"].values.astype(float)
     T, N = sf.x.shape[:2]
     geo = surface_geometry(sf.tangents)
     grad, total, loc, convective, best, unc = temperature_fields(points, calibration, sf, geo, t, p, noise_attrs,
                                                                   series, ops)
+    report("rest", 0.0)
     ops.clear()  # the factorisations (GBs at paper scale) go before the output dataset is built
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
              _time.perf_counter() - started, method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
-    ds = fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, configured, noise_attrs)
-    return with_uncertainty(ds, unc)
+    report("rest", 0.5)
+    return fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, configured, noise_attrs), unc
 
 
 def _fill_operators(points, x, p) -> dict:
@@ -140,6 +173,7 @@ def _fill_operators(points, x, p) -> dict:
     from ..surface import shared_interpolant
 
     ops = {}
+    report("fill", 0.0)
     psi = surface_parameters(x, p["parametrisation"])[0]
     have = np.isfinite(psi).all(axis=1)
     theta = points["temperature"].values

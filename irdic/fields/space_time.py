@@ -14,6 +14,7 @@ import numpy as np
 from ..camera import load_camera
 from ..footprint.fields import paper_value
 from ..gradient import material_rate, surface_gradient
+from ..logs import report
 from ..numerics.series import fill_series, smooth_series
 from ..numerics.temporal import RATE_MAX_FRACTION, rate_reference_weights
 from ..uncertainty.model import uncertainties
@@ -43,6 +44,7 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     local = points["temperature_local_rate"].values.astype(float)
     theta = points["temperature"].values.astype(float)
     grad = surface_gradient(g_pix, J, sf.tangents)
+    report("regression", 0.0)
     rate = material_rate(local, g_pix, J, sf.velocity)
     total, loc = rate.rate, rate.local
     visible = np.isfinite(theta)
@@ -69,8 +71,11 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     def regress_space(th, dual, k):
         return regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"], ops=ops)[:2]
 
+    report("regression", 1.0)
+    report("uncertainty", 0.0)
     unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
                         g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial, ops=ops)
+    report("uncertainty", 1.0)
     return grad, total, loc, rate.convective, best, unc
 
 

@@ -120,9 +120,13 @@ def specimen_mask(
             f"or coincide (they span {span[0]:.3g} x {span[1]:.3g} px), so they cover no area of the image; check "
             "that the DIC export holds a surface (not a line of points) and that the camera looks at it"
         ) from None
-    spacing = np.median(cKDTree(p).query(p, k=2)[0][:, 1])
     corners = p[tri.simplices]
-    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    lengths = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)  # (n, 3): edge i from corner i - 1
+    if tri.coplanar.size:  # points left out of the triangulation (duplicates): their neighbours by a tree
+        spacing = np.median(cKDTree(p).query(p, k=2)[0][:, 1])
+    else:
+        spacing = np.median(_nearest_distance(tri.simplices, lengths, p.shape[0]))
+    edges = lengths.max(axis=1)
     keep = edges <= max_edge_factor * max(spacing, 1e-12)
     # only the bounding box of the cloud needs testing
     iu = np.flatnonzero((u >= p[:, 0].min() - 1) & (u <= p[:, 0].max() + 1))
@@ -131,10 +135,30 @@ def specimen_mask(
         return mask
     mask[np.ix_(iv, iu)] = _rasterise(corners[keep], u[iu], v[iv])
     if erosion_px > 0:
-        # erode by a Euclidean distance rather than a square structuring element
-        dist = ndimage.distance_transform_edt(mask)
-        mask &= dist > erosion_px
+        # erode by a Euclidean distance rather than a square structuring element: a pixel stays when no
+        # unmasked pixel centre lies within erosion_px (beyond the frame counts as masked), i.e. the
+        # Euclidean distance transform's ``dist > erosion_px``, as an erosion by the disc of those offsets
+        mask = ndimage.binary_erosion(mask, structure=_disc(erosion_px), border_value=1)
     return mask
+
+
+def _disc(radius):
+    """The integer offsets within ``radius`` (px) of the centre, as a structuring element (the same
+    comparison as ``distance_transform_edt(...) <= radius``)."""
+    r = int(np.floor(radius))
+    a = np.arange(-r, r + 1)
+    return np.sqrt((a[:, None] ** 2 + a[None, :] ** 2).astype(float)) <= radius
+
+
+def _nearest_distance(simplices, lengths, n):
+    """Distance (px) from each of ``n`` points to its nearest other point: the shortest Delaunay edge at it
+    (a point's nearest neighbour is always one of its Delaunay neighbours); ``lengths`` (m, 3) of the edges
+    from corner ``i - 1`` to corner ``i`` of each simplex; every point a vertex of some simplex."""
+    d = np.full(n, np.inf)
+    e = lengths.ravel()
+    for a in (simplices, np.roll(simplices, 1, axis=1)):
+        np.minimum.at(d, a.ravel(), e)
+    return d
 
 
 def _rasterise(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:

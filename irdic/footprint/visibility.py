@@ -11,12 +11,14 @@ out.
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 
 from ..errors import CalibrationError, DataError
+from ..logs import report
 from .mask import facing_camera, point_normals, specimen_mask
 from ..numerics.threads import parallel_map
 
@@ -64,17 +66,25 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, o
     masks = np.zeros((keep_t.size, v.size, u.size), dtype=bool)
     facing = np.zeros((keep_t.size, M), dtype=bool)
 
+    done = [0]
+    lock = threading.Lock()
+
     def build(j):
         n = point_normals(xf[j], towards=centre)
         f = facing_camera(xf[j], n, centre, max_angle_deg=max_angle)
         keep = np.isfinite(pf[j]).all(axis=1) & f
-        return specimen_mask(pf[j][keep], u, v, erosion_px=erosion, max_edge_factor=edge_factor), f
+        out = specimen_mask(pf[j][keep], u, v, erosion_px=erosion, max_edge_factor=edge_factor), f
+        with lock:
+            done[0] += 1
+            report("masks", done[0] / sources.size)
+        return out
 
     sources = np.unique(source[keep_t][source[keep_t] >= 0])
     built = dict(zip(sources.tolist(), parallel_map(build, sources.tolist())))
     for row, k in enumerate(keep_t):
         if source[k] >= 0:
             masks[row], facing[row] = built[int(source[k])]
+    report("masks", 1.0)
     rebuilt = len(built)
     n_t = keep_t.size
     # a pixel the moving edge crosses between neighbouring times carries mixed

@@ -59,16 +59,19 @@ determined, to ~1e-5 of the local data variation, by the masked pixels within
   coefficients.
 * *Near the mask edge* (:mod:`.tiles`): overlapping tiles, a core of ``tile``
   x ``tile`` pixels plus every masked pixel within ``halo`` of the core
-  (~600 px). One Cholesky factorisation per tile (IMQ is positive definite;
-  the monomials enter through a 3 x 3 Schur complement) serves every field
-  and time while the mask is unchanged; points are evaluated directly from
-  the tile's RBF coefficients. Factorisations are cached by the tile's local
-  mask pattern alone (relative pixel positions), shared by all tile positions,
-  masks and times, so a moving edge factorises only patterns not seen before.
-  Even those are mostly extensions: within a run of masks (``evaluate_series``)
-  a tile orders the pixels every mask of the run has first; their Cholesky
-  factor, and the triangular solves of the pixels near the outline, are shared,
-  and a new pattern costs only the factor of its few outline pixels.
+  (its *window*, ~840 px, ~570 masked on a moving tube's edge). The window
+  is the same for every tile, so each tile's saddle system (IMQ is positive
+  definite; the monomials enter through a 3 x 3 Schur complement) is a
+  principal submatrix of one kernel matrix: its Cholesky factor is a leading
+  block of a factor of the whole window in a pixel order that sorts the
+  window along the outline's normal (one of 128 directions; 16 factorisations
+  serve all, by the window's symmetries), extended by the few pixels past
+  that block (a Schur complement of their rows of the factor). Nothing is
+  factorised per mask or pattern, and the triangular solves of the tiles of
+  many times run as one matrix product per order: a tile costs the same
+  whether the outline stands still or moves. Points are evaluated directly
+  from the tile's RBF coefficients. The interpolant is that of each tile's
+  own pixels (to round-off, ~1e-12 of the values).
 
 *Accuracy* against :func:`exact_global_interpolant` (tests, benchmark), fields
 of tens of K with 0.05 K noise: ~3e-5 K and ~6e-5 K/px from ``halo`` px off the
@@ -85,10 +88,13 @@ about 2.5 x the interior stencils; a global CG solve with an FFT (BTTB)
 product needs ~100-1000 FFTs of a padded grid per field (condition 1e5-1e6)
 and then still a 50k-centre sum at every point, whose 1/r tail defeats
 truncation; per-point local solves cost a (441 + 3)^2 product per point. The
-stencils plus edge tiles win by > 5 x. Measured run times and memory are in
+stencils plus edge tiles win by > 5 x. Edge tiles factorised per mask pattern
+(cached by pattern, extending shared factors of the pixels neighbouring masks
+have in common) cost more the faster the outline moves: a moving outline
+makes most patterns new at every time. Measured run times and memory are in
 ``benchmarks/README.md`` (``benchmarks/bench_rbf.py``). Every stage limits
-BLAS to the threads it was given (:mod:`irdic.threads`); the ~600 x 600
-Cholesky factorisations gain nothing from more than one.
+BLAS to the threads it was given (:mod:`irdic.threads`); the ~840 x 840
+triangular products of the edge tiles gain little from more than one.
 """
 
 from ..numerics.imq import imq, imq_dr

@@ -17,7 +17,8 @@ from scipy.spatial import cKDTree
 from ..errors import ConfigError, DataError
 from ..validation import as_int, bool_mask, choice, float_array, positive
 from .stencil import chebyshev, interior_stencil
-from .tiles import EDGE_BLOCK, TileCache, build_tile, check_unisolvent, eval_tile_block
+from .batch import EdgeBatch
+from .tiles import check_unisolvent, edge_windows
 
 __all__ = ["METHODS", "Evaluation", "MaskedGridInterpolant", "MaskedGridRBF"]
 
@@ -81,15 +82,6 @@ class MaskedGridInterpolant:
         local data variation; 8 gives ~1e-4).
     tile : int
         Core size in px of the tiles used near the mask edge.
-    tile_cache : TileCache, optional
-        Factorised edge tiles shared with other interpolants (e.g. of the
-        masks of neighbouring times); default a private cache.
-    stable_mask : array_like of bool, shape (H, W), optional
-        Pixels masked in this mask and in the masks of neighbouring times
-        (their intersection). An edge tile's factorisation then extends a
-        shared factor of its stable pixels instead of starting afresh (the
-        same interpolant to round-off; only with ``tile_cache`` shared).
-
     Attributes
     ----------
     mask : ndarray of bool, shape (H, W)
@@ -105,11 +97,12 @@ class MaskedGridInterpolant:
     -----
     Typical use: ``MaskedGridInterpolant(mask).fit(fields).evaluate(points)``.
     The object depends on the mask only; :meth:`fit` may be called again with
-    new fields (all setup, including edge factorisations, is reused); edge
-    tiles are factorised on first use (setup times: ``benchmarks/README.md``).
+    new fields (all setup is reused). The edge tiles' factors are those of the
+    process (:func:`~irdic.image_rbf.tiles.edge_windows`, built once per
+    ``c * R0``, ``tile`` and ``halo``), whatever the mask.
     """
 
-    def __init__(self, mask, *, method="rbf", c=2.0, R0=1.0, halo=12, tile=8, tile_cache=None, stable_mask=None):
+    def __init__(self, mask, *, method="rbf", c=2.0, R0=1.0, halo=12, tile=8):
         self.method = choice(method, "method", METHODS)
         self.c = positive(c, "c")
         self.R0 = positive(R0, "R0")
@@ -123,12 +116,6 @@ class MaskedGridInterpolant:
         self.n_mask = vv.size
         check_unisolvent(uu.astype(float), vv.astype(float), "mask")
         self.pixels = np.c_[uu, vv]
-        self._stable = None
-        if stable_mask is not None:
-            st = bool_mask(stable_mask, "stable_mask")
-            if st.shape != m.shape:
-                raise ConfigError(f"stable_mask must have the mask's shape {m.shape}, got {st.shape}")
-            self._stable = st & m
 
         margin = self.halo if self.method == "rbf" else _MARGIN[self.method]
         self._rv0 = int(vv.min()) - margin
@@ -165,7 +152,7 @@ class MaskedGridInterpolant:
             # Interior: the whole disc of radius halo is masked (edt is exact
             # for integer squared distances, so the comparison is exact).
             self._interior = mr & (dist > self.halo)
-            self._tiles = tile_cache if tile_cache is not None else TileCache()
+            self._windows = edge_windows(self._ce, self.tile, self.halo)
             log.debug(
                 "MaskedGridInterpolant: %d masked px, %d interior (halo %d px)",
                 self.n_mask, int(self._interior.sum()), self.halo,
@@ -231,7 +218,6 @@ class MaskedGridInterpolant:
         grid = np.zeros((nf, self._Hr, self._Wr))
         grid[:, self._vr, self._ur] = vals
         self._nf = nf
-        self._alpha = {}
         if self.method == "rbf":
             self._grid = grid
             # float32 copy around a per-field offset, for the gathers of the
@@ -372,8 +358,15 @@ class MaskedGridInterpolant:
                 du, dv = du[0], dv[0]
         return Evaluation(val, du, dv, edge)
 
-    def evaluate_grouped(self, pts, g, derivs):
-        """Fields ``group * g + slot`` at ``pts[group]``; returns (G, g, M) x 3 and (G, M)."""
+    def evaluate_grouped(self, pts, g, derivs, edges=None, need=None):
+        """Fields ``group * g + slot`` at ``pts[group]``; returns (G, g, M) x 3 and (G, M).
+
+        ``edges``: an :class:`~irdic.image_rbf.batch.EdgeBatch` that collects
+        the points near the mask edge instead of evaluating them; the returned
+        arrays (views of the ones it writes into) hold their values once
+        ``edges.run()`` returns. ``need`` (M,) bool: the points whose
+        derivatives are wanted (default all; the others' may be left NaN).
+        """
         G, M, _ = pts.shape
         flat = pts.reshape(-1, 2)
         u, v = flat[:, 0], flat[:, 1]
@@ -391,7 +384,11 @@ class MaskedGridInterpolant:
             if self.method == "rbf":
                 inner = self._interior[pv[idx], pu[idx]]
                 self._eval_interior(idx[inner], grp[inner], u, v, pu, pv, g, derivs, val, du, dv)
-                self._eval_edge(idx[~inner], grp[~inner], G, u, v, pu, pv, g, derivs, val, du, dv)
+                batch = EdgeBatch() if edges is None else edges
+                batch.add(self, idx[~inner], grp[~inner], G, u, v, pu, pv, g, derivs, (val, du, dv),
+                          None if need is None else np.tile(np.asarray(need, bool), G))
+                if edges is None:
+                    batch.run()
             elif self.method == "bilinear":
                 self._eval_bilinear(idx, grp, u, v, g, val, du, dv)
             else:
@@ -446,37 +443,6 @@ class MaskedGridInterpolant:
                         du[sel, f] = np.einsum("na,na->n", ZTv, Du[b0:b1])
                         dv[sel, f] = np.einsum("nab,na,nb->n", Z, tu, Dv[b0:b1])
 
-    def _tile_alpha(self, key):
-        """Tile ``key = (ty, tx)`` and the RBF and monomial coefficients of all fitted fields on it."""
-        got = self._alpha.get(key)
-        if got is None:
-            with self._tiles.lock:  # the cache is shared by the worker threads of evaluate_series
-                tile = build_tile(self._tiles, self.mask, key[0], key[1], self.tile, self.halo, self._ce,
-                                  self._stable)
-            F = self._grid[:, tile.pv - self._rv0, tile.pu - self._ru0].T
-            alpha, beta = tile.fac.solve(F)
-            got = (tile, np.ascontiguousarray(alpha.T), beta.T)  # (nf, n_t), (nf, 3)
-            self._alpha[key] = got
-        return got
-
-    def _eval_edge(self, idx, grp, G, u, v, pu, pv, g, derivs, val, du, dv):
-        if idx.size == 0:
-            return
-        C = self.tile
-        ty = (pv[idx] + self._rv0) // C
-        tx = (pu[idx] + self._ru0) // C
-        key = ty * (self.shape[1] // C + 1) + tx
-        order = np.argsort(key, kind="stable")
-        idx, grp, ty, tx, key = idx[order], grp[order], ty[order], tx[order], key[order]
-        starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
-        ends = np.append(starts[1:], key.size)
-        for s0, s1 in zip(starts, ends):
-            tile, alpha, beta = self._tile_alpha((int(ty[s0]), int(tx[s0])))
-            for b0 in range(s0, s1, EDGE_BLOCK):
-                b1 = min(b0 + EDGE_BLOCK, s1)
-                eval_tile_block(tile, alpha, beta, self._ce, u, v, idx[b0:b1], None if G == 1 else grp[b0:b1],
-                                g, derivs, (val, du, dv))
-
     def _eval_bilinear(self, idx, grp, u, v, g, val, du, dv):
         x = u[idx] - self._ru0
         y = v[idx] - self._rv0
@@ -514,7 +480,6 @@ class MaskedGridInterpolant:
 
 MaskedGridRBF = MaskedGridInterpolant
 """Alias of :class:`MaskedGridInterpolant` (``method="rbf"`` is the default)."""
-
 
 def _bspline3(t):
     """Cubic B-spline weights (n, 4) and their derivatives for offsets -1..2 of floor(x)."""

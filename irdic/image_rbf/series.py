@@ -3,6 +3,11 @@
 For each evaluation time ``t_k`` the frames are combined by the temporal
 cardinal weights, ``G_k = F l_t(t_k)`` and ``G'_k = F l_t'(t_k)``, and both are
 interpolated in space at the points ``P_k`` (see :mod:`irdic.image_rbf`).
+
+With a moving mask the tensor product interpolates each pixel's series over
+all frames, so pixels that changed between specimen and background within a
+few frames of ``t_k`` carry mixed values in ``G_k``; an eroded mask avoids
+that.
 """
 
 from __future__ import annotations
@@ -15,13 +20,16 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import ConfigError, DataError, IrdicWarning
-from ..logs import Progress
+from ..logs import Progress, report
 from ..numerics.temporal import TemporalInterpolant
 from ..numerics.threads import parallel_map
 from ..threads import blas_threads
 from ..validation import as_int, bool_mask, choice, float_array
 from .interpolant import METHODS, MaskedGridInterpolant
-from .tiles import TileCache
+from .stencil import interior_stencil
+from .batch import EdgeBatch
+from .tiles import edge_windows
+
 
 __all__ = ["SeriesEvaluation", "evaluate_series"]
 
@@ -29,11 +37,6 @@ log = logging.getLogger(__name__)
 
 # Bytes of frames read per block (float32 frames: 128 MB).
 _READ_BYTES = 2**27
-# Distinct masks per run that shares a stable mask (their intersection): the
-# edge tiles' factors of the stable pixels are shared within the run. Longer
-# runs share more but leave more pixels outside the intersection (moving
-# tube: ~4 x fewer flops than a factorisation per new pattern at 16).
-_STABLE_RUN = 32
 
 
 class SeriesEvaluation(NamedTuple):
@@ -144,19 +147,20 @@ def _warn_out_of_span(in_span, te, ft):
     return in_span
 
 
-def _pieces(ks, mask_of, chunk):
-    """Runs of consecutive in-span times with the same mask, cut into chunks."""
+def _pieces(ks, chunk):
+    """Runs of consecutive in-span times, cut into chunks."""
     pieces = []
     if ks.size:
-        cut = np.flatnonzero((np.diff(ks) != 1) | (np.diff(mask_of[ks]) != 0)) + 1
+        cut = np.flatnonzero(np.diff(ks) != 1) + 1
         for run in np.split(ks, cut):
             pieces.extend(run[i:i + chunk] for i in range(0, run.size, chunk))
     return pieces
 
 
 def _combined_frames(F, sel, Wv, Wd, n_mask, extra=None):
-    """``G_k`` and ``G'_k`` of a chunk: (chunk, 2, n_mask); with the sparse operator ``extra`` (n_u, n_u)
-    on the union's pixels (the rows of ``F``), ``extra G_k`` too: (chunk, 3, n_mask)."""
+    """``G_k`` and ``G'_k`` of a chunk at the pixels ``sel`` of the rows of ``F``: (chunk, 2, n_mask); with the
+    sparse operator ``extra`` (n_u, n_u) on the union's pixels (the rows of ``F``), ``extra G_k`` too:
+    (chunk, 3, n_mask)."""
     vals = np.empty((Wv.shape[0], 2 if extra is None else 3, n_mask))
     for j, Wt in enumerate((Wv, Wd)):
         # the temporal cardinal weights decay like the spatial ones: only
@@ -173,7 +177,7 @@ def _combined_frames(F, sel, Wv, Wd, n_mask, extra=None):
 
 def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rbf", c=2.0, R0=1.0, c_time=1.0,
                     R0_time=1.0, time_window=None, halo=12, tile=8, chunk=32, u=None, v=None, name="frames",
-                    pixel_operator=None):
+                    pixel_operator=None, derivatives=None):
     """Temperatures, gradients and rates at moving points over a frame series.
 
     Parameters
@@ -218,6 +222,8 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
         ``(union mask (H, W), its pixels (n, 2) (u, v)) -> sparse (n, n)``, a linear operator on the pixel
         values; the frames through it are interpolated in the same pass, extra right-hand sides of the same
         tile factorisations (``theta_extra``, no derivatives).
+    derivatives : array_like of bool, shape (M,), optional
+        Points whose ``dTheta/du``, ``dTheta/dv`` are wanted (default all; the others' may be NaN).
 
     Returns
     -------
@@ -228,13 +234,6 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     DataError
         A masked pixel with a non-finite value (naming the first: frame,
         frame time, pixel), or a mask without 3 pixels off a line.
-
-    Notes
-    -----
-    With a moving mask the tensor product interpolates each pixel's series
-    over all frames, so pixels that changed between specimen and background
-    within a few frames of ``t_k`` carry mixed values in ``G_k``; an eroded
-    mask avoids that.
     """
     method = choice(method, "method", METHODS)
     chunk = as_int(chunk, "chunk", 1)
@@ -248,9 +247,20 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     union = _union(masks)
     F, lookup = _pixel_series(frames, union, ft, *((None, None) if u is None or v is None else (u, v)), name)
     extra = None if pixel_operator is None else pixel_operator(union, np.c_[np.nonzero(union)[::-1]])  # F's rows
+    need = _wanted(derivatives, pts.shape[1])
     out = _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk,
-                    dict(method=method, c=c, R0=R0, halo=halo, tile=tile), extra)
+                    dict(method=method, c=c, R0=R0, halo=halo, tile=tile), extra, need)
     return SeriesEvaluation(*out[:5], in_span, out[5] if extra is not None else None)
+
+
+def _wanted(derivatives, M):
+    """The points (M,) whose derivatives are wanted, or None for all."""
+    if derivatives is None:
+        return None
+    need = np.asarray(derivatives, dtype=bool)
+    if need.shape != (M,):
+        raise ConfigError(f"derivatives must have shape (M,) = ({M},) like the points, got {need.shape}")
+    return need
 
 
 def _eval_times(eval_times):
@@ -276,15 +286,15 @@ def _frame_times(frame_times, n_frames):
     return ft
 
 
-@blas_threads(1)  # thousands of small tile factorisations: threaded BLAS only synchronises
-def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra=None):
+@blas_threads(1)  # many small triangular solves and products: threaded BLAS only synchronises
+def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, interp_args, extra=None, need=None):
     """theta, d/du, d/dv, d/dt, edge distance and theta through ``extra`` (sparse, on the rows of ``F``)
     (n_times, M) for the in-span times, chunk by chunk.
 
     The chunks run on the stage's worker threads (:func:`~irdic.numerics.threads.parallel_map`),
-    each thread with the interpolant of its current mask; they share the
-    factorised edge tiles (:class:`TileCache`, built under its lock) and write
-    disjoint rows of the results.
+    each thread with the interpolant of its current mask; a chunk's edge
+    tiles, of all its times whatever their masks, are solved together
+    (:class:`~irdic.image_rbf.batch.EdgeBatch`). Chunks write disjoint rows of the results.
     """
     ks = np.flatnonzero(in_span)
     Wv = temporal.weights(te[ks], 0) if ks.size else None
@@ -294,8 +304,10 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
     g = 2 if extra is None else 3
     # theta, d/du, d/dv, d/dt, edge distance, and theta through extra when there is one
     out = [np.full((te.size, pts.shape[1]), np.nan) for _ in range(5 if extra is None else 6)]
-    cache = TileCache()
-    stables = {}
+    if interp_args["method"] == "rbf":
+        # the shared factors (stencils, edge windows) built here, on one BLAS thread, before the workers start
+        interior_stencil(interp_args["c"] * interp_args["R0"], interp_args["halo"])
+        edge_windows(interp_args["c"] * interp_args["R0"], interp_args["tile"], interp_args["halo"])
     progress = Progress(ks.size, "evaluate_series", unit="times", logger=log)
     done = [0]
     lock = threading.Lock()
@@ -303,33 +315,35 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
 
     def interpolant(mi):
         if getattr(local, "mask", None) != mi:  # masks come in runs: a thread keeps only its current one
-            run = mi // _STABLE_RUN
-            if run not in stables:
-                stables[run] = np.logical_and.reduce(masks[run * _STABLE_RUN:(run + 1) * _STABLE_RUN])
-            local.interp = MaskedGridInterpolant(masks[mi], tile_cache=cache, stable_mask=stables[run],
-                                                 **interp_args)
+            local.interp = MaskedGridInterpolant(masks[mi], **interp_args)
             local.mask = mi
         return local.interp
 
     def work(ch):
-        interp = interpolant(int(mask_of[ch[0]]))
-        sel = lookup[interp.pixels[:, 1], interp.pixels[:, 0]]
-        if sel.size == F.shape[0]:
-            sel = slice(None)  # the mask is the union: no copy
         r = row_of[ch]
-        interp.fit_values(_combined_frames(F, sel, Wv[r], Wd[r], interp.n_mask, extra).reshape(g * ch.size, -1))
-        val, du, dv, ed = interp.evaluate_grouped(pts[ch], g, (True,) + (False,) * (g - 1))
-        for o, res in zip(out, (val[:, 0], du[:, 0], dv[:, 0], val[:, 1], ed, val[:, g - 1])):
-            o[ch] = res
+        G = _combined_frames(F, slice(None), Wv[r], Wd[r], F.shape[0], extra)  # (chunk, g, union pixels)
+        edges = EdgeBatch()
+        runs = []
+        mi = mask_of[ch]
+        cut = np.flatnonzero(np.diff(mi)) + 1
+        for run in np.split(np.arange(ch.size), cut):
+            interp = interpolant(int(mi[run[0]]))
+            sel = lookup[interp.pixels[:, 1], interp.pixels[:, 0]]
+            vals = G[run] if sel.size == F.shape[0] else G[run][:, :, sel]  # the mask is the union: no copy
+            interp.fit_values(vals.reshape(g * run.size, -1))
+            runs.append((ch[run], interp.evaluate_grouped(pts[ch[run]], g, (True,) + (False,) * (g - 1),
+                                                          edges=edges, need=need)))
+        del G
+        edges.run()
+        for times, (val, du, dv, ed) in runs:
+            for o, res in zip(out, (val[:, 0], du[:, 0], dv[:, 0], val[:, 1], ed, val[:, g - 1])):
+                o[times] = res
         with lock:
             done[0] += ch.size
             progress.update(done[0])
+            report("interpolation", done[0] / ks.size)
 
-    parallel_map(work, _pieces(ks, mask_of, chunk))
-    log.info(
-        "evaluate_series: %d times x %d points, %d masked px (union), %d mask(s), %d edge tiles factorised, "
-        "%d reused (hit rate %.0f %%), %d of the factorised extending a shared stable factor",
-        te.size, pts.shape[1], F.shape[0], len(masks), cache.built, cache.hits, 100 * cache.hit_rate,
-        cache.extended,
-    )
+    parallel_map(work, _pieces(ks, chunk))
+    log.info("evaluate_series: %d times x %d points, %d masked px (union), %d mask(s)", te.size, pts.shape[1],
+             F.shape[0], len(masks))
     return out

@@ -1,43 +1,48 @@
-"""Edge tiles: local saddle-point solves near the mask edge, cached by mask pattern.
+"""Edge tiles: the local saddle-point solves near the mask edge, from factors shared by every tile and time.
 
-A tile is a core of ``tile`` x ``tile`` pixels plus every masked pixel within
-``halo`` of the core (~600 px); one factorisation per tile serves every field
-and time while the local mask pattern is unchanged. Points are evaluated
-directly from the tile's RBF coefficients.
-
-The tile's system depends only on the relative positions of its masked pixels
-(the grid is shift invariant), so factorisations are cached by that local
-pattern alone and shared by every tile position, mask and time with the same
-pattern: a moving straight or gently curved outline repeats a few hundred
-patterns along its length and from time to time.
-
-A moving outline still makes most tiles new. Given a *stable* mask (pixels
-masked in every mask of a run of neighbouring times), a tile orders its stable
-pixels first: the Cholesky factor of their block is computed once per stable
-pattern and shared, and a new pattern costs only the extension by the few
-pixels near the moving outline (see :func:`build_tile`).
+A tile is a core of ``tile`` x ``tile`` pixels; its system holds the masked
+pixels of its *window*, the pixels within ``halo`` of the core (~840 px for
+8 and 12). The window is the same for every tile (the grid is shift
+invariant), only which of its pixels are masked (the *pattern*) differs from
+tile to tile and, with a moving specimen, from time to time. The system of
+a pattern ``S`` is the principal submatrix ``K_SS`` of the kernel matrix
+``K`` of the whole window (plus the monomials {1, u, v}), so all of them come
+from a few factorisations of ``K`` (see :class:`EdgeWindows`); no
+factorisation depends on the mask, and the cost of a tile is the same
+whether the outline stands still or moves.
 """
 
 from __future__ import annotations
 
+import math
 import threading
-from collections import OrderedDict
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial.distance import cdist
-
 import scipy.linalg
+from scipy.spatial.distance import cdist
 
 from ..errors import DataError
 from ..numerics.imq import imq_matrix, imq_scaled_inverse
 from ..numerics.saddle import SaddleFactor
+from ..threads import blas_threads
 
-__all__ = ["EDGE_BLOCK", "Tile", "TileCache", "check_unisolvent", "build_tile", "eval_tile_block"]
+__all__ = ["EDGE_BLOCK", "DIRECTIONS", "Window", "EdgeWindows", "edge_windows", "check_unisolvent", "eval_tile_block"]
 
 # Rows per block in the direct (edge tile) evaluation: keeps the temporaries in
 # the CPU cache.
 EDGE_BLOCK = 128
+#: Pixel orders of the window (directions of the outline's normal, evenly spread; a multiple of 8: the
+#: window's symmetries map one octant's orders onto the others, so DIRECTIONS / 8 factorisations serve all)
+DIRECTIONS = 128
+# Directions tried per pattern, around the one its masked and unmasked pixels point to
+_CANDIDATES = 5
+# Patterns per block in the choice of the order (memory ~ block x candidates x window x 4 B)
+_CHOICE_BLOCK = 512
+# Beyond this many pixels past the first gap of the best order a pattern is factorised directly
+# (the Schur step costs ~p^2 (n - m) + p^3 / 3 against (m + p)^3 / 3)
+_DIRECT_FRACTION = 0.6
 
 
 def check_unisolvent(u, v, what):
@@ -54,259 +59,366 @@ def check_unisolvent(u, v, what):
     )
 
 
-class Tile(NamedTuple):
-    """A factorised edge tile; local coordinates relative to the core centre."""
+class Window(NamedTuple):
+    """Centres of a tile's window for :func:`eval_tile_block`: local coordinates relative to the core centre."""
 
-    pv: np.ndarray  # frame rows of the tile pixels (n_t,)
-    pu: np.ndarray  # frame columns
     ov: float  # origin of the local coordinates (core centre), frame px
     ou: float
-    cu: np.ndarray  # local coordinates of the centres
+    cu: np.ndarray  # local coordinates of the centres (n,)
     cv: np.ndarray
-    fac: SaddleFactor
 
 
-class TileCache:
-    """Factorised edge tiles, keyed by local mask pattern (LRU by bytes).
+def _symmetries():
+    """The 8 symmetries of the square as 2 x 2 integer matrices acting on (u, v) about the core centre."""
+    rot = np.array([[0, -1], [1, 0]])
+    flip = np.array([[0, 1], [1, 0]])
+    out = []
+    for f in (np.eye(2, dtype=int), flip):
+        g = f.copy()
+        for _ in range(4):
+            out.append(g)
+            g = rot @ g
+    return out
+
+
+class EdgeWindows:
+    """The factorised kernel matrices of a tile's window, and the solves of any pattern of it.
 
     Parameters
     ----------
-    max_bytes : int
-        Bound on the bytes of the cached factorisations; the least recently
-        used go beyond it (default 512 MiB: ~1,200 tiles of ~600 px factorised
-        whole, several times more extending a stable factor).
-    stable_bytes : int
-        Bound on the bytes of the stable factors (see :func:`build_tile`);
-        a stable factor that goes takes the tiles extending it along, so
-        that the two bounds hold for the memory actually held.
+    ce : float
+        ``c * R0`` (px).
+    tile, halo : int
+        Core size and halo (px).
 
     Attributes
     ----------
-    built : int
-        Factorisations computed (cache misses).
-    hits : int
-        Tiles served from the cache.
-    """
-
-    def __init__(self, max_bytes=1 << 29, stable_bytes=1 << 29):
-        self.max_bytes = max_bytes
-        self.stable_bytes = stable_bytes
-        self._d = OrderedDict()
-        self._bytes = 0
-        self._s = OrderedDict()
-        self._s_bytes = 0
-        self.built = 0
-        self.hits = 0
-        self.extended = 0
-        # held by whoever looks up or builds a tile (the stable factors grow in place)
-        self.lock = threading.RLock()
-
-    @property
-    def hit_rate(self):
-        """Fraction of tile requests served from the cache (0 before any request)."""
-        n = self.built + self.hits
-        return self.hits / n if n else 0.0
-
-    def get(self, key):
-        """The cached tile of ``key`` or None."""
-        tile = self._d.get(key)
-        if tile is not None:
-            self._d.move_to_end(key)
-            self.hits += 1
-        return tile
-
-    def put(self, key, tile, stable=None):
-        """Store a tile (extending the :class:`_Stable` ``stable``); the least recently used go beyond ``max_bytes``."""
-        self._d[key] = tile
-        if stable is not None:
-            stable.tiles.append(key)
-        self._bytes += tile.fac.nbytes
-        self.built += 1
-        while self._bytes > self.max_bytes and len(self._d) > 1:
-            _, old = self._d.popitem(last=False)
-            self._bytes -= old.fac.nbytes
-
-    def stable_factor(self, key, make):
-        """The :class:`_Stable` factor of a stable pattern: cached, or ``make()`` (None: not definite)."""
-        st = self._s.get(key, False)
-        if st is not False:
-            self._s.move_to_end(key)
-            return st
-        st = make()
-        self._s[key] = st
-        self.grew(0 if st is None else st.nbytes)
-        return st
-
-    def grew(self, nbytes):
-        """Account ``nbytes`` more of stable factors; the least recently used go beyond ``stable_bytes``."""
-        self._s_bytes += nbytes
-        while self._s_bytes > self.stable_bytes and len(self._s) > 1:
-            _, old = self._s.popitem(last=False)
-            if old is None:
-                continue
-            self._s_bytes -= old.nbytes
-            # the tiles extending it hold its factor: dropped with it, or the
-            # factor would stay in memory uncounted
-            for k in old.tiles:
-                tile = self._d.pop(k, None)
-                if tile is not None:
-                    self._bytes -= tile.fac.nbytes
-
-
-class _Stable:
-    """Cholesky factor ``L`` of a stable pattern's kernel block and the columns ``L^-1 A_sp`` of extra pixels.
-
-    A run of masks adds and removes the same few pixels near the outline
-    again and again, so the triangular solve of each extra pixel (``s^2``
-    flops, the bulk of an extension) is done once per stable pattern.
-    """
-
-    def __init__(self, L, cen, shape):
-        self.L = L
-        self.cen = cen
-        self.col = np.full(shape, -1, np.int64)  # column of each window pixel in X, -1: not yet solved
-        self.X = np.empty((L.shape[0], 0), order="F")
-        self.n = 0
-        self.tiles = []  # keys of the cached tiles extending this factor
-
-    @property
-    def nbytes(self):
-        return self.L.nbytes + self.X.nbytes
-
-    def columns(self, iv, iu, cr, ce):
-        """``L^-1 A_sr`` (s, r) for the extra pixels at window rows/columns ``iv``, ``iu`` (local coordinates ``cr``), and the bytes added."""
-        c = self.col[iv, iu]
-        new = np.flatnonzero(c < 0)
-        added = 0
-        if new.size:
-            Xn = scipy.linalg.solve_triangular(self.L, imq_matrix(self.cen, cr[new], ce), lower=True,
-                                               check_finite=False)
-            if self.n + new.size > self.X.shape[1]:
-                grown = np.empty((self.L.shape[0], max(2 * self.X.shape[1], self.n + new.size)), order="F")
-                grown[:, :self.n] = self.X[:, :self.n]
-                added = grown.nbytes - self.X.nbytes
-                self.X = grown
-            self.X[:, self.n:self.n + new.size] = Xn
-            self.col[iv[new], iu[new]] = np.arange(self.n, self.n + new.size)
-            self.n += new.size
-            c = self.col[iv, iu]
-        return self.X[:, c], added
-
-
-def _cholesky(A):
-    """Lower Cholesky factor of ``A`` (Fortran order), or None when round-off makes it indefinite."""
-    try:
-        return np.asfortranarray(scipy.linalg.cholesky(A, lower=True, overwrite_a=True, check_finite=False))
-    except np.linalg.LinAlgError:
-        return None
-
-
-def _extended_factor(cache, key, cen, s, ce, P, rest):
-    """Saddle factor of the centres ``cen`` whose first ``s`` form the stable pattern ``key``, and that :class:`_Stable` (None, None on failure).
-
-    ``rest`` (window-shaped bool) marks the other pixels, in the order of ``cen[s:]``.
+    n : int
+        Pixels of the window.
+    dv, du : ndarray of int, shape (n,)
+        Window pixels relative to the core's first pixel (row-major order: the *natural* order).
+    lu, lv : ndarray, shape (n,)
+        Their local coordinates, relative to the core centre.
 
     Notes
     -----
-    With ``A = [[A_ss, A_sr], [A_rs, A_rr]]`` and ``A_ss = L_ss L_ss^T``
-    (cached): ``L_rs = A_rs L_ss^-T`` and ``L_rr L_rr^T = A_rr - L_rs L_rs^T``,
-    ``s^2 r + r^3 / 3`` flops instead of ``(s + r)^3 / 3`` for ``r`` pixels
-    beyond the stable ones. The factor is that of the same matrix (in this
-    pixel order), so results agree with a direct factorisation to round-off.
+    For a pixel order ``pi`` of the window let ``K = L L^T`` (Cholesky). A
+    pattern ``S`` whose first ``m`` pixels in that order are the first ``m``
+    of the window (the *prefix*), followed by ``p`` more pixels ``Q`` (past
+    the first unmasked one), has ``K_SS = L_S L_S^T`` with ``L_S`` the rows of
+    ``L`` of its pixels, so its factor is ``[[L_mm, 0], [L_Qm, M]]`` with
+    ``M M^T = L_Q,m: L_Q,m:^T``, the Gram matrix of the rows of ``Q`` past
+    column ``m``: ``p^2 (n - m)`` flops instead of ``(m + p)^3 / 3``. The
+    substitutions with ``L_mm`` are those with ``L`` itself (forward: the
+    first ``m`` rows; backward: with zeros below row ``m``), so the patterns
+    of many tiles and times run through one triangular solve per order.
+
+    The orders sort the window by the projection on one of
+    :data:`DIRECTIONS` directions (deepest first, for the outline's outward
+    normal): a straight outline with that normal makes the pattern a prefix
+    (``p = 0``), a curved one or a tilted one a prefix and a few pixels
+    (median 4 on a moving tube, 99 % below 230 at the patch corners). Each
+    pattern takes the order, among the few around its own normal, with the
+    fewest. The symmetries of the square window map orders into each other
+    with the same kernel matrix, so ``DIRECTIONS / 8`` factorisations serve
+    all (8 x n^2 x 8 B: 45 MB for the default window); the monomials of an
+    order are those of its octant's transformed linearly.
+
+    Every pattern's system is the same as a direct factorisation of its own
+    pixels would give (same matrix; the order changes round-off only). When
+    round-off makes a kernel matrix numerically indefinite (very flat
+    kernels) the pattern is solved by :class:`~irdic.numerics.saddle.SaddleFactor`
+    directly.
     """
-    def make():
-        L = _cholesky(imq_matrix(cen[:s], cen[:s], ce))
-        return None if L is None else _Stable(L, cen[:s].copy(), rest.shape)
 
-    st = cache.stable_factor(key, make)
-    if st is None:
-        return None, None
-    L_ss = st.L
-    cr = cen[s:]
-    # L_rs^T = L_ss^-1 A_sr, (s, r)
-    X, added = st.columns(*np.nonzero(rest), cr, ce)
-    cache.grew(added)
-    # A_rr - X^T X, lower triangle only (syrk: half the flops of a product)
-    schur = scipy.linalg.blas.dsyrk(-1.0, X, beta=1.0, c=np.asfortranarray(imq_matrix(cr, cr, ce)), trans=1,
-                                    lower=1, overwrite_c=1)
-    L_rr = _cholesky(schur)
-    if L_rr is None:
-        return None, None
-    cache.extended += 1
-    # L = [[L_ss, 0], [X^T, L_rr]] in blocks: L_ss stays shared, not copied
-    return SaddleFactor.from_blocks(L_ss, X, L_rr, P), st
+    def __init__(self, ce, tile, halo):
+        self.ce, self.tile, self.halo = float(ce), int(tile), int(halo)
+        C, R = self.tile, self.halo
+        g = np.arange(-R, C + R)
+        GV, GU = np.meshgrid(g, g, indexing="ij")
+        dx = np.maximum(np.maximum(-GU, GU - (C - 1)), 0)
+        dy = np.maximum(np.maximum(-GV, GV - (C - 1)), 0)
+        keep = dx * dx + dy * dy <= R * R
+        self.dv, self.du = GV[keep], GU[keep]
+        self.n = n = self.dv.size
+        c0 = 0.5 * (C - 1)
+        self.lu, self.lv = self.du - c0, self.dv - c0
+        self.P = np.column_stack([np.ones(n), self.lu, self.lv])
+        # natural index of each window pixel, to map transformed pixels back
+        index = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(2 * self.du - (C - 1), 2 * self.dv - (C - 1)))}
+        twice = np.column_stack([2 * self.du - (C - 1), 2 * self.dv - (C - 1)])  # 2 (u, v) about the centre: integers
+        base = DIRECTIONS // 8
+        step = 2 * math.pi / DIRECTIONS
+        orders, angles, mons, of = [], [], [], []
+        base_orders = []
+        for j in range(base):
+            th = (j + 0.5) * step  # inside the first octant, never on an axis or a diagonal
+            key = math.cos(th) * self.lu + math.sin(th) * self.lv
+            base_orders.append(np.lexsort((self.dv, self.du, key)))
+        for G in _symmetries():
+            moved = twice @ G.T
+            perm = np.array([index[(int(a), int(b))] for a, b in moved])  # natural index of g(pixel i)
+            Mg = np.eye(3)
+            Mg[1:, 1:] = G.T  # (1, u, v) of g(x) = (1, u, v) of x @ Mg
+            for j in range(base):
+                th = (j + 0.5) * step
+                d = G @ np.array([math.cos(th), math.sin(th)])
+                orders.append(perm[base_orders[j]])
+                angles.append(math.atan2(d[1], d[0]) % (2 * math.pi))
+                mons.append(Mg)
+                of.append(j)
+        self.order = np.array(orders, dtype=np.int64)  # (D, n) natural index at each position
+        self.rank = np.empty_like(self.order, dtype=np.int32)  # (D, n) position of each natural index
+        for d in range(DIRECTIONS):
+            self.rank[d, self.order[d]] = np.arange(n)
+        self.base_of = np.array(of)
+        self._mono = np.array(mons)
+        angles = np.array(angles)
+        # directions sorted by angle: the candidates of a pattern are neighbours in this ring
+        self._ring = np.argsort(angles)
+        self._ring_angle = angles[self._ring]
+        self._base_orders = base_orders
+        self._factor(base_orders)
+
+    def _factor(self, base_orders):
+        """The factors of the octant's orders, and per order the monomials' forward solves and their Gram sums."""
+        cen = np.column_stack([self.lu, self.lv])
+        self.L = []
+        with blas_threads(1):  # cached for the process: the same numbers whichever stage built them
+            for order in base_orders:
+                try:
+                    L = scipy.linalg.cholesky(imq_matrix(cen[order], cen[order], self.ce), lower=True,
+                                              overwrite_a=True, check_finite=False)
+                except np.linalg.LinAlgError:
+                    self.L = None
+                    return
+                self.L.append(L)
+            # the explicit inverses: the substitutions of many columns become matrix products
+            self.Linv = [np.asfortranarray(scipy.linalg.lapack.dtrtri(L, lower=1)[0]) for L in self.L]
+            Yb = [scipy.linalg.solve_triangular(L, self.P[o], lower=True, check_finite=False)
+                  for L, o in zip(self.L, base_orders)]
+        self.Yb = Yb
+        # row-major: the pixels past a prefix read rows of L
+        self.L = [np.ascontiguousarray(L) for L in self.L]
+        n = self.n
+        self.Y = np.empty((DIRECTIONS, n, 3))  # L^-1 P in each order
+        self.Gram = np.zeros((DIRECTIONS, n + 1, 3, 3))  # Gram[d, m] = Y[d, :m]^T Y[d, :m]
+        self.Pord = np.empty((DIRECTIONS, n, 3))  # monomials in each order
+        for d in range(DIRECTIONS):
+            Y = Yb[self.base_of[d]] @ self._mono[d]
+            self.Y[d] = Y
+            np.cumsum(Y[:, :, None] * Y[:, None, :], axis=0, out=self.Gram[d, 1:])
+            self.Pord[d] = self.P[self.order[d]]
+
+    @property
+    def nbytes(self):
+        return 0 if self.L is None else 2 * sum(L.nbytes for L in self.L) + self.Y.nbytes + self.Gram.nbytes
+
+    # -- orders -------------------------------------------------------------
+
+    def unisolvent(self, patterns):
+        """Which patterns (k, n) admit the monomials {1, u, v} (3 or more pixels not on one line), (k,) bool."""
+        u = 2 * self.du - (self.tile - 1)
+        v = 2 * self.dv - (self.tile - 1)
+        X = np.column_stack([np.ones(self.n), u, v, u * u, v * v, u * v]).astype(np.int64)
+        s = patterns.astype(np.int64) @ X  # exact integer moments
+        n, su, sv, suu, svv, suv = s.T
+        a, b, c = n * suu - su * su, n * svv - sv * sv, n * suv - su * sv
+        return (n >= 3) & (a * b - c * c > 0)
+
+    def choose(self, patterns):
+        """Order (direction index), prefix length ``m`` and pixels past it ``p`` of each pattern (k, n)."""
+        k = patterns.shape[0]
+        d_out = np.zeros(k, np.int64)
+        m_out = np.full(k, self.n, np.int64)
+        holes = ~patterns
+        nh = holes.sum(axis=1)
+        ns = self.n - nh
+        some = np.flatnonzero(nh > 0)
+        if some.size:
+            H = holes[some].astype(float)
+            S = 1.0 - H
+            # the outward normal: from the masked pixels' centroid to the unmasked ones'
+            du = H @ self.lu / nh[some] - S @ self.lu / np.maximum(ns[some], 1)
+            dv = H @ self.lv / nh[some] - S @ self.lv / np.maximum(ns[some], 1)
+            ang = np.arctan2(dv, du) % (2 * math.pi)
+            pos = np.searchsorted(self._ring_angle, ang)
+            half = _CANDIDATES // 2
+            cand = self._ring[(pos[:, None] + np.arange(-half, _CANDIDATES - half)) % DIRECTIONS]  # (k', c)
+            for b0 in range(0, some.size, _CHOICE_BLOCK):
+                b1 = min(b0 + _CHOICE_BLOCK, some.size)
+                rk = self.rank[cand[b0:b1]]  # (b, c, n)
+                first = np.where(holes[some[b0:b1], None, :], rk, self.n).min(axis=2)  # prefix length per candidate
+                best = np.argmax(first, axis=1)  # the longest prefix: the fewest pixels past it
+                d_out[some[b0:b1]] = cand[b0:b1][np.arange(b1 - b0), best]
+                m_out[some[b0:b1]] = first[np.arange(b1 - b0), best]
+        return d_out, m_out, ns - m_out
+
+    # -- solves -------------------------------------------------------------
+
+    def solve(self, patterns, values):
+        """Kernel and monomial coefficients of the interpolants of ``values`` on each pattern.
+
+        Parameters
+        ----------
+        patterns : ndarray of bool, shape (k, n)
+            Masked window pixels of each of ``k`` tiles (natural order); each
+            unisolvent (:meth:`unisolvent`).
+        values : ndarray, shape (k, n, nf)
+            Field values at the window pixels (those outside the pattern are ignored).
+
+        Returns
+        -------
+        alpha : ndarray, shape (k, n, nf)
+            Kernel coefficients at the window pixels, zero outside the pattern.
+        beta : ndarray, shape (k, 3, nf)
+            Coefficients of {1, u, v} (local coordinates).
+        """
+        k, n, nf = values.shape
+        alpha = np.zeros((k, n, nf))
+        beta = np.zeros((k, 3, nf))
+        if k == 0:
+            return alpha, beta
+        d, m, p = self.choose(patterns)
+        direct = np.zeros(k, bool) if self.L is not None else np.ones(k, bool)
+        direct |= p > _DIRECT_FRACTION * (m + p)
+        for j in range(DIRECTIONS // 8):
+            sel = np.flatnonzero((self.base_of[d] == j) & ~direct)
+            if sel.size:
+                fail = self._solve_order(j, sel, d[sel], m[sel], patterns, values, alpha, beta)
+                direct[sel[fail]] = True
+        for i in np.flatnonzero(direct):
+            self._solve_direct(patterns[i], values[i], alpha[i], beta[i])
+        return alpha, beta
+
+    def _solve_direct(self, pattern, vals, alpha, beta):
+        """One pattern by its own factorisation (:class:`SaddleFactor`)."""
+        s = np.flatnonzero(pattern)
+        cen = np.column_stack([self.lu[s], self.lv[s]])
+        fac = SaddleFactor(imq_matrix(cen, cen, self.ce), self.P[s])
+        a, b = fac.solve(vals[s])
+        alpha[s] = a
+        beta[:] = b
+
+    def _solve_order(self, j, sel, d, m, patterns, values, alpha, beta):
+        """Patterns ``sel`` in orders ``d`` of octant order ``j`` (prefix lengths ``m``); True where one failed.
+
+        Right-hand sides are columns ``i * nf + f`` (pattern ``i``, field ``f``),
+        patterns sorted by decreasing ``m``: the substitutions run on blocks of
+        columns with similar ``m``, each on the leading rows it needs.
+        """
+        L, Li, Yj = self.L[j], self.Linv[j], self.Yb[j]
+        n = self.n
+        nf = values.shape[2]
+        srt = np.argsort(-m, kind="stable")
+        sel, d, m = sel[srt], d[srt], m[srt]
+        k = sel.size
+        K = k * nf
+        idx = self.order[d]  # (k, n) natural index at each position
+        F = values[sel[:, None], idx]  # (k, n, nf) in each pattern's order
+        rhs = np.ascontiguousarray(F.transpose(0, 2, 1)).reshape(K, n).T  # (n, K), F-contiguous
+        mc = np.repeat(m, nf)  # prefix length of each column
+        y = np.zeros((n, K), order="F")
+        blocks = _blocks(mc)
+        trmm = scipy.linalg.blas.dtrmm
+        # forward: the first m rows of L^-1 f are those of L_mm^-1 f_m (L^-1 lower triangular)
+        for c0, c1 in blocks:
+            mb = int(mc[c0])
+            y[:mb, c0:c1] = trmm(1.0, Li[:mb, :mb], rhs[:mb, c0:c1], lower=1)
+        y *= np.arange(n)[:, None] < mc[None, :]
+        # Y_d = Y_j M_d: the monomials' part through the octant's Y_j and each order's 3 x 3 map
+        Md = self._mono[d]  # (k, 3, 3)
+        rb = np.einsum("kba,kbf->kaf", Md, (Yj.T @ y).reshape(3, k, nf).transpose(1, 0, 2))  # Y_d,m^T y_m
+        C = self.Gram[d, m]  # (k, 3, 3)
+        on = patterns[sel[:, None], idx]  # (k, n) pattern in each order
+        fail = np.zeros(k, bool)
+        # the pixels past the prefix (see the class Notes), pattern by pattern: with Q their rows of L, B the
+        # columns before m and T from m on, the Schur complement is G = T T^T, and G^-1 r of the fields'
+        # r = f_Q - B y_m and the monomials' P_Q - B Y_m give their shares of C and rb, and x_Q once beta is known
+        extra = []
+        potrf, potrs = scipy.linalg.lapack.dpotrf, scipy.linalg.lapack.dpotrs
+        for i in np.flatnonzero(m < on.sum(axis=1)):
+            mi = int(m[i])
+            q = mi + np.flatnonzero(on[i, mi:])
+            Lq = L[q]
+            B = Lq[:, :mi]
+            T = Lq[:, mi:]
+            Mq, info = potrf(T @ T.T, lower=1, clean=0)
+            if info:
+                fail[i] = True
+                continue
+            cols = slice(i * nf, (i + 1) * nf)
+            r = np.concatenate([F[i, q] - B @ y[:mi, cols], self.Pord[d[i], q] - (B @ Yj[:mi]) @ Md[i]], axis=1)
+            w = potrs(Mq, r, lower=1)[0]
+            rP = r[:, nf:]
+            C[i] += rP.T @ w[:, nf:]
+            rb[i] += rP.T @ w[:, :nf]
+            extra.append((i, q, B, w))
+        ok = ~fail
+        b = np.zeros((k, 3, nf))
+        b[ok] = np.linalg.solve(C[ok], rb[ok])
+        z = y - Yj @ np.einsum("kab,kbf->akf", Md, b).reshape(3, K)
+        z *= np.arange(n)[:, None] < mc[None, :]
+        z[:, np.repeat(fail, nf)] = 0.0
+        xq = []
+        for i, q, B, w in extra:
+            xp = w[:, :nf] - w[:, nf:] @ b[i]  # x_Q = G^-1 (r_f - r_P beta)
+            z[:B.shape[1], i * nf:(i + 1) * nf] -= B.T @ xp
+            xq.append((i, q, xp))
+        # backward: with zeros below row m, L^-T gives L_mm^-T on the first m rows and zeros below
+        x = np.zeros((n, K), order="F")
+        for c0, c1 in blocks:
+            mb = int(mc[c0])
+            x[:mb, c0:c1] = trmm(1.0, Li[:mb, :mb], z[:mb, c0:c1], lower=1, trans_a=1)
+        x = x.T.reshape(k, nf, n).transpose(0, 2, 1)  # (k, n, nf) in each order
+        for i, q, xp in xq:
+            x[i, q] = xp
+        good = np.flatnonzero(ok)
+        alpha[sel[good, None], idx[good]] = x[good]
+        beta[sel[good]] = b[good]
+        out = np.zeros(k, bool)
+        out[srt] = fail
+        return out
 
 
-def build_tile(cache, mask, ty, tx, C, R, ce, stable=None):
-    """The tile of core ``(ty, tx)`` (in units of ``C`` px), from ``cache`` or factorised.
+def _blocks(mc, ratio=0.85, least=32):
+    """Column ranges of ``mc`` (decreasing) whose values lie within ``ratio`` of the range's first (at least
+    ``least`` columns each, the rest of the columns once fewer remain)."""
+    out = []
+    c0, K = 0, mc.size
+    while c0 < K:
+        c1 = max(c0 + least, int(np.searchsorted(-mc, -ratio * mc[c0], side="right")))
+        c1 = K if K - c1 < least else min(c1, K)
+        out.append((c0, c1))
+        c0 = c1
+    return out
 
-    Parameters
-    ----------
-    cache : TileCache
-    mask : ndarray of bool, shape (H, W)
-    ty, tx : int
-        Core row and column index.
-    C, R : int
-        Core size and halo (px).
-    ce : float
-        ``c * R0`` (px).
-    stable : ndarray of bool, shape (H, W), optional
-        Pixels of ``mask`` shared with neighbouring masks: the tile's pixels
-        among them come first and their factor is shared through ``cache``.
 
-    Returns
-    -------
-    Tile
+_BUILD = threading.Lock()
+
+
+def edge_windows(ce, tile, halo):
+    """The :class:`EdgeWindows` of ``c * R0 = ce`` px, core ``tile`` px and ``halo`` px (cached).
+
+    Built once per process, by one thread: the worker threads of a stage that
+    ask for it together wait for that one (two builds at once would also
+    change each other's BLAS thread limits, and with them the rounding).
     """
-    H, W = mask.shape
-    v0, u0 = ty * C, tx * C
-    v1, u1 = v0 + C - 1, u0 + C - 1
-    a, b = max(v0 - R, 0), min(v1 + R, H - 1)
-    l, r = max(u0 - R, 0), min(u1 + R, W - 1)
-    # only the masked pixels within R of the core enter: the key is their
-    # pattern, so a change in the corners of the crop does not refactorise
-    gv = np.arange(a, b + 1)[:, None]
-    gu = np.arange(l, r + 1)[None, :]
-    dx = np.maximum(np.maximum(u0 - gu, gu - u1), 0)
-    dy = np.maximum(np.maximum(v0 - gv, gv - v1), 0)
-    crop = mask[a:b + 1, l:r + 1] & (dx * dx + dy * dy <= R * R)
-    # Position-free key: the window relative to the core (it differs only
-    # where the frame border clips it) and the pattern in it. The cached tile
-    # holds pixel positions relative to the core corner (v0, u0).
-    key = (C, R, ce, (a - v0, b - v0, l - u0, r - u0), np.packbits(crop).tobytes())
-    tile = cache.get(key)
-    if tile is None:
-        keep = crop if stable is None else crop & stable[a:b + 1, l:r + 1]
-        rest = crop & ~keep
-        # stable pixels first, then the ones near the moving outline; with
-        # either part empty this is the plain np.nonzero order of the pattern
-        cv, cu = (np.concatenate(x) for x in zip(np.nonzero(keep), np.nonzero(rest)))
-        s = int(keep.sum())
-        cv = cv + (a - v0)
-        cu = cu + (l - u0)
-        ou = ov = 0.5 * (C - 1)
-        lu, lv = cu - ou, cv - ov
-        check_unisolvent(
-            lu, lv, f"mask: the masked pixels within halo = {R} px of pixels u = {u0}..{u1}, v = {v0}..{v1}"
-        )
-        cen = np.column_stack([lu, lv])
-        P = np.column_stack([np.ones(lu.size), lu, lv])
-        fac = st = None
-        if 0 < s < lu.size:
-            fac, st = _extended_factor(cache, key[:4] + (np.packbits(keep).tobytes(),), cen, s, ce, P, rest)
-        if fac is None:
-            fac = SaddleFactor(imq_matrix(cen, cen, ce), P)
-        tile = Tile(cv, cu, ov, ou, lu, lv, fac)
-        cache.put(key, tile, st)
-    return tile._replace(pv=tile.pv + v0, pu=tile.pu + u0, ov=tile.ov + v0, ou=tile.ou + u0)
+    with _BUILD:
+        return _edge_windows(float(ce), int(tile), int(halo))
 
 
-def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
+@lru_cache(maxsize=4)
+def _edge_windows(ce, tile, halo):
+    return EdgeWindows(ce, tile, halo)
+
+
+def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out, need=None):
     """Evaluate points ``sel`` of one tile from its coefficients, into ``out = (val, du, dv)``.
 
     Parameters
     ----------
-    tile : Tile
+    tile : Window
     alpha, beta : ndarray, shape (n_fields, n_t), (n_fields, 3)
         RBF and monomial coefficients of every fitted field on the tile.
     ce : float
@@ -323,6 +435,8 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
     derivs : sequence of bool, length g
         Which slots want ``d/du``, ``d/dv``.
     out : tuple of ndarray, shape (n_points, g)
+    need : ndarray of bool, shape (sel.size,), optional
+        Which points want the derivatives (default all); the others' stay as they are.
 
     Notes
     -----
@@ -337,10 +451,6 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
     # np.column_stack, not np.c_: this runs ~10^4 times per evaluation pass
     s = cdist(np.column_stack([xu, xv]), np.column_stack([tile.cu, tile.cv]), "sqeuclidean")
     imq_scaled_inverse(s, ce, out=s)
-    s3 = None
-    if want.size:
-        s3 = s * s
-        s3 *= s
     # Points come sorted by group (time) within a tile: one matrix product per
     # run of a group instead of a gather of coefficient rows per point.
     if gb is None:
@@ -354,10 +464,14 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out):
         rows = sel[r0:r1]
         x1, x2 = xu[r0:r1, None], xv[r0:r1, None]
         val[rows] = ce * (s[r0:r1] @ A) + B[:, 0] + x1 * B[:, 1] + x2 * B[:, 2]
-        if want.size:
+        d = slice(r0, r1) if need is None else r0 + np.flatnonzero(need[r0:r1])
+        if want.size and (need is None or d.size):
+            s3 = s[d]
+            s3 = s3 * s3 * s3
             Aw = A[:, want]
             # sum_j alpha_j s_j^3 (1, cu_j, cv_j) for the wanted slots at once
-            T = s3[r0:r1] @ np.concatenate([Aw, tile.cu[:, None] * Aw, tile.cv[:, None] * Aw], axis=1)
+            T = s3 @ np.concatenate([Aw, tile.cu[:, None] * Aw, tile.cv[:, None] * Aw], axis=1)
             k = want.size
+            rows, x1, x2 = sel[d], xu[d, None], xv[d, None]
             du[rows[:, None], want] = -ce * (x1 * T[:, :k] - T[:, k:2 * k]) + B[want, 1]
             dv[rows[:, None], want] = -ce * (x2 * T[:, :k] - T[:, 2 * k:]) + B[want, 2]

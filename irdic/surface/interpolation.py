@@ -16,6 +16,7 @@ import scipy.linalg
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, DataError, GeometryError
+from ..logs import report
 from ..numerics.patterns import same_patterns
 from ..numerics.imq import imq_matrix, imq_planar
 from ..numerics.saddle import SaddleFactor
@@ -251,10 +252,15 @@ class SpatialInterpolant:
         order_g = np.argsort(inv_g, kind="stable")
         bounds_g = np.searchsorted(inv_g[order_g], np.arange(len(uc) + 1))
 
+        done = [0]
+
         def work(t):
             idx = order_e[bounds_e[t]:bounds_e[t + 1]]
             grow = rows[order_g[bounds_g[t]:bounds_g[t + 1]]]
-            return (idx, *tile_weights(tiles, uc[t], pts[idx], kinds, grow, self.n), grow)
+            out = (idx, *tile_weights(tiles, uc[t], pts[idx], kinds, grow, self.n), grow)
+            done[0] += 1  # a count for the stage's progress lines (racy increments only shift them)
+            report("fill", done[0] / len(uc))
+            return out
 
         # the largest tiles first: the pool's last tiles are then short ones, not one left running alone
         with blas_threads(1):

@@ -79,7 +79,7 @@ from ..numerics.threads import parallel_map
 from ..vocabulary import Status
 from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
-from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
+from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_times, spread
 from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
                               scaled_probes)
 from .strain import noise_floor_note, strain_std
@@ -252,6 +252,7 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
     grad_std = s_g * np.sqrt(Lu ** 2 + Lv ** 2)
     rate_std = np.sqrt(s_r ** 2 + s_g ** 2 * (cu ** 2 + cv ** 2))
     temp_std = np.full((T, N), s_T)
+    del e, Lu, Lv, cu, cv  # GBs at paper scale while the probes run
 
     kt, ks = chosen_k.get("temperature_smoothing"), chosen_k.get("temperature_smoothing_space")
     W = rate_biased = None
@@ -290,9 +291,9 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             acc_fp = scaled_probes(acc_fp, noise_scale(own, acc_fp, regress_space, ks, trusted))
             acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null",
                                                "rs_var_null")})
-        temp_std, grad_std = np.sqrt(acc["v"]), np.sqrt(acc["g"])
+        temp_std, grad_std = np.sqrt(acc.pop("v")), np.sqrt(acc.pop("g"))
         if W is not None:
-            rate_std = np.sqrt(acc["r"])
+            rate_std = np.sqrt(acc.pop("r"))
         if spatial is not None:
             theta, grad, value_in, value = spatial[:4]
             # against the lighter regression of the gradient's input after the same regression in time (the
@@ -388,7 +389,8 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     if n_bias:
         acc["g_var"] = acc["g_var"] / n_bias
     out = {k: spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
-    return {**out, **{f"{k}_null": np.array([spread(a, near) for a in n]) if n else None for k, n in nulls.items()}}
+    # the nulls stay at the probed times: local_bias reads them at a few times only (SpreadStack)
+    return {**out, **{f"{k}_null": SpreadStack(np.array(n), near) if n else None for k, n in nulls.items()}}
 
 
 def _values(points, name):

@@ -67,8 +67,14 @@ def noise_scale(theta, acc, regress_space, ks, trusted):
 
 
 def scaled_probes(acc, k2):
-    """The probes' mean squares ``acc`` (:func:`irdic.uncertainty.model._spatial_probes`) with the noise variance scaled by ``k2``."""
-    return {k: (None if a is None else a * k2) for k, a in acc.items()}
+    """The probes' mean squares ``acc`` (:func:`irdic.uncertainty.model._spatial_probes`) with the noise variance
+    scaled by ``k2``, arrays in place (at paper scale they are GBs)."""
+    for k, a in acc.items():
+        if isinstance(a, np.ndarray) or hasattr(a, "rows"):
+            a *= k2
+        elif a is not None:
+            acc[k] = a * k2
+    return acc
 
 
 def reference_spacing(k):
@@ -203,41 +209,79 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     ``L(d_j² - v̄)``; ``b²`` counts where it exceeds ``z`` such errors,
     else 0.
     """
-    a = np.square(d) - noise_var
-    ok = np.isfinite(a)
+    d = np.asarray(d)
+    noise_var = np.broadcast_to(noise_var, d.shape)
+    ok = np.isfinite(np.square(d) - noise_var)
     if trusted is not None:
-        ok &= np.asarray(trusted, dtype=bool).reshape(trusted.shape + (1,) * (a.ndim - 2))
+        ok &= np.asarray(trusted, dtype=bool).reshape(trusted.shape + (1,) * (d.ndim - 2))
     if not np.isfinite(psi).all(axis=1).any():
-        return np.zeros_like(a)
-    out = None
-    # the neighbourhood, then a wider one where the bias is below the neighbourhood's resolution, then all points
+        return np.zeros(d.shape)
+    nbs = _neighbourhoods(psi, spacing, pooled, neighbourhoods)
+    simple = null is None or len(null) < 2
+    if simple:
+        nbs = nbs[:1]
+        scales = [None]
+    else:  # the pooled scatter on noise, one number per neighbourhood
+        null = null if hasattr(null, "rows") else np.asarray(null)
+        scales = [_null_scale(null, ok, nb) for nb in nbs]
+    # block by block of times (each with its neighbouring times, which the local means include): the work
+    # arrays of a block, not of the record (at paper scale ~10 arrays of 100 MB per call otherwise)
+    out = np.empty(d.shape)
+    T = d.shape[0]
+    step = max(1, _BIAS_BLOCK // max(1, ok[0].size))
+    for t0 in range(0, T, step):
+        t1 = min(T, t0 + step)
+        e0, e1 = max(0, t0 - 1), min(T, t1 + 1)
+        res = _local_estimate(d[e0:e1], noise_var[e0:e1], ok[e0:e1], nbs, scales, z)
+        out[t0:t1] = np.sqrt(share * res[t0 - e0:t1 - e0])
+    return out
+
+
+def _neighbourhoods(psi, spacing, pooled, cache):
+    """The neighbourhoods :func:`local_bias` averages over, in order: the :data:`BIAS_NEIGHBOURS` nearest
+    points, then a wider one where the bias is below their resolution, then (``pooled``) all points (None);
+    from ``cache`` by size where built before."""
     wide = [] if spacing is None else [min(WIDE_MAX, int(np.pi * float(np.max(spacing)) ** 2))]
+    nbs = []
     for k in [BIAS_NEIGHBOURS] + [n for n in wide if n > BIAS_NEIGHBOURS] + ([None] if pooled else []):
-        nb = None if neighbourhoods is None or k is None else neighbourhoods.get(k)
+        nb = None if cache is None or k is None else cache.get(k)
         if nb is None and k is not None:
             nb = _neighbours(psi, k)
-            if neighbourhoods is not None:
-                neighbourhoods[k] = nb
+            if cache is not None:
+                cache[k] = nb
+        nbs.append(nb)
+    return nbs
+
+
+def _local_estimate(d, noise_var, ok, nbs, scales, z):
+    """``b²`` of :func:`local_bias` on a block of times: the first neighbourhood's estimate where it exceeds
+    ``z`` standard errors (``scales``: their factors; None: no null, the estimate as it is), else the next's."""
+    a = np.where(ok, np.square(d) - noise_var, 0.0)
+    res = None
+    for nb, scale in zip(nbs, scales):
         count = _local_count(ok, nb)
-        est = _local_mean(np.where(ok, a, 0.0), ok, nb, count)
-        if null is None or len(null) < 2:
-            return np.sqrt(share * np.maximum(est, 0.0))
-        se = _null_scale(np.asarray(null), ok, nb) * _local_mean(np.where(ok, noise_var, 0.0), ok, nb, count)
+        est = _local_mean(a, ok, nb, count)
+        if scale is None:
+            return np.maximum(est, 0.0)
+        se = scale * _local_mean(np.where(ok, noise_var, 0.0), ok, nb, count)
         est = np.where(est > z * se, est, 0.0)
-        out = est if out is None else np.where(out > 0, out, est)
-    return np.sqrt(share * out)
+        res = est if res is None else np.where(res > 0, res, est)
+    return res
+
+
+#: Values per time block of :func:`local_bias` (its work arrays are a few of this size)
+_BIAS_BLOCK = 1 << 21
 
 
 def _null_scale(null, ok, nb):
     """Standard error of the local bias estimate on pure noise relative to the local noise variance, pooled.
 
-    ``null`` (K, T, N[, C]): the probes' squared differences. Each probe's
-    estimate ``L(null_j - v̄)`` scatters about 0 as the data's does under no
-    bias; the data's ``v`` is the mean of the probes, whose own error adds
-    ``1/K`` of that variance.
+    ``null`` (K, T, N[, C], or a :class:`~irdic.uncertainty.probes.SpreadStack`):
+    the probes' squared differences. Each probe's estimate ``L(null_j - v̄)``
+    scatters about 0 as the data's does under no bias; the data's ``v`` is the
+    mean of the probes, whose own error adds ``1/K`` of that variance.
     """
     K = null.shape[0]
-    ok = ok & np.isfinite(null).all(axis=0)
     # a pooled ratio: the times of at most NULL_TIMES windows (each time with its neighbours) hold enough
     # points, at a fraction of the sparse products over every time and probe (43 of 163 s of the fields stage
     # on the moving tube, 300 times x 13,104 points, 452 neighbours)
@@ -245,10 +289,13 @@ def _null_scale(null, ok, nb):
     if T > NULL_TIMES + 2:
         mid = np.linspace(1, T - 2, NULL_TIMES).round().astype(int)
         sel = np.unique(np.clip(mid[:, None] + [-1, 0, 1], 0, T - 1))
-        ok, null = ok[sel], null[:, sel]
+        null = null.rows(sel) if hasattr(null, "rows") else null[:, sel]
+        ok = ok[sel]
         centre = np.isin(sel, mid)
     else:
+        null = np.asarray(null)
         centre = np.ones(T, bool)
+    ok = ok & np.isfinite(null).all(axis=0)
     mean = np.where(ok, null.mean(axis=0), 0.0)
     count = _local_count(ok, nb)
     lv = _local_mean(mean, ok, nb, count)

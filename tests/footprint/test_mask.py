@@ -99,3 +99,28 @@ def test_triangle_rasterisation_matches_point_location():
     got = _rasterise(corners[keep], u, v)
     assert ref.sum() > 1500
     assert np.array_equal(got, ref)
+
+
+@pytest.mark.parametrize("radius", [0.5, 1.0, 1.5, 2.0, np.sqrt(2.0), 2.9])
+def test_specimen_mask_erosion_is_the_euclidean_distance_rule(radius):
+    """The erosion keeps exactly the pixels whose distance to the nearest unmasked pixel centre exceeds the
+    radius (beyond the frame counts as masked), and the point spacing is the nearest-neighbour median,
+    also with duplicate points and a cloud that leaves the frame (a frame without any unmasked pixel is
+    not compared: the distance transform has nothing to measure to there)."""
+    from scipy import ndimage
+    from scipy.spatial import Delaunay, cKDTree
+
+    from irdic.footprint.mask import _rasterise
+
+    rng = np.random.default_rng(7)
+    g = np.stack(np.meshgrid(np.arange(30), np.arange(22)), -1).reshape(-1, 2) * 2.2
+    for p in (g + rng.normal(0, 0.05, g.shape) - [4.0, 3.0], np.r_[g, g[:5]] + [1.0, 1.0], rng.random((400, 2)) * 60):
+        u, v = np.arange(70), np.arange(52)
+        got = specimen_mask(p, u, v, erosion_px=radius)
+        tri = Delaunay(p)
+        spacing = np.median(cKDTree(p).query(p, k=2)[0][:, 1])
+        c = p[tri.simplices]
+        keep = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1) <= 3.0 * spacing
+        want = _rasterise(c[keep], u, v)
+        want &= ndimage.distance_transform_edt(want) > radius
+        assert want.any() and not want.all() and np.array_equal(got, want)

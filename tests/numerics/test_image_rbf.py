@@ -10,7 +10,6 @@ from scipy import ndimage
 from irdic.errors import ConfigError, DataError, IrdicWarning
 from irdic.numerics.temporal import TemporalInterpolant
 from irdic.threads import stage_threads
-from irdic.image_rbf.tiles import TileCache
 from irdic.image_rbf import (
     MaskedGridInterpolant,
     MaskedGridRBF,
@@ -502,11 +501,9 @@ def test_series_moving_mask_matches_per_time_masks():
 
 
 def test_series_on_worker_threads_equals_one_thread():
-    """The chunks of a moving outline run on the stage's threads with one shared tile cache.
+    """The chunks of a moving outline run on the stage's threads, sharing the edge windows' factors.
 
-    Each time keeps its own mask and the same numbers as on one thread (to
-    round-off: a shared tile may be built by either thread, whole or
-    extending its run's stable factor), including the cache's accounting.
+    Each time keeps its own mask and the same numbers as on one thread.
     """
     t, mask, frames = series_case(n_frames=16)
     n = 10
@@ -529,75 +526,88 @@ def test_series_on_worker_threads_equals_one_thread():
     np.testing.assert_allclose(three.dtheta_du[ok], du[ok], atol=1e-5)  # float32 frames
 
 
-def test_edge_tiles_shared_across_positions_and_masks():
-    """A mask shifted by whole tiles reuses every edge factorisation, with the same results.
+def test_edge_tiles_equal_direct_factorisations_of_any_pattern():
+    """Every window pattern's saddle system, from the shared factors, equals its own factorisation.
 
-    Regression: the tile cache was keyed by tile position, so a
-    moving outline refactorised every edge tile at every time.
+    Half-planes at many angles and offsets, curved and cornered outlines, random gaps, a
+    full window and windows clipped by the frame (a gap along one side): coefficients and
+    values to round-off against :class:`~irdic.numerics.saddle.SaddleFactor` of the
+    pattern's own pixels.
     """
+    from irdic.image_rbf.tiles import EdgeWindows
+    from irdic.numerics.imq import imq_matrix
+    from irdic.numerics.saddle import SaddleFactor
+
+    win = EdgeWindows(2.0, 8, 12)
+    rng = np.random.default_rng(11)
+    pats = [np.ones(win.n, bool), win.du >= 0, win.dv <= 3]
+    for j in range(0, 64, 3):  # outlines along the orders' own directions: the prefix alone
+        th = (j + 0.5) * 2 * np.pi / 64
+        pats.append(np.cos(th) * win.lu + np.sin(th) * win.lv <= j % 7 - 3.2)
+    for i in range(160):
+        th = rng.uniform(0, 2 * np.pi)
+        x = np.cos(th) * win.lu + np.sin(th) * win.lv
+        y = -np.sin(th) * win.lu + np.cos(th) * win.lv
+        s = x + (0.01 * (i % 3 - 1)) * y**2 <= rng.uniform(-14, 14)
+        if i % 5 == 0:
+            s &= np.cos(th + 1.4) * win.lu + np.sin(th + 1.4) * win.lv <= rng.uniform(-6, 12)
+        if i % 9 == 0:
+            s &= rng.random(win.n) > 0.05
+        pats.append(s)
+    pats = np.array(pats)
+    pats = pats[win.unisolvent(pats)]
+    assert len(pats) > 120
+    assert not win.unisolvent(np.array([win.dv == 3, (win.du == win.dv) & (win.du < 4)])).any()
+    vals = 20 + 0.1 * win.lu + 0.02 * win.lv**2 + rng.normal(0, 0.05, (len(pats), win.n, 2)).transpose(2, 0, 1)
+    vals = vals.transpose(1, 2, 0)
+    alpha, beta = win.solve(pats, vals)
+    _, m, p = win.choose(pats)
+    assert (p == 0).sum() > 20 and (p > 0).sum() > 20  # both paths tried
+    X = np.c_[rng.uniform(-4, 4, 30), rng.uniform(-4, 4, 30)]
+    for i, pat in enumerate(pats):
+        s = np.flatnonzero(pat)
+        cen = np.c_[win.lu[s], win.lv[s]]
+        a0, b0 = SaddleFactor(imq_matrix(cen, cen, 2.0), win.P[s]).solve(vals[i, s])
+        assert np.all(alpha[i, ~pat] == 0)
+        np.testing.assert_allclose(alpha[i, s], a0, rtol=0, atol=1e-9 * np.abs(a0).max())
+        B = imq_matrix(X, cen, 2.0)
+        want = B @ a0 + np.c_[np.ones(30), X] @ b0
+        got = B @ alpha[i, s] + np.c_[np.ones(30), X] @ beta[i]
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-10)
+
+
+def test_edge_tiles_cost_no_factorisation_per_mask(monkeypatch):
+    """A moving outline's interpolants equal direct factorisations of every tile, and factorise nothing new.
+
+    Regression: edge tiles were factorised per mask pattern (cached), so an outline that moved
+    every frame factorised most tiles at every time.
+    """
+    from irdic.image_rbf import tiles
+
     n = 96
     gv, gu = np.mgrid[0:n, 0:n]
-    m1 = (gu - 40.0) ** 2 + (gv - 38.0) ** 2 <= 14.0**2
-    su, sv = 8, 16  # whole tiles (tile = 8 px)
-    m2 = np.roll(np.roll(m1, sv, axis=0), su, axis=1)
-    f1 = gauss(gu - 10.0, gv - 10.0)
-    f2 = gauss(gu - 10.0 - su, gv - 10.0 - sv)
-    pts = points_in(m1, 300, np.random.default_rng(3))
-    cache = TileCache()
-    a = MaskedGridInterpolant(m1, tile_cache=cache).fit(f1).evaluate(pts)
-    built = cache.built
-    assert built > 0 and cache.hits == 0
-    b = MaskedGridInterpolant(m2, tile_cache=cache).fit(f2).evaluate(pts + [su, sv])
-    assert cache.built == built and cache.hits == built
-    ref = MaskedGridInterpolant(m2).fit(f2).evaluate(pts + [su, sv])
-    for x, y, z in ((a.value, b.value, ref.value), (a.du, b.du, ref.du), (a.dv, b.dv, ref.dv)):
-        np.testing.assert_array_equal(y, z)
-        np.testing.assert_allclose(y, x, rtol=0, atol=1e-9, equal_nan=True)
-    # a cache bounded to one tile evicts the others and still gives the same numbers
-    small = TileCache(max_bytes=1)
-    c = MaskedGridInterpolant(m2, tile_cache=small).fit(f2).evaluate(pts + [su, sv])
-    np.testing.assert_array_equal(c.value, ref.value)
-    assert small.built == built and len(small._d) == 1
-
-
-def test_stable_mask_extends_shared_factors_with_the_same_interpolant():
-    """Edge tiles of a moving outline extend the shared factor of the pixels all masks have.
-
-    The extended factor is that of the same saddle system with the stable
-    pixels ordered first: the interpolant agrees with a direct factorisation
-    to round-off, and the masks share their stable factors.
-    """
-    n = 96
-    gv, gu = np.mgrid[0:n, 0:n]
-    # an outline that moves to and fro and breathes: each mask has pixels of its own
     masks = [(gu - 40.0 - s) ** 2 / 1.2 + (gv - 44.0 + s) ** 2 <= (20.0 + 0.5 * s) ** 2
              for s in (0.0, 1.5, -1.2, 0.7)]
-    stable = np.logical_and.reduce(masks)
-    assert all((m & ~stable).sum() > 20 for m in masks)
     f = gauss(gu - 12.0, gv - 14.0)
     pts = points_in(masks[0], 400, np.random.default_rng(5))
-    cache = TileCache()
-    for k, m in enumerate(masks):
-        got = MaskedGridInterpolant(m, tile_cache=cache, stable_mask=stable).fit(f).evaluate(pts)
+    shared = [MaskedGridInterpolant(m).fit(f).evaluate(pts) for m in masks]
+    calls = []
+    for name in ("cholesky", "cho_factor"):  # the whole-pattern factorisations (SaddleFactor, windows)
+        real = getattr(tiles.scipy.linalg, name)
+        monkeypatch.setattr(tiles.scipy.linalg, name, lambda a, *r, _f=real, **kw: calls.append(a.shape) or _f(a, *r, **kw))
+    again = MaskedGridInterpolant(np.roll(masks[1], 3, axis=0)).fit(f).evaluate(pts)
+    assert not calls  # the window factors exist: no pattern is factorised whole
+    monkeypatch.setattr(tiles, "_DIRECT_FRACTION", -1.0)  # every tile by its own factorisation
+    for m, got in zip(masks, shared):
         ref = MaskedGridInterpolant(m).fit(f).evaluate(pts)
         for x, y in ((got.value, ref.value), (got.du, ref.du), (got.dv, ref.dv)):
             np.testing.assert_allclose(x, y, rtol=0, atol=1e-9, equal_nan=True)
             assert np.isfinite(x).sum() > 200
-        # every tile built is either stable-only (plain factorisation) or an extension
-        assert cache.extended > 0
-    # the stable factors are shared: fewer than one per extended tile
-    assert len(cache._s) < cache.extended
-    # Regression: a stable factor evicted from its LRU stayed in memory,
-    # uncounted, through the cached tiles that extend it. Now they go with it.
-    small = TileCache(stable_bytes=1)
-    for m in masks:
-        MaskedGridInterpolant(m, tile_cache=small, stable_mask=stable).fit(f).evaluate(pts)
-    assert small.extended > 0 and len(small._s) == 1
-    held = [t.fac._blocks[0] for t in small._d.values() if t.fac._blocks is not None]
-    assert held and all(any(L is st.L for st in small._s.values()) for L in held)
-    assert small._bytes == sum(t.fac.nbytes for t in small._d.values())
-    with pytest.raises(ConfigError, match="stable_mask must have the mask's shape"):
-        MaskedGridInterpolant(masks[0], stable_mask=stable[:-1])
+    assert np.isfinite(again.value).sum() > 200
+    # a mask shifted by whole tiles: the same patterns, the same numbers
+    m2 = np.roll(np.roll(masks[0], 16, axis=0), 8, axis=1)
+    b = MaskedGridInterpolant(m2).fit(np.roll(np.roll(f, 16, axis=0), 8, axis=1)).evaluate(pts + [8, 16])
+    np.testing.assert_allclose(b.value, shared[0].value, rtol=0, atol=1e-9, equal_nan=True)
 
 
 @pytest.mark.parametrize("method", ["bilinear", "cubic"])
