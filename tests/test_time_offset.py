@@ -142,6 +142,19 @@ def test_pattern_changing_its_shape_refused(realistic):
         ir_clock(dic, ir, cal, "s07")
 
 
+def test_model_order_where_the_one_component_model_failed():
+    """Only the two-component model fitted (the one-component one failed, e.g. most DIC times outside the IR
+    record): no rank is assumed to exist, the estimate is refused as a model that cannot be checked."""
+    from irdic.timing.offset import _model_order
+    from irdic.timing.score import Uncertainty
+
+    quiet = Uncertainty(noise=0.01, robust=0.01, interpolation=0.0)
+    assert _model_order({1: (0.1, None, quiet, None, None)}, 0.5) == (1, 0.0)
+    assert _model_order({2: (0.1, None, quiet, None, None)}, 0.5) == (2, np.inf)
+    rank, shift = _model_order({2: (0.1, None, quiet, None, None), 3: (0.13, None, quiet, None, None)}, 0.5)
+    assert rank == 2 and shift == pytest.approx(0.03)
+
+
 def test_nodes_follow_an_affine_motion_exactly():
     """Nodes carried by the triangulation: positions and reference velocities ``F^-1 w`` exact for an affine
     motion of the points (whatever the triangles), and the gradient of a linear field exact to the outline."""

@@ -137,10 +137,14 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 
 
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
-#: DIC time and point (masks, interpolation with the extrapolation's samples, the rest) and per IR frame and
-#: point the IR clock reads (:data:`irdic.timing.offset.MAX_FRAMES`, :data:`~irdic.timing.offset.MAX_POINTS`);
+#: DIC time and point (masks, interpolation with the extrapolation's samples, the rest) and per sample (node x
+#: frame) the IR clock's refinement reads (about :data:`NODES_PER_POINT` nodes per point, at most
+#: :data:`irdic.timing.offset.MAX_FRAMES` frames and :data:`~irdic.timing.offset.MAX_SAMPLES` samples);
 #: their ratios, measured on the moving tube of the benchmarks, are what the ETA rests on
-STAGE_COSTS = {"masks": 8e-6, "clock": 2.2e-5, "interpolation": 1.2e-5, "rest": 2e-6}
+STAGE_COSTS = {"masks": 8e-6, "clock": 3.3e-6, "interpolation": 1.2e-5, "rest": 2e-6}
+#: the IR clock's nodes lie 1 px apart on the specimen: about this many per DIC point at the usual DIC spacing
+#: (the moving tube: ~58,000 specimen pixels, 13,104 points)
+NODES_PER_POINT = 4
 #: the part of each that runs on the stage's threads (the masks' triangulations do not)
 STAGE_SHARES = {"masks": 0.6, "clock": 0.5, "interpolation": 0.9, "rest": 0.3}
 
@@ -148,11 +152,11 @@ STAGE_SHARES = {"masks": 0.6, "clock": 0.5, "interpolation": 0.9, "rest": 0.3}
 def stage_costs(n_t: int, n_points: int, n_frames: int) -> dict:
     """Expected seconds of one core of the stage's parts for ``n_t`` DIC times, ``n_points`` points and
     ``n_frames`` IR frames (:data:`STAGE_COSTS`)."""
-    from ..timing.offset import MAX_FRAMES, MAX_POINTS
+    from ..timing.offset import MAX_FRAMES, MAX_SAMPLES
 
     tm = float(n_t) * n_points
-    return {"masks": STAGE_COSTS["masks"] * tm,
-            "clock": STAGE_COSTS["clock"] * min(n_frames, MAX_FRAMES) * min(n_points, MAX_POINTS),
+    samples = min(float(min(n_frames, MAX_FRAMES)) * NODES_PER_POINT * n_points, MAX_SAMPLES)
+    return {"masks": STAGE_COSTS["masks"] * tm, "clock": STAGE_COSTS["clock"] * samples,
             "interpolation": STAGE_COSTS["interpolation"] * tm, "rest": STAGE_COSTS["rest"] * tm}
 
 

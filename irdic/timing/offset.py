@@ -282,7 +282,7 @@ def _model_order(fits: dict, period: float) -> tuple[int, float]:
     """The model kept and the shift (s) of its estimate to that of the neighbouring order: one component
     where it leaves no structure (no shift); else two where they leave none, three otherwise, each with the
     distance between the two- and three-component estimates (infinite where either failed)."""
-    if len(fits) == 1 and not _structured(fits[1][2], period):
+    if set(fits) == {1} and not _structured(fits[1][2], period):
         return 1, 0.0
     if 2 not in fits or 3 not in fits:
         return max(fits), np.inf
