@@ -31,8 +31,10 @@ uncertainty probes); the load average before and after each row.
 ``--quick``: 60 frames and 3,000 points, the scipy way on 2 times (a minute or
 two per row; for a check, not for the figures). With ``--two-jobs`` the
 fastest row's job runs twice at once (one thread each) against once alone on
-one thread. Each stage's progress lines give its ETA's worst error from the
-first tenth of the run on (against the time that was left).
+one thread. Each stage's progress lines, from the first tenth of the run to
+the last, give the worst error of the duration they predict (elapsed + ETA
+against the stage's time from the start of its progress) and, stricter near
+the end, of the ETA against the time that was left.
 """
 
 from __future__ import annotations
@@ -78,6 +80,13 @@ if stage == "couple":
     timed("irdic.coupling.compute", "evaluate_series", "interpolation")
 else:
     timed("irdic.fields.space_time", "uncertainties", "probes")
+# when the stage's progress starts (after its inputs are read): the ETA's reference is the time from there
+import irdic.logs
+_init = irdic.logs.StageProgress.__init__
+def _started(self, *a, **kw):
+    parts.setdefault("progress_start", time.perf_counter() - t0)
+    _init(self, *a, **kw)
+irdic.logs.StageProgress.__init__ = _started
 t0 = time.perf_counter()
 log = root + f"/{stage}{tag}.log"
 if stage == "couple":
@@ -129,25 +138,29 @@ def run_stage(stage: str, root: Path, tag: str = "", threads: int = 1) -> dict:
     if proc.returncode:
         raise SystemExit(f"{stage} subprocess failed ({proc.returncode})")
     out = json.loads(proc.stdout.strip().splitlines()[-1])
-    out["eta"] = eta_error(root / f"{stage}{tag}.log", stage, out["seconds"])
+    out["eta"] = eta_error(root / f"{stage}{tag}.log", stage, out["seconds"] - out["parts"].pop("progress_start", 0.0))
     return out
 
 
 _ETA_LINE = re.compile(r"(?P<stage>\w+): (?P<pct>\d+) % of the work, (?P<el>[\d.]+) s elapsed, ETA (?P<eta>\d+) s")
 
 
-def eta_error(log: Path, stage: str, seconds: float) -> tuple[float, float]:
-    """The stage's progress lines against its run time: the worst relative error of the ETA (against the time
-    that was left) over the lines from the first tenth of the run to the last tenth, and the part of the run
-    that had passed at its first line (NaN, NaN without lines)."""
+def eta_error(log: Path, stage: str, seconds: float) -> tuple[float, float, float]:
+    """The stage's progress lines against its run time from the start of its progress (``seconds``: its inputs
+    read, its store written), over the lines from the first tenth of the run to the last tenth: the worst
+    relative error of the duration they predict (elapsed + ETA against ``seconds``), the worst relative error
+    of the ETA against the time that was left (stricter near the end), and the part of the run that had
+    passed at the first line (NaN without lines)."""
     lines = [m for m in map(_ETA_LINE.search, log.read_text().splitlines() if log.exists() else []) if m
              and m["stage"] == stage]
     if not lines:
-        return float("nan"), float("nan")
+        return float("nan"), float("nan"), float("nan")
     first = float(lines[0]["el"]) / seconds
-    errs = [abs(float(m["el"]) + float(m["eta"]) - seconds) / (seconds - float(m["el"])) for m in lines
-            if 0.1 * seconds <= float(m["el"]) <= 0.9 * seconds]
-    return (max(errs) if errs else float("nan")), first
+    kept = [(float(m["el"]), float(m["eta"])) for m in lines if 0.1 * seconds <= float(m["el"]) <= 0.9 * seconds]
+    if not kept:
+        return float("nan"), float("nan"), first
+    return (max(abs(el + eta - seconds) / seconds for el, eta in kept),
+            max(abs(el + eta - seconds) / (seconds - el) for el, eta in kept), first)
 
 
 def run_job(root: Path, tag: str = "", threads: int = 1) -> dict:
@@ -248,8 +261,8 @@ def two_at_once(root: Path) -> None:
 
 
 def _eta(e):
-    """``worst error % (first line at % of the run)``."""
-    return f"{100 * e[0]:.0f} % (first at {100 * e[1]:.0f} %)"
+    """``worst error of the duration % (of the time left %; first line at % of the run)``."""
+    return f"{100 * e[0]:.0f} % ({100 * e[1]:.0f} %; first at {100 * e[2]:.0f} %)"
 
 
 def sweep(speeds, frames: int, points: int, threads: int, subset: int, two_jobs: bool = False) -> None:
@@ -261,7 +274,8 @@ def sweep(speeds, frames: int, points: int, threads: int, subset: int, two_jobs:
     rows = []
     print("| outline px/frame | couple s | clock / masks / interpolation s | fields s | probes s | total s | "
           "peak RSS GB (couple / fields) | scipy s per DIC time | scipy / couple | couple s per DIC time | "
-          "ETA worst error from the first tenth (couple / fields) | load before / after |")
+          "ETA from the first tenth: worst error of the duration (of the time left) (couple / fields) | load "
+          "before / after |")
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 
     def both(p, k):

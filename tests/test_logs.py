@@ -87,3 +87,48 @@ def test_stage_progress_eta_from_the_cost_model():
     assert lines[-1].startswith("couple: 100 % of the work, 28.5 s elapsed, ETA 0 s")
     etas = [(float(ln.split()[6]), float(ln.split()[10])) for ln in lines]
     assert all(abs(el + eta - 28.5) <= 1.0 for el, eta in etas)  # the ETA rounded to whole seconds
+
+
+def test_stage_progress_a_part_that_stops_early_is_not_fast_work():
+    """The IR clock finds no motion and stops after 1 s instead of the 6 s expected: the ETA stays that of the
+    other parts at their own speed (without re-weighting it would count 6 s of work done in 1 s)."""
+    import logging
+
+    from irdic.logs import StageProgress, report
+
+    now = [0.0]
+    with StageProgress("couple", {"masks": 10.0, "clock": 6.0, "interpolation": 20.0}, logger=logging.getLogger(
+            "irdic.test_stop_early"), clock=lambda: now[0], tick=None) as sp:
+        for k in range(1, 11):
+            now[0] = float(k)
+            report("masks", k / 10)
+        report("clock", 0.0)
+        now[0] = 11.0
+        report("clock", 1.0)
+        now[0] = 16.0
+        report("interpolation", 0.25)
+        f, eta = sp._state(now[0])
+        # 15 s of the 20 s interpolation left at the speed of the masks and the interpolation so far
+        assert eta == pytest.approx(15.0, rel=0.02)
+        assert f == pytest.approx(16.0 / 31.0, rel=0.02)
+
+
+def test_stage_progress_running_part_at_its_own_pace():
+    """The interpolation runs at half the pace the model gives it relative to the masks: once it has reported a
+    quarter of itself (a fifth since its first report), the ETA is its own rest at its own pace (not the masks'
+    pace) plus the last part at the stage's pace so far (16 model seconds in 22 s)."""
+    import logging
+
+    from irdic.logs import StageProgress, report
+
+    now = [0.0]
+    with StageProgress("couple", {"masks": 10.0, "interpolation": 20.0, "rest": 5.0}, logger=logging.getLogger(
+            "irdic.test_own_pace"), clock=lambda: now[0], tick=None) as sp:
+        for k in range(1, 11):
+            now[0] = float(k)
+            report("masks", k / 10)
+        for k in range(1, 7):  # 40 s for the whole part instead of 20
+            now[0] = 10.0 + 2.0 * k
+            report("interpolation", k / 20)
+        _, eta = sp._state(now[0])
+        assert eta == pytest.approx(0.7 * 40.0 + 5.0 / (16.0 / 22.0), rel=0.01)

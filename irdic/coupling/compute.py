@@ -137,16 +137,18 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 
 
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
-#: DIC time and point (masks, interpolation with the extrapolation's samples, the rest) and per sample (node x
-#: frame) the IR clock's refinement reads (about :data:`NODES_PER_POINT` nodes per point, at most
+#: DIC time and point (the projections, masks, interpolation with the extrapolation's samples, the rest) and per
+#: sample (node x frame) the IR clock's refinement reads (about :data:`NODES_PER_POINT` nodes per point, at most
 #: :data:`irdic.timing.offset.MAX_FRAMES` frames and :data:`~irdic.timing.offset.MAX_SAMPLES` samples);
-#: their ratios, measured on the moving tube of the benchmarks, are what the ETA rests on
-STAGE_COSTS = {"masks": 8e-6, "clock": 3.3e-6, "interpolation": 1.2e-5, "rest": 2e-6}
+#: their ratios, measured on the moving tube of the benchmarks, are what the ETA rests on; ``write`` is the
+#: stage's store, written after :func:`couple` returns (never reported: the ETA includes it)
+STAGE_COSTS = {"setup": 8e-7, "masks": 8.1e-6, "clock": 3.7e-6, "interpolation": 1.4e-5, "rest": 3e-7,
+               "write": 3e-7}
 #: the IR clock's nodes lie 1 px apart on the specimen: about this many per DIC point at the usual DIC spacing
 #: (the moving tube: ~58,000 specimen pixels, 13,104 points)
 NODES_PER_POINT = 4
-#: the part of each that runs on the stage's threads (the masks' triangulations do not)
-STAGE_SHARES = {"masks": 0.6, "clock": 0.5, "interpolation": 0.9, "rest": 0.3}
+#: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads)
+STAGE_SHARES = {"setup": 0.0, "masks": 0.9, "clock": 0.25, "interpolation": 0.65, "rest": 0.3, "write": 0.0}
 
 
 def stage_costs(n_t: int, n_points: int, n_frames: int) -> dict:
@@ -156,8 +158,7 @@ def stage_costs(n_t: int, n_points: int, n_frames: int) -> dict:
 
     tm = float(n_t) * n_points
     samples = min(float(min(n_frames, MAX_FRAMES)) * NODES_PER_POINT * n_points, MAX_SAMPLES)
-    return {"masks": STAGE_COSTS["masks"] * tm, "clock": STAGE_COSTS["clock"] * samples,
-            "interpolation": STAGE_COSTS["interpolation"] * tm, "rest": STAGE_COSTS["rest"] * tm}
+    return {k: c * (samples if k == "clock" else tm) for k, c in STAGE_COSTS.items()}
 
 
 def _chunk_times(dic, chunk) -> slice:
@@ -205,6 +206,7 @@ def _footprint(dic, ir, calibration, p, only=None):
     pr = project_points(camera, dic, u, v)
     _check_extent(pr)
     side = footprint_side(pr)  # from the record's first stage: the same in every chunk
+    report("setup", 1.0)
     masks, facing = masks_and_facing(
         pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
         np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],

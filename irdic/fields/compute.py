@@ -114,11 +114,13 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
 
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
 #: DIC time and point of each part with the default settings (regressions, their noise probes and bias
-#: estimates), measured on the moving tube of the benchmarks; the ETA rests on their ratios
-STAGE_COSTS = {"setup": 1e-6, "fill": 2.7e-6, "surface": 7e-6, "regression": 3.8e-6, "uncertainty": 2.1e-5,
-               "rest": 2e-6}
-#: the part of each that runs on the stage's threads
-STAGE_SHARES = {"setup": 0.2, "fill": 0.9, "surface": 0.6, "regression": 0.6, "uncertainty": 0.6, "rest": 0.3}
+#: estimates), measured on the moving tube of the benchmarks; the ETA rests on their ratios. ``write`` is the
+#: stage's store, written after :func:`fields` returns (never reported: the ETA includes it)
+STAGE_COSTS = {"setup": 3.5e-7, "fill": 2.4e-6, "surface": 9.9e-6, "regression": 4.6e-6, "uncertainty": 2.0e-5,
+               "rest": 5e-7, "write": 7.5e-7}
+#: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads)
+STAGE_SHARES = {"setup": 0.4, "fill": 0.25, "surface": 0.7, "regression": 0.3, "uncertainty": 0.4, "rest": 0.0,
+                "write": 0.0}
 
 
 def stage_costs(n_t: int, n_points: int) -> dict:

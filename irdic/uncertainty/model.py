@@ -74,6 +74,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..gradient import material_rate, surface_gradient
+from ..logs import report
 from ..numerics.temporal import TemporalInterpolant, rate_reference_weights, temporal_window
 from ..numerics.threads import parallel_map
 from ..vocabulary import Status
@@ -119,6 +120,13 @@ class Window(NamedTuple):
     pixel: np.ndarray | None = None
     noise_factor: np.ndarray | None = None
     extrapolated: np.ndarray | None = None
+
+
+#: the part of :func:`uncertainties`' time done (the fields stage's progress, :func:`irdic.logs.report`) after
+#: the IR noise's probes and after the IR noise's whole share (the probes scaled, the bias estimates); the DIC
+#: noise's share of temperature, gradient and strain takes the rest (measured on the moving tube of the
+#: benchmarks)
+PROGRESS = {"probes": 0.40, "ir": 0.70}
 
 
 def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None, spatial=None,
@@ -183,6 +191,7 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
                                                         footprint_probes(points, window, sigma),
                                                         _values(points, "temperature_paper"))
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
+    report("uncertainty", PROGRESS["ir"])
     s_x = float(a.get("dic_noise_mm", np.nan))
     temp_std, grad_std = position_std(points, sf, geo, J, g_pix, temp_std, grad_std, s_x, p, spatial, rng, ops)
     e_std = strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
@@ -386,6 +395,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             acc["g_var"] = acc["g_var"] + np.sum((g - g_int) ** 2, axis=0)
             nulls["g_var"] += list((g - g_int) ** 2)
             n_bias += b
+        report("uncertainty", PROGRESS["probes"] * (start + b) / PROBES)
     if n_bias:
         acc["g_var"] = acc["g_var"] / n_bias
     out = {k: spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
