@@ -275,25 +275,29 @@ class StageProgress:
         """The expected part of the stage's wall time done (0..1), the running part extrapolated to ``now``."""
         return self._state(self.clock() if now is None else now)[0]
 
-    def _state(self, now):
-        w = sum(self.weights[k] * self.done[k] for k in self.weights)
-        if self._last is None or w <= 0:
-            return w / self.total, None
+    def _speed(self):
+        """Expected wall seconds of work done per second so far (at the last report)."""
         w_last, t_last = self._last
-        speed = w_last / max(t_last - self.started, 1e-9)
+        return w_last / max(t_last - self.started, 1e-9)
+
+    def _state(self, now):
+        done = sum(self.weights[k] * self.done[k] for k in self.weights)
+        if self._last is None or done <= 0:
+            return done / self.total, None
+        speed = self._speed()
         if self._running is None:
-            return min(1.0, w / self.total), (self.total - w) / speed
+            return min(1.0, done / self.total), (self.total - done) / speed
         part, since = self._running
         left = self.weights[part] * (1.0 - self.done[part])
-        w += min(0.9 * left, max(0.0, now - since) * speed)
-        later = (self.total - w_last - left) / speed
+        w = done + min(0.9 * left, max(0.0, now - since) * speed)
+        eta = (self.total - w) / speed
         t0, f0 = self._began.get(part, (since, self.done[part]))
         f = self.done[part]
         if f - f0 >= OWN_RATE_SHARE and since > t0:
             # the model's ratios between parts are rough; a part's own progress since its first report is not
             own = max(0.0, (1.0 - f) * (since - t0) / (f - f0) - (now - since))
-            return min(1.0, w / self.total), own + later
-        return min(1.0, w / self.total), (self.total - w) / speed
+            eta = own + (self.total - done - left) / speed
+        return min(1.0, w / self.total), eta
 
     def update(self, part: str, fraction: float) -> str | None:
         """Report that ``fraction`` (0..1) of ``part`` is done; returns the line logged, if any."""
@@ -318,10 +322,8 @@ class StageProgress:
         does not count as fast work; call with the lock held."""
         if self._running is None or self._running[0] != part or self._last is None:
             return
-        since = self._running[1]
-        speed = self._last[0] / max(self._last[1] - self.started, 1e-9)
         left = self.weights[part] * (1.0 - self.done[part])
-        took = max(0.0, now - since) * speed
+        took = max(0.0, now - self._running[1]) * self._speed()
         if took < SHORT_PART * left:
             self.total -= left - took
             self.weights[part] -= left - took

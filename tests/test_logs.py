@@ -1,5 +1,7 @@
 """One-line stage errors: the log line a failed stage writes, and how the workflow finds it again."""
 
+import contextlib
+import logging
 import os
 import subprocess
 import sys
@@ -89,19 +91,26 @@ def test_stage_progress_eta_from_the_cost_model():
     assert all(abs(el + eta - 28.5) <= 1.0 for el, eta in etas)  # the ETA rounded to whole seconds
 
 
-def test_stage_progress_a_part_that_stops_early_is_not_fast_work():
-    """The IR clock finds no motion and stops after 1 s instead of the 6 s expected: the ETA stays that of the
-    other parts at their own speed (without re-weighting it would count 6 s of work done in 1 s)."""
-    import logging
-
+@contextlib.contextmanager
+def _masks_done(parts: dict, name: str):
+    """A couple StageProgress on a fake clock whose masks (10 model seconds) took 1 s per tenth:
+    ``(progress, now)``, ``now[0]`` the clock to move on."""
     from irdic.logs import StageProgress, report
 
     now = [0.0]
-    with StageProgress("couple", {"masks": 10.0, "clock": 6.0, "interpolation": 20.0}, logger=logging.getLogger(
-            "irdic.test_stop_early"), clock=lambda: now[0], tick=None) as sp:
+    with StageProgress("couple", parts, logger=logging.getLogger(name), clock=lambda: now[0], tick=None) as sp:
         for k in range(1, 11):
             now[0] = float(k)
             report("masks", k / 10)
+        yield sp, now
+
+
+def test_stage_progress_a_part_that_stops_early_is_not_fast_work():
+    """The IR clock finds no motion and stops after 1 s instead of the 6 s expected: the ETA stays that of the
+    other parts at their own speed (without re-weighting it would count 6 s of work done in 1 s)."""
+    from irdic.logs import report
+
+    with _masks_done({"masks": 10.0, "clock": 6.0, "interpolation": 20.0}, "irdic.test_stop_early") as (sp, now):
         report("clock", 0.0)
         now[0] = 11.0
         report("clock", 1.0)
@@ -117,16 +126,9 @@ def test_stage_progress_running_part_at_its_own_pace():
     """The interpolation runs at half the pace the model gives it relative to the masks: once it has reported a
     quarter of itself (a fifth since its first report), the ETA is its own rest at its own pace (not the masks'
     pace) plus the last part at the stage's pace so far (16 model seconds in 22 s)."""
-    import logging
+    from irdic.logs import report
 
-    from irdic.logs import StageProgress, report
-
-    now = [0.0]
-    with StageProgress("couple", {"masks": 10.0, "interpolation": 20.0, "rest": 5.0}, logger=logging.getLogger(
-            "irdic.test_own_pace"), clock=lambda: now[0], tick=None) as sp:
-        for k in range(1, 11):
-            now[0] = float(k)
-            report("masks", k / 10)
+    with _masks_done({"masks": 10.0, "interpolation": 20.0, "rest": 5.0}, "irdic.test_own_pace") as (sp, now):
         for k in range(1, 7):  # 40 s for the whole part instead of 20
             now[0] = 10.0 + 2.0 * k
             report("interpolation", k / 20)
