@@ -37,7 +37,7 @@ from ..numerics.temporal import temporal_window
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry, surface_parameters
 from ..uncertainty.model import Window
-from .dataset import fields_dataset, method_of, with_uncertainty
+from .dataset import fields_dataset, method_of, stacked_directions, with_uncertainty
 from .smoothing import GCV_STAGES, SMOOTHING, checked_settings, resolve_gcv, surface_kw
 from .space_time import temperature_fields
 
@@ -144,19 +144,24 @@ def _fields(points, calibration, chunk, p):
     report("fill", 1.0)
     report("surface", 0.0)
     points, sf, p, series = _surface(points, x, t, chunk, p, ops)
+    del x  # each (time, point) array is 31 MB at 13,000 points x 300 times: what is done with goes
     report("surface", 1.0)
     t = points["time"].values.astype(float)
     T, N = sf.x.shape[:2]
-    geo = surface_geometry(sf.tangents)
+    # the fields use the dual basis (gradients) and the normal of the geometry, not its metrics
+    geo = surface_geometry(sf.tangents)._replace(metric=None, inverse_metric=None, area_ratio=None, degenerate=None)
     grad, total, loc, convective, best, unc = temperature_fields(points, calibration, sf, geo, t, p, noise_attrs,
                                                                   series, ops)
     report("rest", 0.0)
     ops.clear()  # the factorisations (GBs at paper scale) go before the output dataset is built
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
+    sf, geo = sf._replace(tangents=None, ref_tangents=None), geo._replace(dual=None)
+    st, directions = stacked_directions(st)
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
              _time.perf_counter() - started, method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
     report("rest", 0.5)
-    return fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, configured, noise_attrs), unc
+    return fields_dataset(points, t, sf, geo.normal, st, directions, grad, total, loc, convective, best, configured,
+                          noise_attrs), unc
 
 
 def _fill_operators(points, x, p) -> dict:

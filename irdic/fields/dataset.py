@@ -8,16 +8,27 @@ import xarray as xr
 from ..uncertainty.model import uncertainty_notes
 from ..vocabulary import COMPONENTS, cf_attrs
 
-__all__ = ["fields_dataset", "method_of", "with_uncertainty"]
+__all__ = ["fields_dataset", "method_of", "stacked_directions", "with_uncertainty"]
 
 
 def method_of(info) -> str:
     return str(info.get("method")) if isinstance(info, dict) else str(info)
 
 
-def fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, temperature_smoothing,
-                    noise_attrs) -> xr.Dataset:
-    """The content of ``fields.zarr``: variables with their CF attributes (:mod:`irdic.vocabulary`)."""
+def stacked_directions(st):
+    """The principal directions of the strain ``st`` (:func:`irdic.strain.strain`) as the store holds them,
+    ``(reference, current)`` each (T, N, 2, 3) (max, min), and ``st`` without its directions and stretches
+    (the store's dataset would otherwise hold them twice while it is built)."""
+    directions = (np.stack([st.direction_max, st.direction_min], axis=2),
+                  np.stack([st.direction_max_current, st.direction_min_current], axis=2))
+    return st._replace(direction_max=None, direction_min=None, direction_max_current=None, direction_min_current=None,
+                       stretch_max=None, stretch_min=None), directions
+
+
+def fields_dataset(points, t, sf, normal, st, directions, grad, total, loc, convective, best, temperature_smoothing,
+                   noise_attrs) -> xr.Dataset:
+    """The content of ``fields.zarr``: variables with their CF attributes (:mod:`irdic.vocabulary`); ``normal``
+    (T, N, 3) the surface's unit normal, ``directions`` :func:`stacked_directions`'s."""
     a = lambda name: cf_attrs("fields", name)  # noqa: E731
     tp, tpc = ("time", "point"), ("time", "point", "component")
     tppc = ("time", "point", "principal", "component")
@@ -30,15 +41,13 @@ def fields_dataset(points, t, sf, geo, st, grad, total, loc, convective, best, t
             "temperature": (tp, best, a("temperature")),
             "x": (tpc, sf.x, a("x")),
             "velocity": (tpc, sf.velocity, a("velocity")),
-            "normal": (tpc, geo.normal, a("normal")),
+            "normal": (tpc, normal, a("normal")),
             "strain": (("time", "point", "i", "j"), st.E2, a("strain")),
             "reference_basis": (("point", "i", "component"), st.basis, a("reference_basis")),
             "max_principal_strain": (tp, st.e_max, a("max_principal_strain")),
             "min_principal_strain": (tp, st.e_min, a("min_principal_strain")),
-            "principal_direction": (tppc, np.stack([st.direction_max, st.direction_min], axis=2),
-                                    a("principal_direction")),
-            "principal_direction_current": (tppc, np.stack([st.direction_max_current, st.direction_min_current],
-                                                           axis=2), a("principal_direction_current")),
+            "principal_direction": (tppc, directions[0], a("principal_direction")),
+            "principal_direction_current": (tppc, directions[1], a("principal_direction_current")),
             "equivalent_strain": (tp, st.equivalent, a("equivalent_strain")),
             "surface_parameter": (("point", "param"), sf.psi, a("surface_parameter")),
             "surface_edge_distance": (("point",), sf.edge_distance, a("surface_edge_distance")),

@@ -93,12 +93,17 @@ def regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
     cols = np.flatnonzero(have)
     if dual is not None:
         step = max(1, (1 << 24) // max(1, 6 * cols.size))  # rows per block: ~128 MB of dual basis
+        every = cols.size == N  # all points: slices, not gathers (GBs of dual basis at paper scale)
         for s in range(0, times.size, step):
             tt = times[s:s + step]
-            D = dual[tt % dual.shape[0]][:, cols]
+            D = dual[tt % dual.shape[0]]
+            D = D if every else D[:, cols]
             g = d1[:, s:s + step].T[..., None] * D[:, :, 0]
             g += d2[:, s:s + step].T[..., None] * D[:, :, 1]
-            grad[tt[:, None], cols] = g
+            if every:
+                grad[tt] = g
+            else:
+                grad[tt[:, None], cols] = g
         grad[~visible] = np.nan
     val[times[:, None], cols] = v0.T
     val[~visible] = np.nan

@@ -67,7 +67,7 @@ def pixel_pitch(points: xr.Dataset, psi) -> float | None:
     return float(np.median(d[use, 1] / dpx[use])) if use.any() else None
 
 
-def footprint_noise(rng, pixel, side, shape, extrapolated=None):
+def footprint_noise(rng, pixel, side, shape, extrapolated=None, plan=None):
     """White pixel noise (unit variance) through the box mean of ``side`` px about each point's nearest
     pixel, scaled to unit variance: probes (``shape`` (b,) + pixel.shape[:-1]) with the spatial correlation
     of the footprint temperatures' noise (neighbouring points closer than ``side`` px share pixels).
@@ -75,7 +75,9 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None):
     ``pixel`` (T, N, 2): the points' projected positions (px, NaN: none). ``extrapolated`` (T, N) float,
     optional: for the points the couple stage extrapolated from the mask edge, their distance outside it
     (px, ``-points.edge_distance``), NaN for the others; their probes are extrapolated as the couple stage
-    extrapolates their values (:func:`_extrapolated_noise`).
+    extrapolates their values (:func:`_extrapolated_noise`). ``plan``: a dict the calls on the same
+    ``pixel``, ``side`` and ``extrapolated`` share (each time's pixels and extrapolation lines, built once;
+    the draws are the same with or without it).
 
     Notes
     -----
@@ -92,29 +94,45 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None):
     b = shape[0]
     T, N = pixel.shape[:2]
     out = np.zeros((b, T, N))
-    h = side // 2
-    o = np.arange(-h, h + 1)
-    ou, ov = (a.ravel() for a in np.meshgrid(o, o))
+    plan = {} if plan is None else plan
     for k in range(T):
-        ok = np.isfinite(pixel[k]).all(axis=1)
-        if not ok.any():
+        if k not in plan:
+            plan[k] = _footprint_pixels(pixel[k], side, None if extrapolated is None else extrapolated[k])
+        if plan[k] is None:
             continue
-        ext = np.zeros(N, bool) if extrapolated is None else ok & np.isfinite(extrapolated[k])
-        inner = ok & ~ext
-        centres = np.round(pixel[k][inner])
-        lines = None if not ext.any() else _extrapolation_lines(pixel[k], inner, ext, extrapolated[k][ext])
-        if lines is not None:
-            centres = np.concatenate([centres, np.round(lines[0].reshape(-1, 2))])
-        c = centres.astype(np.int64)
-        keys = (c[:, 0:1] + ou) * 1_000_003 + (c[:, 1:2] + ov)  # (n, side²): the box's pixels
-        uniq, inv = np.unique(keys, return_inverse=True)
-        xi = rng.standard_normal((b, uniq.size))
-        box = xi[:, inv.reshape(keys.shape)].sum(axis=-1) / side
+        inner, ext, inv, n_pixels, lines = plan[k]
+        xi = rng.standard_normal((b, n_pixels))
+        box = xi[:, inv].sum(axis=-1) / side
         n_in = int(inner.sum())
         out[:, k, inner] = box[:, :n_in]
         if lines is not None:
             out[:, k, ext] = _extrapolated_noise(box[:, n_in:].reshape(b, -1, EXTRAP_SAMPLES), *lines[1:], side)
     return out
+
+
+def _footprint_pixels(pix, side, extrapolated):
+    """One time's boxes of :func:`footprint_noise`: ``(inner, ext, inv, n_pixels, lines)``, the points inside
+    and extrapolated (N,) bool, each box's pixels (n, side²) as indices into the ``n_pixels`` distinct ones
+    (sorted by pixel), the points inside first and then the extrapolation samples, and
+    :func:`_extrapolation_lines`; None where no point has a position. ``pix`` (N, 2) px,
+    ``extrapolated`` (N,) px or None."""
+    N = pix.shape[0]
+    ok = np.isfinite(pix).all(axis=1)
+    if not ok.any():
+        return None
+    h = side // 2
+    o = np.arange(-h, h + 1)
+    ou, ov = (a.ravel() for a in np.meshgrid(o, o))
+    ext = np.zeros(N, bool) if extrapolated is None else ok & np.isfinite(extrapolated)
+    inner = ok & ~ext
+    centres = np.round(pix[inner])
+    lines = None if not ext.any() else _extrapolation_lines(pix, inner, ext, extrapolated[ext])
+    if lines is not None:
+        centres = np.concatenate([centres, np.round(lines[0].reshape(-1, 2))])
+    c = centres.astype(np.int64)
+    keys = (c[:, 0:1] + ou) * 1_000_003 + (c[:, 1:2] + ov)  # (n, side²): the box's pixels
+    uniq, inv = np.unique(keys, return_inverse=True)
+    return inner, ext, inv.reshape(keys.shape).astype(np.int32), uniq.size, lines
 
 
 def _extrapolation_lines(pix, inner, ext, L):
@@ -161,7 +179,8 @@ def footprint_probes(points, window, sigma):
     ext = extrapolated(points) if window is None else window.extrapolated
     if "temperature_paper" not in points:
         # the paper's temperatures alone: points closer than a pixel share its noise
-        return (lambda rng, b: footprint_noise(rng, pixel, 1, (b,), ext)), None
+        plan = {}  # each time's pixels, shared by the probe groups
+        return (lambda rng, b: footprint_noise(rng, pixel, 1, (b,), ext, plan)), None
     side = int(points.attrs.get("footprint_px", 1))
     if window is None:
         factor = points["temperature_footprint_noise_factor"].values if "temperature_footprint_noise_factor" in \
@@ -169,7 +188,8 @@ def footprint_probes(points, window, sigma):
     else:
         factor = window.noise_factor
     factor = 1.0 if factor is None else np.nan_to_num(np.asarray(factor, dtype=float), nan=1.0)
-    return (lambda rng, b: footprint_noise(rng, pixel, side, (b,), ext) * factor), sigma * float(
+    plan = {}
+    return (lambda rng, b: footprint_noise(rng, pixel, side, (b,), ext, plan) * factor), sigma * float(
         points.attrs.get("ir_noise_gain_temperature_paper", np.nan))
 
 

@@ -235,10 +235,14 @@ def fit_stages(x, psi, *, shape_stage=None, nodes=None, c=0.95, R0=1.0, smoothin
     x0 = Xs[:1] if shape_stage is None else float_array(shape_stage, "shape_stage").reshape(-1, N, 3)[:, nodes]
     if x0.shape[0] not in (1, S):
         raise ConfigError(f"shape_stage must have shape ({N}, 3) or ({S}, {N}, 3), got {np.shape(shape_stage)}")
+    # stacked probes repeat one shape stage for all their stages: each distinct one is filled and fitted once
+    changed = np.r_[True, np.any((x0[1:] != x0[:-1]) & ~(np.isnan(x0[1:]) & np.isnan(x0[:-1])), axis=(1, 2))]
+    shape_of = np.cumsum(changed) - 1 if x0.shape[0] > 1 else None
+    x0 = x0[changed]
     if shape_stage is not None:
         x0 = sp.fill(x0, np.isfinite(x0).all(axis=2))[0]
     val, d1, d2, _ = _spatial_fields(sp, psi[nodes], Xs.transpose(1, 0, 2).reshape(n, 3 * S),
-                                     x0.transpose(1, 0, 2).reshape(n, -1), ks, kg, c, R0, operators)
+                                     x0.transpose(1, 0, 2).reshape(n, -1), ks, kg, c, R0, operators, shape_of)
     x_fit = np.full((S, N, 3), np.nan)
     tangents = np.full((S, N, 2, 3), np.nan)
     x_fit[:, nodes] = val.reshape(n, S, 3).transpose(1, 0, 2)
@@ -360,27 +364,35 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
     return val, d1, d2, vel, np.flatnonzero(ok_t)
 
 
-def _spatial_fields(sp, psi_n, Y, x0, ks, kg, c, R0, ops):
+def _spatial_fields(sp, psi_n, Y, x0, ks, kg, c, R0, ops, shape_of=None):
     """Value and ``d/dPsi^alpha`` (n, 3 m) of stage columns ``Y`` (n, 3 m: x, y, z of m stages side by side).
 
     ``ks``: the spacing of the spatial operator (1: ``sp``, the
     interpolation); with a shape spacing ``kg`` other than ``ks`` the shape
     and the motion are regressed apart, ``x = S_shape x0 + S_motion (x -
-    x0)``, ``x0`` (n, 3) the shape stage, or (n, 3 m) one per column triple.
-    ``Y`` is overwritten. Returns ``val, d1, d2`` and the motion's operator.
+    x0)``, ``x0`` (n, 3) the shape stage of all, or (n, 3 u) ``u`` shape
+    stages with ``shape_of`` (m,) int the one of each stage (None: one per
+    stage, in order). ``Y`` is overwritten. Returns ``val, d1, d2`` and the
+    motion's operator.
     """
     ops = {} if ops is None else ops
     sp_motion = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=ks) if ks > 1.0 else sp
     split = kg is not None and kg != ks
-    reps = Y.shape[1] // np.shape(x0)[1]
+    m = Y.shape[1] // 3
+    if shape_of is None:
+        shape_of = np.zeros(m, int) if np.shape(x0)[1] == 3 else np.arange(m)
+
+    def per_stage(a):  # (n, 3 u) -> (n, 3 m), each stage's shape stage
+        return a.reshape(a.shape[0], -1, 3)[:, shape_of].reshape(a.shape[0], -1)
+
     if split:
         # the temporal weights of a value sum to 1 ({1, t} are reproduced), so columns minus x0 are displacements
-        Y -= np.tile(x0, reps)
+        Y -= per_stage(x0)
     val, d1, d2 = sp_motion.evaluate(Y)
     if split:
         sp_shape = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
         for a, b in zip((val, d1, d2), sp_shape.evaluate(x0)):
-            a += np.tile(b, reps)
+            a += per_stage(b)
     return val, d1, d2, sp_motion
 
 

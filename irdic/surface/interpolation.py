@@ -340,12 +340,17 @@ class SpatialInterpolant:
             self._ls = ls_design(self.psi, self.k, self.h, self.c, self.R0)
         return self._ls
 
+    def _kernel_rows(self, q, kinds):
+        """The regression's kernel columns at ``q`` (n, 2): value and, for ``kinds`` with 1 or 2, the
+        derivatives (each (n, centres))."""
+        centres, R0k, _, _, _ = self._ls_factor()
+        return imq_planar(q[:, None, 0] - centres[None, :, 0], q[:, None, 1] - centres[None, :, 1], self.c, R0k,
+                          any(k > 0 for k in kinds))
+
     def _ls_rows(self, q, kinds):
         """Design rows of the regression's functionals ``kinds`` at ``q`` (n, 2): each (n, centres + 3)."""
-        centres, R0k, ctr, _, _ = self._ls_factor()
-        m = imq_planar(q[:, None, 0] - centres[None, :, 0], q[:, None, 1] - centres[None, :, 1], self.c, R0k,
-                       any(k > 0 for k in kinds))
-        return [np.concatenate([m[k], monomials(q, ctr, self.R0, k)], axis=1) for k in kinds]
+        m = self._kernel_rows(q, kinds)
+        return [np.concatenate([m[k], monomials(q, self._ls_factor()[2], self.R0, k)], axis=1) for k in kinds]
 
     def _eval_ls(self, F, pts, kinds, at_nodes=False):
         centres, _, _, Qm, Rm = self._ls_factor()
@@ -357,9 +362,14 @@ class SpatialInterpolant:
             return [self._ls_at[k] @ coef for k in kinds]
         out = [np.empty((pts.shape[0], F.shape[1])) for _ in kinds]
         step = max(1, _BLOCK_BYTES // (8 * max(len(centres), 1)))
+        nc = len(centres)
         for i in range(0, pts.shape[0], step):
-            for o, E in zip(out, self._ls_rows(pts[i:i + step], kinds)):
-                o[i:i + step] = E @ coef
+            q = pts[i:i + step]
+            # the kernel's and the monomials' columns apart: a block's rows are not copied side by side
+            m = self._kernel_rows(q, kinds)
+            for o, k in zip(out, kinds):
+                o[i:i + step] = m[k] @ coef[:nc]
+                o[i:i + step] += monomials(q, self._ls_factor()[2], self.R0, k) @ coef[nc:]
         return out
 
     # ---- public -----------------------------------------------------------

@@ -367,17 +367,17 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             # in space at each time first, then in time (irdic.fields.space_time.space_time)
             s = np.nan_to_num(regress_space(noise.reshape(b * tw, N), None, ks)[1].reshape(b, tw, N))
             res = (noise - s)[:, off:off + T][:, sub]
-            r = np.einsum("ij,kjn->kin", W1[sub], s)
+            r = W1[sub] @ s  # (S, T_w) @ (b, T_w, N): one BLAS call per probe
             acc["r"] = acc["r"] + np.sum(r ** 2, axis=0) / PROBES
-            smoothed = np.einsum("ij,kjn->kin", W0[sub], s)
+            smoothed = W0[sub] @ s
             smoothed[:, ~visible[sub]] = np.nan
             g, v = regress_space(smoothed.reshape(m, N), geo.dual[sub], ks)
             # the bias is judged against the temporal regression of the points' own series
-            value_in = np.einsum("ij,kjn->kin", W0[sub], np.nan_to_num(noise))
+            value_in = W0[sub] @ np.nan_to_num(noise)
             if bias:  # the noise in the space-time regression's differences (_space_time_bias)
                 for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - np.nan_to_num(noise)),
                                    ("vt_var", W0 - I0, s)):
-                    sq = np.einsum("ij,kjn->kin", Wd[sub], x) ** 2
+                    sq = (Wd[sub] @ x) ** 2
                     acc[key] = acc[key] + np.sum(sq, axis=0) / PROBES
                     nulls[key] += list(sq) if start < BIAS_PROBES else []
         g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)

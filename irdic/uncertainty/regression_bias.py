@@ -16,6 +16,7 @@ model passes for a bias in ``d² - v`` otherwise.
 from __future__ import annotations
 
 import logging
+import threading
 
 import numpy as np
 
@@ -244,13 +245,18 @@ def _neighbourhoods(psi, spacing, pooled, cache):
     wide = [] if spacing is None else [min(WIDE_MAX, int(np.pi * float(np.max(spacing)) ** 2))]
     nbs = []
     for k in [BIAS_NEIGHBOURS] + [n for n in wide if n > BIAS_NEIGHBOURS] + ([None] if pooled else []):
-        nb = None if cache is None or k is None else cache.get(k)
-        if nb is None and k is not None:
-            nb = _neighbours(psi, k)
-            if cache is not None:
-                cache[k] = nb
+        # the estimates that share a cache run side by side (parallel_map): one builds, the other waits for it
+        with _CACHE_LOCK:
+            nb = None if cache is None or k is None else cache.get(k)
+            if nb is None and k is not None:
+                nb = _neighbours(psi, k)
+                if cache is not None:
+                    cache[k] = nb
         nbs.append(nb)
     return nbs
+
+
+_CACHE_LOCK = threading.Lock()
 
 
 def _local_estimate(d, noise_var, ok, nbs, scales, z):
