@@ -183,7 +183,7 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
 
 
 def fit_stages(x, psi, *, shape_stage=None, nodes=None, c=0.95, R0=1.0, smoothing=None, solver="auto",
-               operators=None):
+               operators=None, values=True):
     """Position and tangents of each stage's own surface, without the temporal operator.
 
     At a stage's own time :func:`fit_surface` interpolating in time
@@ -208,10 +208,13 @@ def fit_stages(x, psi, *, shape_stage=None, nodes=None, c=0.95, R0=1.0, smoothin
     c, R0, smoothing, solver, operators
         As :func:`fit_surface` (``smoothing`` a number >= 1, a (shape,
         motion) pair or None; not "gcv").
+    values : bool
+        Also the positions (False: ``x_fit`` None, the tangents alone at
+        two thirds of the cost, as the strain's noise probes need them).
 
     Returns
     -------
-    x_fit : ndarray, shape (S, N, 3)
+    x_fit : ndarray, shape (S, N, 3) or None
         Position on each stage's surface (mm); NaN off the nodes.
     tangents : ndarray, shape (S, N, 2, 3)
         ``a_alpha = dx/dPsi^alpha`` (dimensionless).
@@ -242,10 +245,13 @@ def fit_stages(x, psi, *, shape_stage=None, nodes=None, c=0.95, R0=1.0, smoothin
     if shape_stage is not None:
         x0 = sp.fill(x0, np.isfinite(x0).all(axis=2))[0]
     val, d1, d2, _ = _spatial_fields(sp, psi[nodes], Xs.transpose(1, 0, 2).reshape(n, 3 * S),
-                                     x0.transpose(1, 0, 2).reshape(n, -1), ks, kg, c, R0, operators, shape_of)
-    x_fit = np.full((S, N, 3), np.nan)
+                                     x0.transpose(1, 0, 2).reshape(n, -1), ks, kg, c, R0, operators, shape_of,
+                                     values)
+    x_fit = None
+    if values:
+        x_fit = np.full((S, N, 3), np.nan)
+        x_fit[:, nodes] = val.reshape(n, S, 3).transpose(1, 0, 2)
     tangents = np.full((S, N, 2, 3), np.nan)
-    x_fit[:, nodes] = val.reshape(n, S, 3).transpose(1, 0, 2)
     tangents[:, nodes, 0] = d1.reshape(n, S, 3).transpose(1, 0, 2)
     tangents[:, nodes, 1] = d2.reshape(n, S, 3).transpose(1, 0, 2)
     return x_fit, tangents
@@ -364,7 +370,7 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
     return val, d1, d2, vel, np.flatnonzero(ok_t)
 
 
-def _spatial_fields(sp, psi_n, Y, x0, ks, kg, c, R0, ops, shape_of=None):
+def _spatial_fields(sp, psi_n, Y, x0, ks, kg, c, R0, ops, shape_of=None, values=True):
     """Value and ``d/dPsi^alpha`` (n, 3 m) of stage columns ``Y`` (n, 3 m: x, y, z of m stages side by side).
 
     ``ks``: the spacing of the spatial operator (1: ``sp``, the
@@ -372,8 +378,8 @@ def _spatial_fields(sp, psi_n, Y, x0, ks, kg, c, R0, ops, shape_of=None):
     and the motion are regressed apart, ``x = S_shape x0 + S_motion (x -
     x0)``, ``x0`` (n, 3) the shape stage of all, or (n, 3 u) ``u`` shape
     stages with ``shape_of`` (m,) int the one of each stage (None: one per
-    stage, in order). ``Y`` is overwritten. Returns ``val, d1, d2`` and the
-    motion's operator.
+    stage, in order). ``Y`` is overwritten. Returns ``val, d1, d2`` (``val``
+    None without ``values``) and the motion's operator.
     """
     ops = {} if ops is None else ops
     sp_motion = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=ks) if ks > 1.0 else sp
@@ -388,11 +394,12 @@ def _spatial_fields(sp, psi_n, Y, x0, ks, kg, c, R0, ops, shape_of=None):
     if split:
         # the temporal weights of a value sum to 1 ({1, t} are reproduced), so columns minus x0 are displacements
         Y -= per_stage(x0)
-    val, d1, d2 = sp_motion.evaluate(Y)
+    val, d1, d2 = sp_motion.evaluate(Y, value=values)
     if split:
         sp_shape = shared_interpolant(ops, psi_n, c=c, R0=R0, smoothing=kg) if kg > 1.0 else sp
-        for a, b in zip((val, d1, d2), sp_shape.evaluate(x0)):
-            a += per_stage(b)
+        for a, b in zip((val, d1, d2), sp_shape.evaluate(x0, value=values)):
+            if a is not None:
+                a += per_stage(b)
     return val, d1, d2, sp_motion
 
 

@@ -155,7 +155,7 @@ def tangent_noise(x, sf, s_x, p, rng, ops=None):
     shapes = [np.broadcast_to(st[0], st.shape) for st in stages]
     _, tang = fit_stages(np.concatenate(stages), sf.psi, shape_stage=np.concatenate(shapes), nodes=nodes,
                          c=p["c_space"], R0=p["R0_space"], solver=p["solver"], smoothing=ks,
-                         operators={} if ops is None else ops)
+                         operators={} if ops is None else ops, values=False)
     tang = tang.reshape((TANGENT_PROBES + 1, sub.size) + tang.shape[1:])
     eps = tang[1:] - tang[0]  # (probes, S, N, 2, 3)
     return np.mean(np.square(eps), axis=(0, 1, 4))

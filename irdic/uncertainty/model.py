@@ -312,13 +312,16 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             # (sparse products, which release the GIL) on the stage's threads
             nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
             # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
-            b_g, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], sf.psi, trusted, acc[a[1] + "_null"], ks,
-                                                         nbs, **a[2]),
-                                    ((d_grad, "g_var", reference_options(ks)), (value - value_in, "v_var", {})))
-            grad_std, temp_std = np.hypot(grad_std, b_g), np.hypot(temp_std, b_v)
-            if len(spatial) > 5 and W is not None:  # the temporal terms
-                temp_std, rate_std, rate_biased = _space_time_bias(spatial[4:7], acc, sf.psi, trusted, temp_std, ks,
-                                                                   rate_std, nbs)
+            jobs = [(d_grad, "g_var", reference_options(ks)), (value - value_in, "v_var", {})]
+            temporal = len(spatial) > 5 and W is not None
+            if temporal:  # the space-time regression's terms (_space_time_bias)
+                jobs += [(d, key, {}) for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]
+            # one pool for all, the gradient's (three components) first: the threads stay busy to the end
+            b = parallel_map(lambda a: local_bias(a[0], acc[a[1]], sf.psi, trusted, acc[a[1] + "_null"], ks, nbs,
+                                                  **a[2]), jobs)
+            grad_std, temp_std = np.hypot(grad_std, b[0]), np.hypot(temp_std, b[1])
+            if temporal:
+                temp_std, rate_std, rate_biased = _space_time_bias(b[2:], temp_std, rate_std)
     return temp_std, grad_std, rate_std, rate_biased
 
 
@@ -407,15 +410,14 @@ def _values(points, name):
     return points[name].values.astype(float) if name in points else None
 
 
-def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std, neighbourhoods=None):
+def _space_time_bias(b, temp_std, rate_std):
     """Temperature and rate std with the space-time regression's bias added, and where the rate's temporal
     bias exceeds its noise.
 
-    ``d``: ``(d_rate_t, d_rate_s, d_value_t)`` of :func:`uncertainties`; ``ks``: the spatial spacing;
-    ``neighbourhoods``: :func:`~irdic.uncertainty.regression_bias.local_bias`'s cache for ``psi``;
-    ``acc``: the probes' noise variances of those differences
+    ``b``: :func:`~irdic.uncertainty.regression_bias.local_bias` of ``(d_rate_t, d_rate_s, d_value_t)`` of
+    :func:`uncertainties` (T, N) each, with the probes' noise variances of those differences
     (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each
-    through the same operators as the difference (:func:`~irdic.uncertainty.regression_bias.local_bias`). The
+    through the same operators as the difference. The
     temporal bias is judged against a local polynomial in time of the
     spatially regressed series (:func:`~irdic.numerics.temporal.rate_reference_stencil`;
     the IMQ interpolant was as biased as the regression), whose noise is that
@@ -428,8 +430,7 @@ def _space_time_bias(d, acc, psi, trusted, temp_std, ks, rate_std, neighbourhood
     demo barrel's rate covered 0.63-0.69 / 0.89-0.93 of its errors within 1 /
     2 std (seeds 1, 3, 5, 7); now 0.66-0.73 / 0.92-0.95.
     """
-    b_t, b_s, b_v = parallel_map(lambda a: local_bias(a[0], acc[a[1]], psi, trusted, acc[f"{a[1]}_null"], ks,
-                                                      neighbourhoods), zip(d, ("rt_var", "rs_var", "vt_var")))
+    b_t, b_s, b_v = b
     # only the temporal bias is resolved well enough to flag by (the spatial one scatters with the points' noise)
     biased = b_t > rate_std
     rate_std = np.sqrt(rate_std ** 2 + b_t ** 2 + b_s ** 2)

@@ -286,9 +286,18 @@ class _StrainProbe:
 
     def draw(self, rng, s_x):
         """One probe's coordinate noise: (window or record, reference stages), kept at the stages it needs."""
-        dx = rng.standard_normal(self.shape) * s_x
+        if self.stagewise:
+            # the record's draw a block of stages at a time (the generator's stream is the same), the probed kept
+            dx = np.empty((self.idx.size,) + self.shape[1:])
+            step = max(1, (1 << 21) // max(1, int(np.prod(self.shape[1:]))))
+            for s0 in range(0, self.shape[0], step):
+                block = rng.standard_normal((min(step, self.shape[0] - s0),) + self.shape[1:])
+                at = (self.idx >= s0) & (self.idx < s0 + step)
+                dx[at] = block[self.idx[at] - s0] * s_x
+        else:
+            dx = rng.standard_normal(self.shape) * s_x
         dref = rng.standard_normal(self.window.x_ref.shape) * s_x if self.window is not None else None
-        return (dx[self.idx], dref) if self.stagewise else (dx, dref)
+        return dx, dref
 
     def tensors(self, kw, draws):
         """Tensor components (S, N, 3) (:func:`tensor_components`) at the probed times of each probe of ``draws``."""
@@ -314,7 +323,7 @@ class _StrainProbe:
             shapes.append(np.broadcast_to(x0, st.shape))
         kws = {k: v for k, v in kw.items() if k not in ("c_t", "R0_t", "smoothing_t")}
         _, tang = fit_stages(np.concatenate(stages), sf.psi, shape_stage=np.concatenate(shapes), nodes=self.nodes,
-                             **kws)
+                             values=False, **kws)
         tang = tang.reshape((len(draws), -1) + tang.shape[1:])
         first = 0 if w is None else 1
         return [tensor_components(strain_components(g[first:], g[0])) for g in tang]
