@@ -33,6 +33,7 @@ from ..logs import StageProgress, report
 from ..threads import thread_budget
 from ..footprint.fields import footprint_temperatures, window_extras
 from ..noise import auto_smoothing
+from ..numerics.memory import release
 from ..numerics.temporal import temporal_window
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry, surface_parameters
@@ -145,6 +146,7 @@ def _fields(points, calibration, chunk, p):
     report("surface", 0.0)
     points, sf, p, series = _surface(points, x, t, chunk, p, ops)
     del x  # each (time, point) array is 31 MB at 13,000 points x 300 times: what is done with goes
+    release()
     report("surface", 1.0)
     t = points["time"].values.astype(float)
     T, N = sf.x.shape[:2]
@@ -157,6 +159,7 @@ def _fields(points, calibration, chunk, p):
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
     sf, geo = sf._replace(tangents=None, ref_tangents=None), geo._replace(dual=None)
     st, directions = stacked_directions(st)
+    release()
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,
              _time.perf_counter() - started, method_of(sf.info.get("parametrisation")), sf.info.get("solver"))
     report("rest", 0.5)

@@ -71,6 +71,8 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     def regress_space(th, dual, k):
         return regressed_gradient(th, sf.psi, dual, k, c=p["c_space"], R0=p["R0_space"], ops=ops)[:2]
 
+    # the paper's rate and the points' local rate are replaced by now (or live on as total, loc)
+    rate, local = rate._replace(rate=None, local=None), None
     report("regression", 1.0)
     report("uncertainty", 0.0)
     unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,

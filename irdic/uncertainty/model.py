@@ -76,6 +76,7 @@ import numpy as np
 from ..gradient import material_rate, surface_gradient
 from ..logs import report
 from ..numerics.temporal import TemporalInterpolant, rate_reference_weights, temporal_window
+from ..numerics.memory import release
 from ..numerics.threads import parallel_map
 from ..vocabulary import Status
 from ..footprint.fields import footprint_probes
@@ -194,6 +195,7 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     report("uncertainty", PROGRESS["ir"])
     s_x = float(a.get("dic_noise_mm", np.nan))
     temp_std, grad_std = position_std(points, sf, geo, J, g_pix, temp_std, grad_std, s_x, p, spatial, rng, ops)
+    release()  # the IR probes' and bias estimates' blocks are freed: the strain's probes start on returned pages
     e_std = strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
@@ -300,6 +302,8 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
             acc_fp = scaled_probes(acc_fp, noise_scale(own, acc_fp, regress_space, ks, trusted))
             acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null",
                                                "rs_var_null")})
+            del acc_fp
+        release()  # the probes' groups are freed before the bias estimates' pool
         temp_std, grad_std = np.sqrt(acc.pop("v")), np.sqrt(acc.pop("g"))
         if W is not None:
             rate_std = np.sqrt(acc.pop("r"))
