@@ -64,7 +64,7 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
     p = dict(p)
     if "surface_smoothing" in gcv or "surface_smoothing_time" in gcv:
         info = fit_surface(x[w], t[w], psi, smoothing=p["surface_smoothing"], smoothing_t=p["surface_smoothing_time"],
-                           operators=ops, **surface_kw(p)).info
+                           operators=ops, choose_only=True, **surface_kw(p))
         p["surface_smoothing"] = info["smoothing"] if p["surface_smoothing"] is not None else None
         if p["surface_smoothing"] is not None and "smoothing_shape" in info:
             # GCV chose a spacing for the shape and one for the motion (irdic.surface.fit_surface): keep both

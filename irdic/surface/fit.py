@@ -102,7 +102,7 @@ class SurfaceFields(NamedTuple):
 
 def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_t=1.0, smoothing=None,
                 smoothing_t=None, solver="auto", halo=None, parametrisation="auto", min_stage_fraction=0.5,
-                fill="both", max_gap=3, record_times=None, shape_stage=None, operators=None):
+                fill="both", max_gap=3, record_times=None, shape_stage=None, operators=None, choose_only=False):
     """The continuous surface ``x(Psi, t)`` of DIC stages, evaluated at the points.
 
     Parameters
@@ -146,12 +146,18 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     operators : dict, optional
         Cache of the spatial factorisations, shared by calls on the same
         points and missing pattern (noise probes): the same dict each call.
+    choose_only : bool
+        Only choose the smoothing: return the ``info`` dict with
+        ``smoothing``, ``smoothing_t`` (and ``smoothing_shape``) as the fit
+        would record them, no surface evaluated (the fields stage chooses
+        once for the record, :func:`irdic.fields.smoothing.resolve_gcv`).
 
     Returns
     -------
     SurfaceFields
         Duplicate DIC points (the surface parameters of an earlier point) are
         left out, warned about and listed in ``info["duplicates"]``: NaN.
+        With ``choose_only``: a dict.
 
     Raises
     ------
@@ -177,7 +183,9 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     record = t if record_times is None else float_array(record_times, "record_times")
     x0 = None if shape_stage is None else _shape_stage(sp, shape_stage, nodes, N)
     fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, t[used], te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record,
-                         x0, ops)
+                         x0, ops, choose_only)
+    if choose_only:
+        return info
     return _assemble(fields, psi, te, nodes, used, ~Vu, edge_distance(psi[nodes]), (M, N), info,
                      (c, R0, c_t, R0_t), t0)
 
@@ -337,16 +345,14 @@ def gcv_displacement(psi, X, valid=None, *, c=0.95, R0=1.0):
     return gcv_spatial(psi[rows], U, c=c, R0=R0, candidates=SURFACE_CANDIDATES)
 
 
-def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info, record, x0=None, ops=None):
-    """Temporal then spatial operator on the filled stage data: value, d1, d2 (n, 3 T_ok + 3), velocity, ok times."""
+def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, info, record, x0=None, ops=None,
+                choose_only=False):
+    """Temporal then spatial operator on the filled stage data: value, d1, d2 (n, 3 T_ok + 3), velocity, ok times
+    (``choose_only``: None, the smoothing chosen in ``info``)."""
     n = psi_n.shape[0]
-    # --- temporal
+    # --- the smoothing
     if kt == "gcv":
         kt, info["gcv_t"] = gcv_temporal(tu, Xt.reshape(tu.size, -1), c=c_t, R0=R0_t)
-    ts = TemporalInterpolant(tu, c=c_t, R0=R0_t, smoothing=kt,
-                             window=temporal_window(record, c=c_t, R0=R0_t, smoothing=kt))
-    Y0, Y1, Yr, ok_t = _temporal_columns(ts, te, t_ref, Xs, Xt)
-    # --- spatial
     kg = None
     if ks == "gcv":
         pick = np.linspace(0, tu.size - 1, min(tu.size, 8)).astype(int)
@@ -354,6 +360,14 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
         ks, info["gcv"] = gcv_displacement(psi_n, Xs, Vu, c=c, R0=R0)
     elif isinstance(ks, tuple):
         kg, ks = ks
+    if choose_only:
+        info.update(smoothing=float(ks), smoothing_t=float(kt), **({} if kg is None else {"smoothing_shape": float(kg)}))
+        return None
+    # --- temporal
+    ts = TemporalInterpolant(tu, c=c_t, R0=R0_t, smoothing=kt,
+                             window=temporal_window(record, c=c_t, R0=R0_t, smoothing=kt))
+    Y0, Y1, Yr, ok_t = _temporal_columns(ts, te, t_ref, Xs, Xt)
+    # --- spatial
     cols = np.flatnonzero(np.repeat(ok_t, 3))
     Yall = np.concatenate([Y0[:, cols], Yr], axis=1)
     del Y0  # the stage data of many times are large: free each as soon as it is used

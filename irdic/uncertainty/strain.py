@@ -265,6 +265,10 @@ def _probe_tensors(points, sf, t, p, s_x, rng, window, ops, sub):
     return base, samples, bases, regressed, kw["smoothing"]
 
 
+#: values of the record-length noise of a strain probe drawn at once (:meth:`_StrainProbe.draw`)
+_DRAW_BLOCK = 1 << 21
+
+
 class _StrainProbe:
     """The strain tensor's components at the probed times ``t[sub]`` of the surface fit with DIC noise added.
 
@@ -289,7 +293,7 @@ class _StrainProbe:
         if self.stagewise:
             # the record's draw a block of stages at a time (the generator's stream is the same), the probed kept
             dx = np.empty((self.idx.size,) + self.shape[1:])
-            step = max(1, (1 << 21) // max(1, int(np.prod(self.shape[1:]))))
+            step = max(1, _DRAW_BLOCK // max(1, int(np.prod(self.shape[1:]))))
             for s0 in range(0, self.shape[0], step):
                 block = rng.standard_normal((min(step, self.shape[0] - s0),) + self.shape[1:])
                 at = (self.idx >= s0) & (self.idx < s0 + step)

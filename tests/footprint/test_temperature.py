@@ -206,3 +206,26 @@ def test_probes_without_footprint_share_the_nearest_pixels_noise():
     assert abs(c[0, 2]) < 0.1 and abs(c[2, 3]) < 0.1 and abs(np.std(z) - 1) < 0.05
     w = window_extras(pts, slice(1, 3))
     assert w["pixel"].shape == (2, 4, 2) and np.isnan(w["extrapolated"]).all()
+
+
+@pytest.mark.parametrize("side", [1, 3])
+def test_footprint_noise_with_a_shared_plan_draws_what_it_draws_without(side):
+    """The probe groups share each time's pixels and extrapolation lines (``plan``): group after group, the
+    same noise as each group built alone from the same generator, extrapolated points included."""
+    from irdic.footprint.fields import footprint_noise
+
+    rng = np.random.default_rng(0)
+    u, v = np.meshgrid(np.arange(10) * 1.7, np.arange(8) * 1.3)
+    pix = np.stack([u.ravel() + 20, v.ravel() + 30], axis=-1)
+    pixel = np.stack([pix + rng.uniform(-0.4, 0.4, pix.shape) + k for k in range(3)])  # (3, 80, 2)
+    pixel[1, 7] = np.nan  # a point without a position at one time
+    ext = np.full(pixel.shape[:2], np.nan)
+    edge = np.flatnonzero(pix[:, 0] == pix[:, 0].max())  # the last column: outside the mask by 0.3-0.9 px
+    ext[:, edge] = rng.uniform(0.3, 0.9, (3, edge.size))
+    plan = {}
+    shared = [footprint_noise(np.random.default_rng(s), pixel, side, (4,), ext, plan) for s in (1, 2)]
+    alone = [footprint_noise(np.random.default_rng(s), pixel, side, (4,), ext) for s in (1, 2)]
+    assert sorted(plan) == [0, 1, 2]
+    for a, b in zip(shared, alone):
+        np.testing.assert_array_equal(a, b)
+    assert np.all(shared[0][:, :, edge] != 0) and not np.array_equal(shared[0], shared[1])

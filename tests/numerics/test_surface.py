@@ -550,6 +550,11 @@ def test_fit_stages_is_fit_surface_at_its_stage_times(tube_fit, smoothing):
     np.testing.assert_allclose(both[:4], tang, rtol=0, atol=1e-10 * scale)
     np.testing.assert_allclose(both[4:], tang_m, rtol=0, atol=1e-10 * scale)
     assert np.nanmax(np.abs(tang_m - tang)) > 1e3 * 1e-10 * scale  # the two records' tangents differ
+    # the tangents alone (the noise probes' way): the same tangents, no positions
+    none, alone = fit_stages(np.concatenate([Xn[sub], Xm[sub]]), sf.psi, nodes=nodes, smoothing=smoothing,
+                             shape_stage=shapes, operators=ops, values=False)
+    assert none is None
+    np.testing.assert_allclose(alone, both, rtol=0, atol=1e-12 * scale)
 
 def test_local_and_global_solvers_agree_on_strain(tube_fit):
     tube, times, X, sf = tube_fit
@@ -731,6 +736,12 @@ def test_spatial_smoothing_of_noisy_positions_improves_strain():
     assert sm.info["smoothing"] > 1 and sm.info["solver"] == "regression" and len(sm.info["gcv"]) >= 3
     assert rms_int > 3e-3  # 0.005 mm noise on a 0.8 mm grid: interpolated strains are noise
     assert rms_int / rms_gcv > 3
+    # choosing alone (the fields stage's choice for the record) chooses what the fit chose
+    chosen = fit_surface(X, times, psi, smoothing="gcv", smoothing_t="gcv", choose_only=True)
+    both = fit_surface(X, times, psi, smoothing="gcv", smoothing_t="gcv").info
+    assert {k: chosen[k] for k in ("smoothing", "smoothing_shape", "smoothing_t")} == \
+        {k: both[k] for k in ("smoothing", "smoothing_shape", "smoothing_t")}
+    assert both["smoothing_t"] > 1 and both["smoothing"] > 1
 
 
 def test_duplicate_points_are_left_out_with_a_logged_reason(caplog):

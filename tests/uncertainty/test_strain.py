@@ -102,3 +102,22 @@ def test_nan_and_noise_floor():
     assert out[0] == pytest.approx(np.sqrt(3.0)) and np.isnan(out[1:]).all()
     np.testing.assert_array_equal(below_noise_floor([0.1, 5.0, 1.0, 1.0], [1.0, 1.0, 0.0, np.nan]),
                                   [True, False, False, False])
+
+
+def test_probe_draws_the_record_in_blocks_as_at_once(monkeypatch):
+    """A strain probe keeps its record-length noise at the probed stages only and draws it a block of stages at
+    a time: the same numbers as one draw of the whole record from the same generator."""
+    from types import SimpleNamespace
+
+    from irdic.uncertainty import strain as us
+
+    T, N = 40, 30
+    sf = SimpleNamespace(info={}, stage_used=np.ones(T, bool), x=np.zeros((T, N, 3)))
+    t = np.arange(T, dtype=float)
+    sub = np.array([0, 3, 4, 17, 39])
+    probe = us._StrainProbe(np.zeros((T, N, 3)), sf, t, sub, None)
+    assert probe.stagewise
+    monkeypatch.setattr(us, "_DRAW_BLOCK", 7 * N * 3)  # blocks of 7 stages
+    dx, dref = probe.draw(np.random.default_rng(5), 0.003)
+    assert dref is None
+    np.testing.assert_array_equal(dx, (np.random.default_rng(5).standard_normal((T, N, 3)) * 0.003)[sub])
