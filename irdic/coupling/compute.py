@@ -129,6 +129,9 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
         report("clock", 0.0)
         ir, clock = ir_clock(dic, ir, calibration, experiment)
         report("clock", 1.0)
+        # the interpolation prepares (frames read, stencils and edge windows factorised) before its first time:
+        # running from here, its silence moves the ETA on
+        report("interpolation", 0.0)
         ds = _couple_chunk(dic, ir, calibration, chunk, p, footprint) if chunk is not None else \
             _couple(dic, ir, calibration, p, footprint=footprint)
         report("rest", 1.0)
@@ -207,6 +210,7 @@ def _footprint(dic, ir, calibration, p, only=None):
     _check_extent(pr)
     side = footprint_side(pr)  # from the record's first stage: the same in every chunk
     report("setup", 1.0)
+    report("masks", 0.0)  # running from here: the masks' sources and first triangulations come before a report
     masks, facing = masks_and_facing(
         pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
         np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],

@@ -117,10 +117,10 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
 #: DIC time and point of each part with the default settings (regressions, their noise probes and bias
 #: estimates), measured on the moving tube of the benchmarks; the ETA rests on their ratios. ``write`` is the
 #: stage's store, written after :func:`fields` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 3.5e-7, "fill": 2.4e-6, "surface": 9.9e-6, "regression": 4.6e-6, "uncertainty": 2.0e-5,
-               "rest": 5e-7, "write": 7.5e-7}
+STAGE_COSTS = {"setup": 3.8e-7, "fill": 3.3e-6, "surface": 9.3e-6, "regression": 4.4e-6, "uncertainty": 1.64e-5,
+               "rest": 4.6e-7, "write": 7.5e-7}
 #: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads)
-STAGE_SHARES = {"setup": 0.4, "fill": 0.25, "surface": 0.7, "regression": 0.3, "uncertainty": 0.4, "rest": 0.0,
+STAGE_SHARES = {"setup": 0.4, "fill": 0.38, "surface": 0.67, "regression": 0.34, "uncertainty": 0.62, "rest": 0.0,
                 "write": 0.0}
 
 
