@@ -218,7 +218,8 @@ def one(frames: int, points: int, threads: int, subset: int, two_jobs: bool = Fa
         tot = alone["couple"] + alone["fields"]
         print(f"  irdic: couple {alone['couple']:.1f} s + fields {alone['fields']:.1f} s = {tot:.1f} s, "
               f"peak RSS {alone['peak_gb']:.2f} GB (couple {alone['peak_couple']:.2f}, fields "
-              f"{alone['peak_fields']:.2f}; {threads} thread(s))", flush=True)
+              f"{alone['peak_fields']:.2f}; {threads} thread(s)); ETA from the first tenth, worst error of the "
+              f"duration (of the time left): couple {_eta(alone['eta'][0])}, fields {_eta(alone['eta'][1])}", flush=True)
         if subset:
             from irdic.store import open_store
 

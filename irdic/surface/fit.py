@@ -147,17 +147,13 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
         Cache of the spatial factorisations, shared by calls on the same
         points and missing pattern (noise probes): the same dict each call.
     choose_only : bool
-        Only choose the smoothing: return the ``info`` dict with
-        ``smoothing``, ``smoothing_t`` (and ``smoothing_shape``) as the fit
-        would record them, no surface evaluated (the fields stage chooses
-        once for the record, :func:`irdic.fields.smoothing.resolve_gcv`).
+        Return only ``info``, the smoothing chosen as the fit records it, no surface evaluated.
 
     Returns
     -------
     SurfaceFields
         Duplicate DIC points (the surface parameters of an earlier point) are
         left out, warned about and listed in ``info["duplicates"]``: NaN.
-        With ``choose_only``: a dict.
 
     Raises
     ------
@@ -167,14 +163,10 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     GeometryError
         Folded parametrisation.
     """
-    t0, (X, t, frac) = _time.perf_counter(), _check_stages(x, times, fill, max_gap, min_stage_fraction)
+    t0 = _time.perf_counter()
+    X, t, ks, kt, info, psi, valid, nodes, used = _checked(x, times, psi, smoothing, smoothing_t, parametrisation,
+                                                            fill, max_gap, min_stage_fraction)
     M, N, _ = X.shape
-    ks, kt = _smoothings(smoothing, smoothing_t)
-    info = {}
-    psi = _parameters(X, psi, parametrisation, info)
-    valid = np.isfinite(X).all(axis=2)
-    nodes = _nodes(psi, valid, info)
-    used = _used_stages(valid[:, nodes].sum(axis=1), frac, nodes.size)
     ops = {} if operators is None else operators
     sp = shared_interpolant(ops, psi[nodes], c=c, R0=R0, solver=solver, halo=halo)
     te = t if t_eval is None else np.atleast_1d(float_array(t_eval, "t_eval"))
@@ -184,10 +176,20 @@ def fit_surface(x, times, psi=None, *, t_eval=None, c=0.95, R0=1.0, c_t=1.0, R0_
     x0 = None if shape_stage is None else _shape_stage(sp, shape_stage, nodes, N)
     fields = _fit_stages(sp, psi[nodes], Xs, Xt, Vu, t[used], te, t[:1], ks, kt, c, R0, c_t, R0_t, info, record,
                          x0, ops, choose_only)
-    if choose_only:
-        return info
-    return _assemble(fields, psi, te, nodes, used, ~Vu, edge_distance(psi[nodes]), (M, N), info,
-                     (c, R0, c_t, R0_t), t0)
+    return info if choose_only else _assemble(fields, psi, te, nodes, used, ~Vu, edge_distance(psi[nodes]), (M, N),
+                                              info, (c, R0, c_t, R0_t), t0)
+
+
+def _checked(x, times, psi, smoothing, smoothing_t, parametrisation, fill, max_gap, min_stage_fraction):
+    """:func:`fit_surface`'s checked inputs: stages (M, N, 3) mm and times (M,) s, the spacings, ``info``, the
+    parameters (N, 2), valid (M, N), the nodes fitted on and the stages used."""
+    X, t, frac = _check_stages(x, times, fill, max_gap, min_stage_fraction)
+    ks, kt = _smoothings(smoothing, smoothing_t)
+    info = {}
+    psi = _parameters(X, psi, parametrisation, info)
+    valid = np.isfinite(X).all(axis=2)
+    nodes = _nodes(psi, valid, info)
+    return X, t, ks, kt, info, psi, valid, nodes, _used_stages(valid[:, nodes].sum(axis=1), frac, nodes.size)
 
 
 def fit_stages(x, psi, *, shape_stage=None, nodes=None, c=0.95, R0=1.0, smoothing=None, solver="auto",
@@ -361,7 +363,9 @@ def _fit_stages(sp, psi_n, Xs, Xt, Vu, tu, te, t_ref, ks, kt, c, R0, c_t, R0_t, 
     elif isinstance(ks, tuple):
         kg, ks = ks
     if choose_only:
-        info.update(smoothing=float(ks), smoothing_t=float(kt), **({} if kg is None else {"smoothing_shape": float(kg)}))
+        info.update(smoothing=float(ks), smoothing_t=float(kt))
+        if kg is not None:
+            info["smoothing_shape"] = float(kg)
         return None
     # --- temporal
     ts = TemporalInterpolant(tu, c=c_t, R0=R0_t, smoothing=kt,

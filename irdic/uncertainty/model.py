@@ -195,7 +195,6 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     report("uncertainty", PROGRESS["ir"])
     s_x = float(a.get("dic_noise_mm", np.nan))
     temp_std, grad_std = position_std(points, sf, geo, J, g_pix, temp_std, grad_std, s_x, p, spatial, rng, ops)
-    release()  # the IR probes' and bias estimates' blocks are freed: the strain's probes start on returned pages
     e_std = strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
     if not np.isfinite(s_x):
         notes.append("max_principal_strain_std: the DIC noise could not be estimated")
@@ -308,25 +307,36 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         if W is not None:
             rate_std = np.sqrt(acc.pop("r"))
         if spatial is not None:
-            theta, grad, value_in, value = spatial[:4]
-            # against the lighter regression of the gradient's input after the same regression in time (the
-            # value's reference; the points' own series at each time carried the temporal bias and full noise)
-            d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
-            # the exact interpolation of the input at the points is the input itself; the two estimates
-            # (sparse products, which release the GIL) on the stage's threads
-            nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
-            # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
-            jobs = [(d_grad, "g_var", reference_options(ks)), (value - value_in, "v_var", {})]
-            temporal = len(spatial) > 5 and W is not None
-            if temporal:  # the space-time regression's terms (_space_time_bias)
-                jobs += [(d, key, {}) for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]
-            # one pool for all, the gradient's (three components) first: the threads stay busy to the end
-            b = parallel_map(lambda a: local_bias(a[0], acc[a[1]], sf.psi, trusted, acc[a[1] + "_null"], ks, nbs,
-                                                  **a[2]), jobs)
-            grad_std, temp_std = np.hypot(grad_std, b[0]), np.hypot(temp_std, b[1])
-            if temporal:
-                temp_std, rate_std, rate_biased = _space_time_bias(b[2:], temp_std, rate_std)
+            temp_std, grad_std, rate_std, rate_biased = _bias_terms(spatial, acc, sf.psi, trusted, ks, regress_space,
+                                                                    geo, W is not None, temp_std, grad_std, rate_std)
+    release()  # the probes' and bias estimates' blocks are freed: what follows starts on returned pages
     return temp_std, grad_std, rate_std, rate_biased
+
+
+def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, temp_std, grad_std, rate_std):
+    """Temperature, gradient and rate std with the regressions' estimated bias added
+    (:func:`~irdic.uncertainty.regression_bias.local_bias`), and where the rate's temporal bias exceeds its noise
+    (T, N) or None; ``spatial`` and ``acc`` as in :func:`_ir_std`, ``in_time``: with a regression in time."""
+    theta, grad, value_in, value = spatial[:4]
+    # against the lighter regression of the gradient's input after the same regression in time (the
+    # value's reference; the points' own series at each time carried the temporal bias and full noise)
+    d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
+    # the exact interpolation of the input at the points is the input itself; the estimates (sparse
+    # products, which release the GIL) on the stage's threads
+    nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
+    # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
+    jobs = [(d_grad, "g_var", reference_options(ks)), (value - value_in, "v_var", {})]
+    temporal = len(spatial) > 5 and in_time
+    if temporal:  # the space-time regression's terms (_space_time_bias)
+        jobs += [(d, key, {}) for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]
+    # one pool for all, the gradient's (three components) first: the threads stay busy to the end
+    b = parallel_map(lambda a: local_bias(a[0], acc[a[1]], psi, trusted, acc[a[1] + "_null"], ks, nbs, **a[2]),
+                     jobs)
+    grad_std, temp_std = np.hypot(grad_std, b[0]), np.hypot(temp_std, b[1])
+    if not temporal:
+        return temp_std, grad_std, rate_std, None
+    temp_std, rate_std, biased = _space_time_bias(b[2:], temp_std, rate_std)
+    return temp_std, grad_std, rate_std, biased
 
 
 def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias, draw=None):
