@@ -177,9 +177,9 @@ def footprint_probes(points, window, sigma):
         return None
     pixel = points["pixel"].transpose("time", "point", "axis").values if window is None else window.pixel
     ext = extrapolated(points) if window is None else window.extrapolated
+    plan = {}  # each time's pixels, shared by the probe groups
     if "temperature_paper" not in points:
         # the paper's temperatures alone: points closer than a pixel share its noise
-        plan = {}  # each time's pixels, shared by the probe groups
         return (lambda rng, b: footprint_noise(rng, pixel, 1, (b,), ext, plan)), None
     side = int(points.attrs.get("footprint_px", 1))
     if window is None:
@@ -188,7 +188,6 @@ def footprint_probes(points, window, sigma):
     else:
         factor = window.noise_factor
     factor = 1.0 if factor is None else np.nan_to_num(np.asarray(factor, dtype=float), nan=1.0)
-    plan = {}
     return (lambda rng, b: footprint_noise(rng, pixel, side, (b,), ext, plan) * factor), sigma * float(
         points.attrs.get("ir_noise_gain_temperature_paper", np.nan))
 

@@ -349,11 +349,11 @@ class SpatialInterpolant:
 
     def _ls_rows(self, q, kinds):
         """Design rows of the regression's functionals ``kinds`` at ``q`` (n, 2): each (n, centres + 3)."""
-        m = self._kernel_rows(q, kinds)
-        return [np.concatenate([m[k], monomials(q, self._ls_factor()[2], self.R0, k)], axis=1) for k in kinds]
+        m, ctr = self._kernel_rows(q, kinds), self._ls_factor()[2]
+        return [np.concatenate([m[k], monomials(q, ctr, self.R0, k)], axis=1) for k in kinds]
 
     def _eval_ls(self, F, pts, kinds, at_nodes=False):
-        centres, _, _, Qm, Rm = self._ls_factor()
+        centres, _, ctr, Qm, Rm = self._ls_factor()
         coef = scipy.linalg.solve_triangular(Rm, Qm.T @ F, check_finite=False)
         if at_nodes and pts.shape[0] * (len(centres) + 3) * 8 * 3 <= _BLOCK_BYTES:
             # the rows at the points themselves serve every later evaluation there (noise probes, GCV trials)
@@ -369,7 +369,7 @@ class SpatialInterpolant:
             m = self._kernel_rows(q, kinds)
             for o, k in zip(out, kinds):
                 o[i:i + step] = m[k] @ coef[:nc]
-                o[i:i + step] += monomials(q, self._ls_factor()[2], self.R0, k) @ coef[nc:]
+                o[i:i + step] += monomials(q, ctr, self.R0, k) @ coef[nc:]
         return out
 
     # ---- public -----------------------------------------------------------
