@@ -37,7 +37,7 @@ from ..numerics.memory import release
 from ..numerics.temporal import temporal_window
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry, surface_parameters
-from ..uncertainty.model import Window
+from ..uncertainty.model import Window, with_strain_std
 from .dataset import fields_dataset, method_of, stacked_directions, with_uncertainty
 from .smoothing import GCV_STAGES, SMOOTHING, checked_settings, resolve_gcv, surface_kw
 from .space_time import temperature_fields
@@ -154,10 +154,15 @@ def _fields(points, calibration, chunk, p):
     geo = surface_geometry(sf.tangents)._replace(metric=None, inverse_metric=None, area_ratio=None, degenerate=None)
     grad, total, loc, convective, best, unc = temperature_fields(points, calibration, sf, geo, t, p, noise_attrs,
                                                                   series, ops)
+    # the strain's noise probes refit the surface: after the IR terms' inputs and the dual basis are gone
+    geo = geo._replace(dual=None)
+    release()
+    unc = with_strain_std(unc)
+    report("uncertainty", 1.0)
     report("rest", 0.0)
     ops.clear()  # the factorisations (GBs at paper scale) go before the output dataset is built
     st = strain(sf.tangents, sf.ref_tangents, tensors=False)
-    sf, geo = sf._replace(tangents=None, ref_tangents=None), geo._replace(dual=None)
+    sf = sf._replace(tangents=None, ref_tangents=None)
     st, directions = stacked_directions(st)
     release()
     log.info("fields: %d times x %d points in %.1f s (parametrisation %s, solver %s)", T, N,

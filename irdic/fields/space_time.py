@@ -17,7 +17,7 @@ from ..gradient import material_rate, surface_gradient
 from ..logs import report
 from ..numerics.series import fill_series, smooth_series
 from ..numerics.temporal import RATE_MAX_FRACTION, rate_reference_weights
-from ..uncertainty.model import uncertainties
+from ..uncertainty.model import paper_std, uncertainties
 from .spatial import regressed_gradient
 
 __all__ = ["space_time", "temperature_fields"]
@@ -26,7 +26,8 @@ __all__ = ["space_time", "temperature_fields"]
 def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=None, ops=None):
     """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
     and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
-    uncertainties of :func:`irdic.uncertainty.model.uncertainties`.
+    uncertainties of :func:`irdic.uncertainty.model.uncertainties`, the strain's pending
+    (:func:`~irdic.uncertainty.model.with_strain_std`).
 
     The projection Jacobian of the calibrated camera at the surface points
     turns pixel gradients into surface ones (see the module docstring).
@@ -40,12 +41,16 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     J = np.full((T * N, 2, 3), np.nan)
     J[ok] = camera.jacobian(flat[ok])
     J = J.reshape(T, N, 2, 3)
-    g_pix = points["temperature_pixel_gradient"].transpose("time", "point", "axis").values.astype(float)
+    # the store's own array where it is float already (not a copy: nothing here writes to it)
+    g_pix = np.asarray(points["temperature_pixel_gradient"].transpose("time", "point", "axis").values, dtype=float)
     local = points["temperature_local_rate"].values.astype(float)
     theta = points["temperature"].values.astype(float)
     grad = surface_gradient(g_pix, J, sf.tangents)
     report("regression", 0.0)
     rate = material_rate(local, g_pix, J, sf.velocity)
+    # the Jacobian's last use: what the uncertainty needs of it, so that it is not held through the regressions
+    paper = list(paper_std(points, sf, J))  # a list: the uncertainty empties it once they are replaced
+    del J
     total, loc = rate.rate, rate.local
     visible = np.isfinite(theta)
     best = theta
@@ -75,9 +80,8 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     rate, local = rate._replace(rate=None, local=None), None
     report("regression", 1.0)
     report("uncertainty", 0.0)
-    unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, J,
-                        g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial, ops=ops)
-    report("uncertainty", 1.0)
+    unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, paper,
+                        grad, g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial, ops=ops)
     return grad, total, loc, rate.convective, best, unc
 
 

@@ -74,22 +74,26 @@ def regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
 
     ops = {} if ops is None else ops
     T, N = theta.shape
-    grad = None if dual is None else np.full((T, N, 3), np.nan)
-    val = np.full((T, N), np.nan)
     have = np.isfinite(psi).all(axis=1)
     visible = np.isfinite(theta) & have
     times = np.flatnonzero(visible.sum(axis=1) >= 6)
     if times.size == 0:
         log.warning("temperature_smoothing_space: no time with 6 or more visible points; gradient left NaN")
-        return grad, val, smoothing
+        return None if dual is None else np.full((T, N, 3), np.nan), np.full((T, N), np.nan), smoothing
     p = psi[have]
-    filled, _ = shared_interpolant(ops, p, c=c, R0=R0, smoothing=1.0).fill(theta[np.ix_(times, have)], visible[np.ix_(times, have)])
+    # every time and point (the usual case): the input itself, not a gathered copy (the fill copies it anyway)
+    whole = times.size == T and bool(have.all())
+    filled, _ = shared_interpolant(ops, p, c=c, R0=R0, smoothing=1.0).fill(
+        theta if whole else theta[np.ix_(times, have)], visible if whole else visible[np.ix_(times, have)])
     if smoothing == "gcv":
         k = space_gcv_filled(filled, p, c=c, R0=R0)
     else:
         k = float(smoothing)
     v0, d1, d2 = shared_interpolant(ops, p, c=c, R0=R0, smoothing=k).evaluate(filled.T, derivatives=dual is not None)
     del filled
+    # the outputs once the fill's and the evaluation's work arrays are gone (each GBs for stacked noise probes)
+    grad = None if dual is None else np.full((T, N, 3), np.nan)
+    val = np.full((T, N), np.nan)
     cols = np.flatnonzero(have)
     if dual is not None:
         step = max(1, (1 << 24) // max(1, 6 * cols.size))  # rows per block: ~128 MB of dual basis

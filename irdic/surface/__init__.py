@@ -130,7 +130,7 @@ shrinks the signal (GCV then chose ``lam`` too small: rate error reduced only
 from ..numerics.series import SeriesFit, smooth_series
 from .fit import SurfaceFields, fit_stages, fit_surface
 from .geometry import Geometry, edge_distance, surface_geometry
-from .interpolation import SpatialInterpolant, shared_interpolant
+from .interpolation import SpatialInterpolant, drop_derivative_weights, shared_interpolant
 from .parametrisation import surface_parameters
 from .regression import gcv_spatial
 
@@ -138,6 +138,7 @@ __all__ = [
     "surface_parameters",
     "SpatialInterpolant",
     "shared_interpolant",
+    "drop_derivative_weights",
     "SeriesFit",
     "smooth_series",
     "gcv_spatial",

@@ -26,7 +26,7 @@ from .parametrisation import MIN_POINTS
 from .regression import ls_design, monomials
 from .tiles import LocalOperator, Tiles, coefficient_matrix, tile_weights
 
-__all__ = ["SOLVERS", "SpatialInterpolant", "LocalOperator", "shared_interpolant"]
+__all__ = ["SOLVERS", "SpatialInterpolant", "LocalOperator", "shared_interpolant", "drop_derivative_weights"]
 
 log = logging.getLogger(__name__)
 
@@ -129,6 +129,7 @@ class SpatialInterpolant:
         self._ls = None
         self._ls_at = None
         self._local = None
+        self._local_tiles = None
         self._g = None
         self._fill_lu = [None, {}, 0]  # (the G they factorise, {missing points: LU}, bytes)
         self._chosen = None
@@ -273,6 +274,7 @@ class SpatialInterpolant:
         op = LocalOperator(pts.shape[0], kinds, tiles_e, rows, G, psi_eval is None)
         if kinds:  # an operator of G rows alone does not replace the evaluation operator
             self._local = op
+            self._local_tiles = tiles  # a rebuild (drop_derivative_weights) takes the same tiles: the same numbers
         if rows.size:
             self._g = (rows, G)
         return op
@@ -280,6 +282,8 @@ class SpatialInterpolant:
     def _eval_local(self, F, pts, kinds, tiles, at_nodes):
         op = self._local
         if not (op is not None and op.at_nodes and at_nodes and set(kinds) <= set(op.kinds)):
+            if tiles is None and at_nodes:
+                tiles = self._local_tiles
             op = self.local_operator(None if at_nodes else pts, kinds, tiles=tiles)
         return op.apply(F, kinds)
 
@@ -542,3 +546,20 @@ def shared_interpolant(cache: dict, psi, **kw) -> SpatialInterpolant:
     built.append((psi, sp))
     del built[:-4]
     return sp
+
+
+def drop_derivative_weights(cache: dict) -> None:
+    """Free the local tiles' derivative weights of the interpolants in ``cache`` (:func:`shared_interpolant`).
+
+    The weights make an evaluation of an exact interpolant's derivatives at
+    the points one product per tile (:meth:`SpatialInterpolant.local_pass`);
+    at paper scale they are the cache's largest entry (0.68 GB at 25,960
+    points). A stage that evaluates only regressions from some point on frees
+    them there; the rows of ``G`` that fill missing points stay, and an
+    evaluation that needs the weights after all builds them again on the
+    same tiles (the same numbers, the tiles' time again).
+    """
+    for built in cache.values():
+        for _, sp in built:
+            sp._local = None
+

@@ -18,32 +18,32 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..gradient import surface_gradient
-
 __all__ = ["position_std", "gradient_dic_var", "position_var", "tangent_noise", "TANGENT_PROBES", "TANGENT_TIMES"]
 
 #: DIC noise probes through the surface fit for the tangents' noise
 TANGENT_PROBES = 4
 #: stages (the first included) the tangents' noise is probed at; it follows the slowly changing geometry
 TANGENT_TIMES = 4
+#: gradient values (time x point x component) of :func:`gradient_dic_var` worked on at once
+_BLOCK_VALUES = 1 << 21
 
 
-def position_std(points, sf, geo, J, g_pix, temp_std, grad_std, s_x, p, spatial, rng, ops=None):
+def position_std(points, sf, geo, grad, g_pix, temp_std, grad_std, s_x, p, regressed, rng, ops=None):
     """Temperature (T, N) and gradient (T, N, 3) std with the points' position terms added in quadrature.
 
-    The temperature gets :func:`position_var`; the spatial regression's
-    gradient (``spatial`` not None: ``spatial[1]``) gets its tangent plane's
-    DIC noise, :func:`gradient_dic_var` of :func:`tangent_noise` (probes
-    from a stream of their own, spawned from ``rng``: the other probes'
-    draws stay as they were). ``J`` (T, N, 2, 3) px/mm and ``g_pix``
-    (T, N, 2) K/px: the paper's gradient where there is no regression;
-    ``s_x``: the DIC noise (mm); ``p``: the fields settings.
+    The temperature gets :func:`position_var`; a regressed gradient
+    (``regressed``) gets its tangent plane's DIC noise,
+    :func:`gradient_dic_var` of :func:`tangent_noise` (probes from a stream
+    of their own, spawned from ``rng``: the other probes' draws stay as they
+    were). ``grad`` (T, N, 3) K/mm: the fields' gradient; ``g_pix`` (T, N,
+    2) K/px: the pixel gradients; ``s_x``: the DIC noise (mm); ``p``: the
+    fields settings.
     """
-    grad = spatial[1] if spatial is not None else surface_gradient(np.nan_to_num(g_pix), J, sf.tangents)
     temp_std = np.sqrt(temp_std ** 2 + position_var(points, g_pix, grad, s_x))
-    if spatial is not None and np.isfinite(s_x) and s_x > 0:
-        x = points["x"].transpose("time", "point", "component").values.astype(float)
+    if regressed and np.isfinite(s_x) and s_x > 0:
+        x = np.asarray(points["x"].transpose("time", "point", "component").values, dtype=float)  # read only
         s2 = tangent_noise(x, sf, s_x, p, rng.spawn(1)[0], ops)
+        del x
         grad_std = np.sqrt(grad_std ** 2 + gradient_dic_var(grad, geo, s2))
     return temp_std, grad_std
 
@@ -99,13 +99,18 @@ def gradient_dic_var(grad, geo, s2):
     the IR noise: ``(σ_x |g| / σ_T)²`` of its variance (demo barrel 0.4 %),
     left out.
     """
-    g = np.nan_to_num(np.asarray(grad, dtype=float))
-    dual, n = np.nan_to_num(geo.dual), np.nan_to_num(geo.normal)
-    gg = np.sum(g * g, axis=-1)[..., None]
-    gd = np.einsum("tnj,tnbj->tnb", g, dual)
-    var = np.zeros(g.shape)
-    for b in range(2):
-        var += np.nan_to_num(s2[:, b])[None, :, None] * (gg * dual[:, :, b] ** 2 + gd[..., b, None] ** 2 * n ** 2)
+    grad = np.asarray(grad, dtype=float)
+    var = np.zeros(grad.shape)
+    s2 = np.nan_to_num(s2)
+    # a block of times at a time: the products' temporaries of the whole record are GBs at paper scale
+    step = max(1, _BLOCK_VALUES // max(1, grad[0].size))
+    for t0 in range(0, grad.shape[0], step):
+        tb = slice(t0, t0 + step)
+        g, dual, n = np.nan_to_num(grad[tb]), np.nan_to_num(geo.dual[tb]), np.nan_to_num(geo.normal[tb])
+        gg = np.sum(g * g, axis=-1)[..., None]
+        gd = np.einsum("tnj,tnbj->tnb", g, dual)
+        for b in range(2):
+            var[tb] += s2[:, b][None, :, None] * (gg * dual[:, :, b] ** 2 + gd[..., b, None] ** 2 * n ** 2)
     return var
 
 

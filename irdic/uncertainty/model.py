@@ -68,6 +68,7 @@ spacings of the point cloud's edge.
 
 from __future__ import annotations
 
+import functools
 import logging
 from typing import NamedTuple
 
@@ -78,6 +79,7 @@ from ..logs import report
 from ..numerics.temporal import TemporalInterpolant, rate_reference_weights, temporal_window
 from ..numerics.memory import release
 from ..numerics.threads import parallel_map
+from ..surface import drop_derivative_weights
 from ..vocabulary import Status
 from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
@@ -86,7 +88,8 @@ from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, referenc
                               scaled_probes)
 from .strain import noise_floor_note, strain_std
 
-__all__ = ["uncertainties", "uncertainty_notes", "Window", "PROBES", "EDGE_PX", "BIAS_NEIGHBOURS"]
+__all__ = ["uncertainties", "with_strain_std", "paper_std", "uncertainty_notes", "Window", "PROBES", "EDGE_PX",
+           "BIAS_NEIGHBOURS"]
 
 log = logging.getLogger(__name__)
 
@@ -130,16 +133,19 @@ class Window(NamedTuple):
 PROGRESS = {"probes": 0.40, "ir": 0.70}
 
 
-def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed=0, window=None, spatial=None,
-                  ops=None):
+def uncertainties(points, sf, geo, paper, grad, g_pix, t, p, chosen_k, regress_space, seed=0, window=None,
+                  spatial=None, ops=None):
     """Standard uncertainties and bias flags of the fields (see the module docstring).
 
     Parameters
     ----------
     points, sf, geo
         ``points.zarr``, the fitted surface and its geometry (dual basis).
-    J, g_pix : ndarray, shape (T, N, 2, 3) and (T, N, 2)
-        Projection Jacobian (px/mm) and pixel gradients (K/px).
+    paper : list of ndarray
+        The paper's relations' std from the IR noise alone (:func:`paper_std`);
+        emptied here (at paper scale 0.3 GB the caller would hold).
+    grad, g_pix : ndarray, shape (T, N, 3) and (T, N, 2)
+        The fields' in-plane gradient (K/mm) and the pixel gradients (K/px).
     t : ndarray, shape (T,)
         DIC times (s).
     p : dict
@@ -175,41 +181,93 @@ def uncertainties(points, sf, geo, J, g_pix, t, p, chosen_k, regress_space, seed
     -------
     dict
         ``name -> (std array, bias_dominated array)`` for ``temperature``,
-        ``temperature_gradient``, ``temperature_rate``,
-        ``max_principal_strain``; and ``"notes"``: str for the attrs.
+        ``temperature_gradient``, ``temperature_rate``; ``"notes"``: list of
+        str; ``"strain"``: the max principal strain's part, pending
+        (:func:`with_strain_std` runs it once the caller has let go of the
+        IR terms' inputs: at paper scale GBs).
     """
     rng = np.random.default_rng(seed)
     a = points.attrs
-    T, N = sf.x.shape[:2]
     visible = np.isfinite(points["temperature"].values.astype(float))
-    sig_n, q, sigma, (s_T, s_g, s_r) = _ir_noise(a)
+    sig_n, q, sigma, (s_T, _, _) = _ir_noise(a)
     notes = []
     ends = (True, True) if window is None else (window.first, window.last)
     ir_bias, rate_bias, strain_bias = _bias_flags(points, sf, visible, q, sig_n, notes, ends)
     trusted = ~(near_edge(points, sf, visible) | strain_bias)  # the bias references are accurate there
-    temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng,
-                                                        s_T, s_g, s_r, window, spatial, trusted,
+    if ops is not None and _regressions_only(sf, chosen_k.get("temperature_smoothing_space")):
+        drop_derivative_weights(ops)  # no exact interpolation's derivatives from here on
+    temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng,
+                                                        s_T, window, spatial, trusted,
                                                         footprint_probes(points, window, sigma),
                                                         _values(points, "temperature_paper"))
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
     report("uncertainty", PROGRESS["ir"])
     s_x = float(a.get("dic_noise_mm", np.nan))
-    temp_std, grad_std = position_std(points, sf, geo, J, g_pix, temp_std, grad_std, s_x, p, spatial, rng, ops)
-    e_std = strain_std(points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
-    if not np.isfinite(s_x):
-        notes.append("max_principal_strain_std: the DIC noise could not be estimated")
+    temp_std, grad_std = position_std(points, sf, geo, grad, g_pix, temp_std, grad_std, s_x, p, spatial is not None,
+                                      rng, ops)
     for arr in (temp_std, rate_std, grad_std):
         arr[~visible] = np.nan
+    # the strain's probes draw from the same stream after the IR terms' (the record's numbers do not depend on
+    # when they run)
+    pending = functools.partial(strain_std, points, sf, t, p, s_x, rng, window, ~strain_bias, ops)
+    return {"temperature": (temp_std, ir_bias), "temperature_rate": (rate_std, rate_bias),
+            "temperature_gradient": (grad_std, np.repeat(ir_bias[..., None], 3, axis=-1)), "notes": notes,
+            "strain": (pending, np.array(strain_bias), sigma, s_T, s_x)}
+
+
+def with_strain_std(unc):
+    """The uncertainties ``unc`` of :func:`uncertainties` complete: the max principal strain's std and bias
+    flags (``max_principal_strain``) computed, ``notes`` a str for the attrs.
+
+    The strain's probes refit the surface (:func:`~irdic.uncertainty.strain.strain_std`); run apart from
+    :func:`uncertainties`, after the caller has let go of the regressions' inputs, the projection and the
+    dual basis, they do not add to the IR terms' memory.
+    """
+    unc = dict(unc)
+    pending, strain_bias, sigma, s_T, s_x = unc.pop("strain")
+    e_std = pending()
+    notes = list(unc["notes"])
+    if not np.isfinite(s_x):
+        notes.append("max_principal_strain_std: the DIC noise could not be estimated")
     log.info("fields: uncertainty from IR noise %.3g K (point %.3g K) and DIC noise %.3g mm; median std: temperature "
-             "%.3g K, rate %.3g K/s, max principal strain %.3g", sigma, s_T, s_x, _median(temp_std),
-             _median(rate_std), _median(e_std))
-    return {
-        "temperature": (temp_std, ir_bias),
-        "temperature_gradient": (grad_std, np.repeat(ir_bias[..., None], 3, axis=-1)),
-        "temperature_rate": (rate_std, rate_bias),
-        "max_principal_strain": (e_std, np.array(strain_bias)),
-        "notes": "; ".join(notes) if notes else "none",
-    }
+             "%.3g K, rate %.3g K/s, max principal strain %.3g", sigma, s_T, s_x, _median(unc["temperature"][0]),
+             _median(unc["temperature_rate"][0]), _median(e_std))
+    unc["max_principal_strain"] = (e_std, strain_bias)
+    unc["notes"] = "; ".join(notes) if notes else "none"
+    return unc
+
+
+def paper_std(points, sf, J):
+    """The std of the paper's temperature (T, N) K, in-plane gradient (T, N, 3) K/mm and rate (T, N) K/s from
+    the IR noise alone: the point-level noise of ``points.zarr``'s attrs through the paper's relations.
+
+    Parameters
+    ----------
+    points : xarray.Dataset
+        ``points.zarr`` (its noise attrs: :func:`_ir_noise`).
+    sf : SurfaceFit
+        The fitted surface (tangents, velocity).
+    J : ndarray, shape (T, N, 2, 3)
+        The projection Jacobian (px/mm).
+
+    Notes
+    -----
+    The gradient is ``L g_pix`` with ``L`` = ``surface_gradient`` of the
+    unit vectors, so component ``i`` has the variance ``σ_g² Σ_j L_ij²``;
+    the rate ``∂Θ/∂t + c · g_pix`` (``c = J v``) has ``σ_r² + σ_g² |c|²``.
+    Computed where the Jacobian is at hand, so that it need not be kept for
+    the uncertainty (at paper scale 0.36 GB).
+    """
+    _, _, _, (s_T, s_g, s_r) = _ir_noise(points.attrs)
+    T, N = sf.x.shape[:2]
+    e = np.zeros((T, N, 2))
+    e[..., 0] = 1
+    Lu = surface_gradient(e, J, sf.tangents)
+    cu = material_rate(np.zeros((T, N)), e, J, sf.velocity).convective
+    e[..., 0], e[..., 1] = 0, 1
+    Lv = surface_gradient(e, J, sf.tangents)
+    cv = material_rate(np.zeros((T, N)), e, J, sf.velocity).convective
+    return np.full((T, N), s_T), s_g * np.sqrt(Lu ** 2 + Lv ** 2), np.sqrt(s_r ** 2 + s_g ** 2 * (cu ** 2 + cv ** 2))
 
 
 def uncertainty_notes(unc, e_max):
@@ -243,26 +301,18 @@ def _ir_noise(a):
     return sig_n, q, sigma, tuple(gains)
 
 
-def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s_r, window=None, spatial=None,
+def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, window=None, spatial=None,
             trusted=None, footprint=None, theta_paper=None):
     """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
-    bias (:func:`~irdic.uncertainty.regression_bias.local_bias`); last, where the rate's estimated bias exceeds its noise (T, N), or None.
+    bias (:func:`~irdic.uncertainty.regression_bias.local_bias`); last, where the rate's estimated bias exceeds
+    its noise (T, N), or None. ``paper``: the paper's relations' (:func:`paper_std`), where nothing is regressed;
+    ``s_T`` the point temperatures' noise (K).
     ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.footprint.fields.footprint_probes`, with
     ``theta_paper`` (T, N) the paper's point temperatures. The probes' noise is scaled to the data's
     (:func:`~irdic.uncertainty.regression_bias.noise_scale`)."""
-    T, N = sf.x.shape[:2]
-    # the paper's relations: exact propagation of the per-point linear maps
-    e = np.zeros((T, N, 2))
-    e[..., 0] = 1
-    Lu = surface_gradient(e, J, sf.tangents)
-    cu = material_rate(np.zeros((T, N)), e, J, sf.velocity).convective
-    e[..., 0], e[..., 1] = 0, 1
-    Lv = surface_gradient(e, J, sf.tangents)
-    cv = material_rate(np.zeros((T, N)), e, J, sf.velocity).convective
-    grad_std = s_g * np.sqrt(Lu ** 2 + Lv ** 2)
-    rate_std = np.sqrt(s_r ** 2 + s_g ** 2 * (cu ** 2 + cv ** 2))
-    temp_std = np.full((T, N), s_T)
-    del e, Lu, Lv, cu, cv  # GBs at paper scale while the probes run
+    T, N = visible.shape
+    temp_std, grad_std, rate_std = paper
+    paper.clear()
 
     kt, ks = chosen_k.get("temperature_smoothing"), chosen_k.get("temperature_smoothing_space")
     W = rate_biased = None
@@ -288,19 +338,27 @@ def _ir_std(sf, J, t, p, chosen_k, regress_space, geo, visible, rng, s_T, s_g, s
         pix_draw = None
         if draw is not None and s_paper is None:  # no footprint: one set of probes, with the pixels' correlation
             pix_draw, draw = draw, None
+        # the probes' stds replace these: not held through the probes (at paper scale 0.3 GB)
+        temp_std = grad_std = None
+        rate_std = None if W is not None else rate_std
         # the value is regressed from the paper's temperatures: their own noise through the operators
         acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
                               spatial is not None, pix_draw)
         own = None if spatial is None else spatial[0]  # the regressions' input (the footprint's, with one)
         acc = scaled_probes(acc, noise_scale(own if draw is None else theta_paper, acc, regress_space, ks, trusted))
+        del acc["res"]  # the residuals' sole use
         if draw is not None:
             # the gradient and rate from the footprint temperatures: their correlated noise, drawn from a stream
-            # of its own (the other probes' draws stay as they were)
+            # of its own (the other probes' draws stay as they were); the paper temperatures' of these are
+            # dropped first (GBs at paper scale)
+            keys = ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null", "rs_var_null")
+            for k in keys:
+                acc.pop(k)
             acc_fp = _spatial_probes(t, regress_space, geo, visible, rng.spawn(1)[0], s_T, ks, W, window,
                                      spatial is not None, draw)
             acc_fp = scaled_probes(acc_fp, noise_scale(own, acc_fp, regress_space, ks, trusted))
-            acc.update({k: acc_fp[k] for k in ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null",
-                                               "rs_var_null")})
+            del acc_fp["res"]
+            acc.update({k: acc_fp[k] for k in keys})
             del acc_fp
         release()  # the probes' groups are freed before the bias estimates' pool
         temp_std, grad_std = np.sqrt(acc.pop("v")), np.sqrt(acc.pop("g"))
@@ -332,6 +390,7 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     # one pool for all, the gradient's (three components) first: the threads stay busy to the end
     b = parallel_map(lambda a: local_bias(a[0], acc[a[1]], psi, trusted, acc[a[1] + "_null"], ks, nbs, **a[2]),
                      jobs)
+    del jobs, d_grad  # the differences, each (T, N[, 3]), before the sums below
     grad_std, temp_std = np.hypot(grad_std, b[0]), np.hypot(temp_std, b[1])
     if not temporal:
         return temp_std, grad_std, rate_std, None
@@ -363,16 +422,13 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     n_bias = 0  # probes through the exact interpolation (whole groups, the first BIAS_PROBES or more)
     # each of the first BIAS_PROBES probes' squared differences: the bias estimates' own scatter on noise
     nulls = {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
-    tw, off = T, 0
-    if W0 is not None and window is not None:
-        # the temporal regression of a chunk mixes its window's noise; the record-length draw is discarded
-        for start in range(0, PROBES, PROBE_GROUP):
-            rng.standard_normal((min(PROBE_GROUP, PROBES - start), T, N))
-        tw, off = window.t.size, int(np.searchsorted(window.t, t[0]))
+    tw, off = _probe_window(rng, t, N, window) if W0 is not None else (T, 0)
     seen = visible if tw == T else np.isfinite(window.theta)
     for start in range(0, PROBES, PROBE_GROUP):
         b = min(PROBE_GROUP, PROBES - start)
-        noise = (rng.standard_normal((b, tw, N)) if draw is None else draw(rng, b)) * s_T
+        # scaled in place: a group's noise is GBs at paper scale, a scaled copy as much again
+        noise = rng.standard_normal((b, tw, N)) if draw is None else np.array(draw(rng, b), dtype=float)
+        noise *= s_T
         noise[:, ~seen] = np.nan
         noise_c = noise[:, off:off + T][:, sub]
         m = b * sub.size
@@ -382,17 +438,18 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
             res = noise_c - v.reshape(noise_c.shape)
         else:
             # in space at each time first, then in time (irdic.fields.space_time.space_time)
-            s = np.nan_to_num(regress_space(noise.reshape(b * tw, N), None, ks)[1].reshape(b, tw, N))
-            res = (noise - s)[:, off:off + T][:, sub]
+            s = np.nan_to_num(regress_space(noise.reshape(b * tw, N), None, ks)[1].reshape(b, tw, N), copy=False)
+            res = noise[:, off:off + T][:, sub] - s[:, off:off + T][:, sub]
+            np.nan_to_num(noise, copy=False)  # the hidden points count as 0 from here on, as in the data's differences
             r = W1[sub] @ s  # (S, T_w) @ (b, T_w, N): one BLAS call per probe
             acc["r"] = acc["r"] + np.sum(r ** 2, axis=0) / PROBES
             smoothed = W0[sub] @ s
             smoothed[:, ~visible[sub]] = np.nan
             g, v = regress_space(smoothed.reshape(m, N), geo.dual[sub], ks)
             # the bias is judged against the temporal regression of the points' own series
-            value_in = W0[sub] @ np.nan_to_num(noise)
+            value_in = W0[sub] @ noise
             if bias:  # the noise in the space-time regression's differences (_space_time_bias)
-                for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - np.nan_to_num(noise)),
+                for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - noise),
                                    ("vt_var", W0 - I0, s)):
                     sq = (Wd[sub] @ x) ** 2
                     acc[key] = acc[key] + np.sum(sq, axis=0) / PROBES
@@ -415,9 +472,32 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         report("uncertainty", PROGRESS["probes"] * (start + b) / PROBES)
     if n_bias:
         acc["g_var"] = acc["g_var"] / n_bias
-    out = {k: spread(a, near) if np.ndim(a) else a for k, a in acc.items()}
-    # the nulls stay at the probed times: local_bias reads them at a few times only (SpreadStack)
+    # the noise variances of the bias estimates' differences, and the nulls, stay at the probed times:
+    # local_bias reads them a block of times at a time (SpreadStack; ~0.4 GB less at paper scale)
+    out = {k: (SpreadStack(a[None], near) if k in nulls else spread(a, near)) if np.ndim(a) else a
+           for k, a in acc.items()}
     return {**out, **{f"{k}_null": SpreadStack(np.array(n), near) if n else None for k, n in nulls.items()}}
+
+
+def _regressions_only(sf, ks):
+    """Whether every spatial operator the uncertainty evaluates derivatives with is a regression: the surface's
+    (shape and motion) and the strain's reference (:func:`~irdic.uncertainty.strain.strain_std`), the
+    temperature's (``ks``) and the gradient's reference; not the exact interpolation (spacing None or 1)."""
+    surface = (sf.info.get("smoothing_shape") or sf.info.get("smoothing"), sf.info.get("smoothing"))
+    spacings = list(surface) + list(np.atleast_1d(reference_spacing(surface) or [None]))
+    if ks is not None:
+        spacings += [ks, reference_spacing(ks)]
+    return all(k is not None and float(k) > 1.0 for k in spacings)
+
+
+def _probe_window(rng, t, N, window):
+    """The times the probes' temporal regression mixes, and the offset of ``t`` among them: a chunk's window
+    (``rng`` then passes over the record-length draw, which a whole record's probes make), or ``t`` itself."""
+    if window is None:
+        return t.size, 0
+    for start in range(0, PROBES, PROBE_GROUP):
+        rng.standard_normal((min(PROBE_GROUP, PROBES - start), t.size, N))
+    return window.t.size, int(np.searchsorted(window.t, t[0]))
 
 
 def _values(points, name):

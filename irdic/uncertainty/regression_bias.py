@@ -166,8 +166,10 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     ----------
     d : ndarray, shape (T, N) or (T, N, C)
         The regression minus the reference (the data's).
-    noise_var : ndarray, same shape
-        The noise variance of ``d`` (probes through both operators).
+    noise_var : ndarray, same shape, or SpreadStack of one
+        The noise variance of ``d`` (probes through both operators); a
+        :class:`~irdic.uncertainty.probes.SpreadStack` of one array at the
+        probed times is read a block of times at a time.
     psi : ndarray, shape (N, 2)
         Surface parameters (the neighbourhoods).
     trusted : ndarray of bool, shape (T, N), optional
@@ -211,8 +213,10 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     else 0.
     """
     d = np.asarray(d)
-    noise_var = np.broadcast_to(noise_var, d.shape)
-    ok = np.isfinite(np.square(d) - noise_var)
+    T = d.shape[0]
+    step = max(1, _BIAS_BLOCK // max(1, int(np.prod(d.shape[1:]))))
+    noise_rows = _rows_of(noise_var, d.shape)
+    ok = _finite(d, noise_rows, step)
     if trusted is not None:
         ok &= np.asarray(trusted, dtype=bool).reshape(trusted.shape + (1,) * (d.ndim - 2))
     if not np.isfinite(psi).all(axis=1).any():
@@ -228,14 +232,29 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
     # block by block of times (each with its neighbouring times, which the local means include): the work
     # arrays of a block, not of the record (at paper scale ~10 arrays of 100 MB per call otherwise)
     out = np.empty(d.shape)
-    T = d.shape[0]
-    step = max(1, _BIAS_BLOCK // max(1, ok[0].size))
     for t0 in range(0, T, step):
         t1 = min(T, t0 + step)
         e0, e1 = max(0, t0 - 1), min(T, t1 + 1)
-        res = _local_estimate(d[e0:e1], noise_var[e0:e1], ok[e0:e1], nbs, scales, z)
+        res = _local_estimate(d[e0:e1], noise_rows(e0, e1), ok[e0:e1], nbs, scales, z)
         out[t0:t1] = np.sqrt(share * res[t0 - e0:t1 - e0])
     return out
+
+
+def _rows_of(a, shape):
+    """``(e0, e1) -> a[e0:e1]`` of an array broadcast to ``shape``, or of a
+    :class:`~irdic.uncertainty.probes.SpreadStack` of one array (spread to those times only)."""
+    if hasattr(a, "rows"):
+        return lambda e0, e1: a.rows(np.arange(e0, e1))[0]
+    a = np.broadcast_to(a, shape)
+    return lambda e0, e1: a[e0:e1]
+
+
+def _finite(d, noise_rows, step):
+    """Where ``d² - noise_var`` is finite (T, N[, C]), ``step`` times at a time (``noise_rows``: :func:`_rows_of`)."""
+    ok = np.empty(d.shape, dtype=bool)
+    for t0 in range(0, d.shape[0], step):
+        ok[t0:t0 + step] = np.isfinite(np.square(d[t0:t0 + step]) - noise_rows(t0, min(d.shape[0], t0 + step)))
+    return ok
 
 
 def _neighbourhoods(psi, spacing, pooled, cache):

@@ -338,6 +338,33 @@ def test_fill_factorisations_are_reused_only_with_their_rows_of_g():
     np.testing.assert_allclose(again, other.fill(np.where(a[..., None], X, np.nan), a)[0], rtol=0, atol=1e-12)
 
 
+def test_dropped_derivative_weights_are_rebuilt_with_the_same_numbers():
+    """drop_derivative_weights frees the local tiles' weights of a cache's exact interpolants: the fill (rows of
+    G) works on without them, and an evaluation that needs the derivatives builds them again, the numbers equal
+    to the last bit."""
+    from irdic.surface import drop_derivative_weights, shared_interpolant
+
+    rng = np.random.default_rng(8)
+    psi = grid(0.6, 9) + rng.uniform(-0.05, 0.05, (grid(0.6, 9).shape[0], 2))
+    n = psi.shape[0]
+    X = curved(psi)[None] + rng.normal(size=(1, n, 3))
+    valid = np.ones((1, n), bool)
+    valid[0, rng.choice(n, 40, replace=False)] = False
+    ops = {}
+    sp = shared_interpolant(ops, psi, solver="local")
+    sp.local_pass(np.flatnonzero(~valid[0]))
+    filled = sp.fill(np.where(valid[..., None], X, np.nan), valid)[0]
+    before = sp.evaluate(filled[0], value=False)
+    assert sp._local is not None
+    drop_derivative_weights(ops)
+    assert sp._local is None
+    np.testing.assert_array_equal(sp.fill(np.where(valid[..., None], X, np.nan), valid)[0], filled)
+    after = sp.evaluate(filled[0], value=False)
+    assert sp._local is not None
+    for a, b in zip(before[1:], after[1:]):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_regression_reduces_noise_in_derivatives():
     rng = np.random.default_rng(4)
     psi = grid(0.7, 14)

@@ -117,3 +117,26 @@ def test_rate_reference_of_a_slow_regression_is_a_least_squares_polynomial():
     reg = TemporalInterpolant(t, smoothing=12.0).weights(t, 1)
     assert rms(ref @ heat - rate) < 1e-3 * rms(reg @ heat - rate)
     assert gain(ref) < 0.25 * gain(local_rate_weights(t)) and gain(ref) < 1.6 * gain(reg)
+
+
+def test_local_bias_reads_a_noise_variance_held_at_the_probed_times(monkeypatch):
+    """The probes' noise variance, held at the probed times (a SpreadStack of one) and spread a block of times
+    at a time, gives exactly the estimate of its spread array; with blocks of a few times, so that the block
+    edges (each block reads its neighbouring times) are crossed. A point hidden at its nearest probed time
+    takes its median over the probed times, as spread() gives it."""
+    from irdic.uncertainty import regression_bias
+    from irdic.uncertainty.probes import SpreadStack, probe_times, spread
+
+    rng = np.random.default_rng(3)
+    psi, T = _grid(), 40
+    sub, near = probe_times(T)
+    assert sub.size < T  # the variance is spread, not every time probed
+    v_sub = rng.uniform(2.0, 6.0, (sub.size, psi.shape[0], 3))
+    v_sub[3, 7] = np.nan
+    d = 1.0 + rng.normal(0.0, 2.0, (T, psi.shape[0], 3))
+    null = SpreadStack(rng.normal(0.0, 2.0, (4, sub.size, psi.shape[0], 3)) ** 2, near)
+    monkeypatch.setattr(regression_bias, "_BIAS_BLOCK", 7 * psi.shape[0] * 3)
+    want = local_bias(d, spread(v_sub, near), psi, null=null)
+    got = local_bias(d, SpreadStack(v_sub[None], near), psi, null=null)
+    assert (want > 0).mean() > 0.5
+    np.testing.assert_array_equal(got, want)
