@@ -483,11 +483,14 @@ def _regressions_only(sf, ks):
     """Whether every spatial operator the uncertainty evaluates derivatives with is a regression: the surface's
     (shape and motion) and the strain's reference (:func:`~irdic.uncertainty.strain.strain_std`), the
     temperature's (``ks``) and the gradient's reference; not the exact interpolation (spacing None or 1)."""
+    def regression(k):
+        return k is not None and float(k) > 1.0
+
     surface = (sf.info.get("smoothing_shape") or sf.info.get("smoothing"), sf.info.get("smoothing"))
-    spacings = list(surface) + list(np.atleast_1d(reference_spacing(surface) or [None]))
-    if ks is not None:
-        spacings += [ks, reference_spacing(ks)]
-    return all(k is not None and float(k) > 1.0 for k in spacings)
+    if not all(map(regression, surface)) or (ks is not None and not regression(ks)):
+        return False
+    references = list(reference_spacing(surface) or [None]) + ([reference_spacing(ks)] if ks is not None else [])
+    return all(map(regression, references))
 
 
 def _probe_window(rng, t, N, window):

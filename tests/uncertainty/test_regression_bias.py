@@ -140,3 +140,23 @@ def test_local_bias_reads_a_noise_variance_held_at_the_probed_times(monkeypatch)
     got = local_bias(d, SpreadStack(v_sub[None], near), psi, null=null)
     assert (want > 0).mean() > 0.5
     np.testing.assert_array_equal(got, want)
+
+
+def test_the_interpolations_derivative_weights_go_only_where_nothing_interpolates():
+    """The uncertainty frees the exact interpolation's derivative weights only where every operator it evaluates
+    derivatives with is a regression: the surface's (shape, motion) and their halves, the temperature's and its
+    half; an interpolated surface, or a spacing whose half is the interpolation (2 and below), keeps them."""
+    from types import SimpleNamespace
+
+    from irdic.uncertainty.model import _regressions_only
+
+    def sf(shape, motion):
+        return SimpleNamespace(info={"smoothing_shape": shape, "smoothing": motion})
+
+    assert _regressions_only(sf(8.0, 16.0), 33.0)
+    assert _regressions_only(sf(None, 8.0), None)
+    assert _regressions_only(sf(8.0, 16.0), 3.0)  # its half, 1.5, is a regression
+    assert not _regressions_only(sf(8.0, 16.0), 2.0)  # its half is the interpolation
+    assert not _regressions_only(sf(None, None), 33.0)
+    assert not _regressions_only(sf(2.0, 16.0), 33.0)
+    assert not _regressions_only(sf(None, 1.0), 33.0)
