@@ -562,4 +562,3 @@ def drop_derivative_weights(cache: dict) -> None:
     for built in cache.values():
         for _, sp in built:
             sp._local = None
-
