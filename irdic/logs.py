@@ -253,10 +253,8 @@ class StageProgress:
                  logger: logging.Logger | None = None, clock: Callable[[], float] = time.perf_counter,
                  tick: float | None = 1.0):
         self.what = what
-        shares = shares or {}
-        n = max(1, int(threads))
-        # expected wall time of each part: the parallel share on n threads, the rest on one
-        self.weights = {k: float(c) * ((1.0 - shares.get(k, 1.0)) + shares.get(k, 1.0) / n) for k, c in parts.items()}
+        self._shares, self._threads = shares or {}, max(1, int(threads))
+        self.weights = {k: self._wall(k, c) for k, c in parts.items()}
         self.total = sum(self.weights.values()) or 1.0
         self.done = dict.fromkeys(self.weights, 0.0)
         self.log = logger if logger is not None else logging.getLogger("irdic")
@@ -270,6 +268,22 @@ class StageProgress:
         self._last = None  # (work done, time) at the last report
         self._began = {}  # part: (time, fraction) of its first report
         self._stop = threading.Event()
+
+    def _wall(self, part, cost):
+        """Expected wall time of ``part`` at ``cost`` (seconds of one core): its parallel share on the stage's
+        threads, the rest on one."""
+        share = self._shares.get(part, 1.0)
+        return float(cost) * ((1.0 - share) + share / self._threads)
+
+    def reweigh(self, parts: dict) -> None:
+        """New expected costs (seconds of one core) of parts that have not reported yet, once the stage knows
+        more of its work than its sizes at the start (the couple stage: the specimen's pixels once the points
+        are projected); the others keep theirs."""
+        with self._lock:
+            for k, c in parts.items():
+                if k in self.weights and k not in self._began:
+                    self.weights[k] = self._wall(k, c)
+            self.total = sum(self.weights.values()) or 1.0
 
     def fraction(self, now: float | None = None) -> float:
         """The expected part of the stage's wall time done (0..1), the running part extrapolated to ``now``."""
@@ -367,6 +381,13 @@ OWN_RATE_SHARE = 0.2
 
 #: the StageProgress of the stage being run (None outside one)
 _current: StageProgress | None = None
+
+
+def reweigh(parts: dict) -> None:
+    """Give the running stage's :class:`StageProgress` new costs of parts not yet begun (no-op without one)."""
+    cur = _current
+    if cur is not None:
+        cur.reweigh(parts)
 
 
 def report(part: str, fraction: float) -> None:

@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from irdic.errors import DataError
@@ -134,3 +135,43 @@ def test_stage_progress_running_part_at_its_own_pace():
             report("interpolation", k / 20)
         _, eta = sp._state(now[0])
         assert eta == pytest.approx(0.7 * 40.0 + 5.0 / (16.0 / 22.0), rel=0.01)
+
+
+def test_stage_progress_reweighs_the_parts_not_yet_begun():
+    """Costs known only once the stage has begun (the couple stage's specimen pixels after the projection)
+    replace those of the parts that have not reported yet; a part already running keeps its own, and the ETA
+    follows the new model."""
+    from irdic.logs import StageProgress, report, reweigh
+
+    now = [0.0]
+    parts = {"setup": 4.0, "masks": 10.0, "interpolation": 20.0}
+    with StageProgress("couple", parts, logger=logging.getLogger("irdic.test_reweigh"), clock=lambda: now[0],
+                       tick=None) as sp:
+        now[0] = 4.0
+        report("setup", 1.0)
+        reweigh({"setup": 40.0, "masks": 5.0, "interpolation": 5.0, "nonsense": 1.0})
+        assert sp.weights == {"setup": 4.0, "masks": 5.0, "interpolation": 5.0}
+        assert sp.total == 14.0
+        # one model second per second so far: 10 s left
+        assert sp._state(now[0])[1] == pytest.approx(10.0)
+        report("masks", 0.5)
+        reweigh({"masks": 50.0})  # running: kept
+        assert sp.weights["masks"] == 5.0
+    reweigh({"masks": 1.0})  # outside a stage: nothing
+
+
+def test_couple_cost_model_counts_the_specimen_pixels():
+    """The masks and the interpolation cost per pixel as well as per point: a specimen with four times the
+    pixels costs more there, the other parts the same; the pixels are the area of the points' convex hull
+    at their first time seen (a 30 x 20 px rectangle: 600)."""
+    from irdic.coupling.compute import PIXELS_PER_POINT, specimen_pixels, stage_costs
+
+    few, many = stage_costs(300, 13104, 300, 12641), stage_costs(300, 13104, 300, 4 * 12641)
+    assert many["masks"] > 2 * few["masks"] and many["interpolation"] > 1.5 * few["interpolation"]
+    assert all(many[k] == few[k] for k in ("setup", "clock", "rest", "write"))
+    assert stage_costs(300, 13104, 300) == stage_costs(300, 13104, 300, PIXELS_PER_POINT * 13104)
+    u, v = np.meshgrid(np.linspace(10, 40, 7), np.linspace(5, 25, 5))
+    local = np.stack([np.full((35, 2), np.nan), np.column_stack([u.ravel(), v.ravel()])])
+    seen = np.ones((2, 35), bool)
+    assert specimen_pixels(local, seen) == pytest.approx(600.0)
+    assert specimen_pixels(local[:, :2], seen[:, :2]) == 0.0

@@ -50,7 +50,7 @@ from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..numerics.temporal import temporal_window
 from ..parameters import settings
 from ..timing.clock import ir_clock
-from ..logs import StageProgress, report
+from ..logs import StageProgress, report, reweigh
 from ..threads import thread_budget
 from ..vocabulary import Status, cf_attrs
 from .dataset import count_attrs, points_dataset
@@ -140,13 +140,20 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 
 
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
-#: DIC time and point (the projections, masks, interpolation with the extrapolation's samples, the rest) and per
-#: sample (node x frame) the IR clock's refinement reads (about :data:`NODES_PER_POINT` nodes per point, at most
-#: :data:`irdic.timing.offset.MAX_FRAMES` frames and :data:`~irdic.timing.offset.MAX_SAMPLES` samples);
-#: their ratios, measured on the moving tube of the benchmarks, are what the ETA rests on; ``write`` is the
-#: stage's store, written after :func:`couple` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 8e-7, "masks": 8.1e-6, "clock": 3.7e-6, "interpolation": 1.4e-5, "rest": 3e-7,
+#: DIC time and point (the projections, the rest) and per sample (node x frame) the IR clock's refinement reads
+#: (about :data:`NODES_PER_POINT` nodes per point, at most :data:`irdic.timing.offset.MAX_FRAMES` frames and
+#: :data:`~irdic.timing.offset.MAX_SAMPLES` samples); the masks and the interpolation cost per DIC time and
+#: point plus per DIC time and specimen pixel (:data:`PIXEL_COSTS`). Their ratios, measured on the tubes of the
+#: benchmarks, are what the ETA rests on; ``write`` is the stage's store, written after :func:`couple` returns
+#: (never reported: the ETA includes it)
+STAGE_COSTS = {"setup": 8e-7, "masks": 8.3e-7, "clock": 3.7e-6, "interpolation": 4.8e-6, "rest": 3e-7,
                "write": 3e-7}
+#: seconds of one core per DIC time and specimen pixel of the masks (rasterised per time) and the interpolation
+#: (edge tiles and windows per pixel): fitted on the sweep tube (13,104 points, 53,270 pixels) and the
+#: benchmark's tube at 25,960 points (12,641 pixels), checked on it at 13,104 points (benchmarks/README.md)
+PIXEL_COSTS = {"masks": 1.9e-6, "interpolation": 2.6e-6}
+#: specimen pixels per DIC point assumed until the points are projected (the benchmarks' tubes: 1 to 4)
+PIXELS_PER_POINT = 2
 #: the IR clock's nodes lie 1 px apart on the specimen: about this many per DIC point at the usual DIC spacing
 #: (the moving tube: ~58,000 specimen pixels, 13,104 points)
 NODES_PER_POINT = 4
@@ -154,14 +161,32 @@ NODES_PER_POINT = 4
 STAGE_SHARES = {"setup": 0.0, "masks": 0.9, "clock": 0.25, "interpolation": 0.65, "rest": 0.3, "write": 0.0}
 
 
-def stage_costs(n_t: int, n_points: int, n_frames: int) -> dict:
-    """Expected seconds of one core of the stage's parts for ``n_t`` DIC times, ``n_points`` points and
-    ``n_frames`` IR frames (:data:`STAGE_COSTS`)."""
+def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None = None) -> dict:
+    """Expected seconds of one core of the stage's parts for ``n_t`` DIC times, ``n_points`` points,
+    ``n_frames`` IR frames and ``n_pixels`` specimen pixels (default :data:`PIXELS_PER_POINT` per point;
+    :data:`STAGE_COSTS`, :data:`PIXEL_COSTS`)."""
     from ..timing.offset import MAX_FRAMES, MAX_SAMPLES
 
+    px = PIXELS_PER_POINT * float(n_points) if n_pixels is None else float(n_pixels)
     tm = float(n_t) * n_points
     samples = min(float(min(n_frames, MAX_FRAMES)) * NODES_PER_POINT * n_points, MAX_SAMPLES)
-    return {k: c * (samples if k == "clock" else tm) for k, c in STAGE_COSTS.items()}
+    return {k: c * (samples if k == "clock" else tm) + PIXEL_COSTS.get(k, 0.0) * float(n_t) * px
+            for k, c in STAGE_COSTS.items()}
+
+
+def specimen_pixels(local, seen) -> float:
+    """Pixels the specimen covers in the IR image: the area (px²) of the convex hull of the points seen at
+    their first time with at least 3 (``local`` (T, M, 2) px, ``seen`` (T, M)); 0 with none."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    for q, ok in zip(local, seen):
+        pts = q[ok & np.isfinite(q).all(axis=1)]
+        if pts.shape[0] >= 3:
+            try:
+                return float(ConvexHull(pts).volume)
+            except QhullError:  # on a line: no area
+                return 0.0
+    return 0.0
 
 
 def _chunk_times(dic, chunk) -> slice:
@@ -209,6 +234,9 @@ def _footprint(dic, ir, calibration, p, only=None):
     pr = project_points(camera, dic, u, v)
     _check_extent(pr)
     side = footprint_side(pr)  # from the record's first stage: the same in every chunk
+    # the masks and the interpolation cost per specimen pixel too: known now that the points are projected
+    n_t = pr.x.shape[0] if only is None else only.stop - only.start
+    reweigh(stage_costs(n_t, pr.x.shape[1], ir.sizes["time"], specimen_pixels(pr.local, pr.in_frame)))
     report("setup", 1.0)
     report("masks", 0.0)  # running from here: the masks' sources and first triangulations come before a report
     masks, facing = masks_and_facing(
