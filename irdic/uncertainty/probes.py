@@ -67,6 +67,7 @@ class SpreadStack:
     def __init__(self, a, near):
         self._a = np.asarray(a, dtype=float)
         self._near = np.asarray(near)
+        self._medians = None  # each array's median over the probed times, once (rows() is called per block)
 
     def __len__(self):
         return self._a.shape[0]
@@ -77,22 +78,20 @@ class SpreadStack:
 
     def rows(self, times):
         """The spread arrays at ``times`` (array of time indices): (K, len(times), N, ...)."""
-        return np.array([spread(a, self._near)[times] for a in self._a]) if self._a.shape[1] == self._near.size \
-            else np.array([_spread_rows(a, self._near, times) for a in self._a])
+        out = self._a[:, self._near[times]]
+        if self._a.shape[1] == self._near.size:  # every time probed: spread() fills nothing
+            return out
+        if self._medians is None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # points never seen: all NaN
+                self._medians = np.array([np.nanmedian(a, axis=0) for a in self._a])
+        return np.where(np.isfinite(out), out, self._medians[:, None])
 
     def __imul__(self, k):
         self._a *= k
+        self._medians = None
         return self
 
     def __array__(self, dtype=None, copy=None):
         out = np.array([spread(a, self._near) for a in self._a])
         return out if dtype is None else out.astype(dtype)
-
-
-def _spread_rows(a, near, times):
-    """``spread(a, near)[times]`` without the other times."""
-    out = a[near[times]]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # points never seen: all NaN
-        med = np.nanmedian(a, axis=0)
-    return np.where(np.isfinite(out), out, med)
