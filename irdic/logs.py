@@ -276,12 +276,13 @@ class StageProgress:
         return float(cost) * ((1.0 - share) + share / self._threads)
 
     def reweigh(self, parts: dict) -> None:
-        """New expected costs (seconds of one core) of parts that have not reported yet, once the stage knows
-        more of its work than its sizes at the start (the couple stage: the specimen's pixels once the points
-        are projected); the others keep theirs."""
+        """New expected costs (seconds of one core) of parts that have reported no progress yet (at most their
+        start), once the stage knows more of its work than its sizes at the start (the couple stage: the
+        specimen's pixels once the points are projected, the masks to build once their reuse is planned); the
+        others keep theirs."""
         with self._lock:
             for k, c in parts.items():
-                if k in self.weights and k not in self._began:
+                if k in self.weights and self.done[k] == 0.0:
                     self.weights[k] = self._wall(k, c)
             self.total = sum(self.weights.values()) or 1.0
 

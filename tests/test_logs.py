@@ -139,8 +139,9 @@ def test_stage_progress_running_part_at_its_own_pace():
 
 def test_stage_progress_reweighs_the_parts_not_yet_begun():
     """Costs known only once the stage has begun (the couple stage's specimen pixels after the projection)
-    replace those of the parts that have not reported yet; a part already running keeps its own, and the ETA
-    follows the new model."""
+    replace those of the parts that have reported no progress yet (a part that has only started, like the
+    couple stage's masks while they plan which to build, included); a part with progress keeps its own, and
+    the ETA follows the new model."""
     from irdic.logs import StageProgress, report, reweigh
 
     now = [0.0]
@@ -154,22 +155,33 @@ def test_stage_progress_reweighs_the_parts_not_yet_begun():
         assert sp.total == 14.0
         # one model second per second so far: 10 s left
         assert sp._state(now[0])[1] == pytest.approx(10.0)
+        report("masks", 0.0)
+        reweigh({"masks": 6.0})  # started, no progress yet: replaced
+        assert sp.weights["masks"] == 6.0 and sp.total == 15.0
+        reweigh({"masks": 5.0})
         report("masks", 0.5)
-        reweigh({"masks": 50.0})  # running: kept
+        reweigh({"masks": 50.0})  # progress reported: kept
         assert sp.weights["masks"] == 5.0
     reweigh({"masks": 1.0})  # outside a stage: nothing
 
 
-def test_couple_cost_model_counts_the_specimen_pixels():
-    """The masks and the interpolation cost per pixel as well as per point: a specimen with four times the
-    pixels costs more there, the other parts the same; the pixels are the area of the points' convex hull
+def test_couple_cost_model_counts_the_specimen_pixels_and_the_masks_built():
+    """The IR clock and the interpolation cost per pixel as well as per point: a specimen with four times the
+    pixels costs more there, the other parts the same; the masks cost per mask built (the default: one per DIC
+    time), the clock per DIC time of the whole record; the pixels are the area of the points' convex hull
     at their first time seen (a 30 x 20 px rectangle: 600)."""
-    from irdic.coupling.compute import PIXELS_PER_POINT, specimen_pixels, stage_costs
+    from irdic.coupling.compute import PIXELS_PER_POINT, STAGE_COSTS, specimen_pixels, stage_costs
 
     few, many = stage_costs(300, 13104, 300, 12641), stage_costs(300, 13104, 300, 4 * 12641)
-    assert many["masks"] > 2 * few["masks"] and many["interpolation"] > 1.5 * few["interpolation"]
-    assert all(many[k] == few[k] for k in ("setup", "clock", "rest", "write"))
+    assert many["clock"] > 1.5 * few["clock"] and many["interpolation"] > 1.5 * few["interpolation"]
+    assert all(many[k] == few[k] for k in ("setup", "masks", "rest", "write"))
     assert stage_costs(300, 13104, 300) == stage_costs(300, 13104, 300, PIXELS_PER_POINT * 13104)
+    reused = stage_costs(300, 13104, 300, 12641, n_masks=30)
+    assert few["masks"] - reused["masks"] == pytest.approx(270 * 13104 * STAGE_COSTS["masks"])
+    assert reused["clock"] == few["clock"]
+    assert stage_costs(300, 13104, 300, 12641, n_masks=300) == few
+    chunk = stage_costs(30, 13104, 300, 12641, n_record=300)
+    assert chunk["clock"] == few["clock"] and chunk["interpolation"] == pytest.approx(few["interpolation"] / 10)
     u, v = np.meshgrid(np.linspace(10, 40, 7), np.linspace(5, 25, 5))
     local = np.stack([np.full((35, 2), np.nan), np.column_stack([u.ravel(), v.ravel()])])
     seen = np.ones((2, 35), bool)

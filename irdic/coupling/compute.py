@@ -122,12 +122,13 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
     _check_params(p["method"], p["mask_erosion_px"], p["max_extrapolation_px"], p["max_view_angle_deg"])
     only = None if chunk is None else _chunk_times(dic, chunk)
     n_t = dic.sizes["time"] if only is None else only.stop - only.start
-    with StageProgress("couple", stage_costs(n_t, dic.sizes["point"], ir.sizes["time"]), threads=thread_budget(),
+    with StageProgress("couple", stage_costs(n_t, dic.sizes["point"], ir.sizes["time"], n_record=dic.sizes["time"]),
+                       threads=thread_budget(),
                        shares=STAGE_SHARES, logger=log):
         # the masks first: they do not depend on the IR clock, and their steady progress dates the stage early
         footprint = _footprint(dic, ir, calibration, p, only)
         report("clock", 0.0)
-        ir, clock = ir_clock(dic, ir, calibration, experiment)
+        ir, clock = ir_clock(dic, ir, calibration, experiment, projection=footprint[0])
         report("clock", 1.0)
         # the interpolation prepares (frames read, stencils and edge windows factorised) before its first time:
         # running from here, its silence moves the ETA on
@@ -139,39 +140,49 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
     return ds
 
 
-#: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
-#: DIC time and point (the projections, the rest) and per sample (node x frame) the IR clock's refinement reads
-#: (about :data:`NODES_PER_POINT` nodes per point, at most :data:`irdic.timing.offset.MAX_FRAMES` frames and
-#: :data:`~irdic.timing.offset.MAX_SAMPLES` samples); the masks and the interpolation cost per DIC time and
-#: point plus per DIC time and specimen pixel (:data:`PIXEL_COSTS`). Their ratios, measured on the tubes of the
-#: benchmarks, are what the ETA rests on; ``write`` is the stage's store, written after :func:`couple` returns
+#: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`), in seconds of one core:
+#: per DIC time and point (the projections, the rest); per mask built and point (the masks: the points' normals
+#: and facing flags dominate; a mask is reused while the outline moves less than
+#: :data:`~irdic.footprint.visibility.MASK_REUSE_PX`) plus :data:`MASK_PLAN_COST`; per DIC time of the whole
+#: record and point plus per IR frame (at most :data:`irdic.timing.offset.MAX_FRAMES`) and specimen pixel (the
+#: IR clock, which reads the whole record in every time chunk); per DIC time and point plus per DIC time and
+#: specimen pixel (the interpolation; :data:`PIXEL_COSTS`). Fitted on three tubes (benchmarks/README.md): their
+#: ratios are what the ETA rests on. ``write`` is the stage's store, written after :func:`couple` returns
 #: (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 8e-7, "masks": 8.3e-7, "clock": 3.7e-6, "interpolation": 4.8e-6, "rest": 3e-7,
+STAGE_COSTS = {"setup": 4e-7, "masks": 6.8e-6, "clock": 1.55e-6, "interpolation": 4.8e-6, "rest": 3e-8,
                "write": 3e-7}
-#: seconds of one core per DIC time and specimen pixel of the masks (rasterised per time) and the interpolation
-#: (edge tiles and windows per pixel): fitted on the sweep tube (13,104 points, 53,270 pixels) and the
-#: benchmark's tube at 25,960 points (12,641 pixels), checked on it at 13,104 points (benchmarks/README.md)
-PIXEL_COSTS = {"masks": 1.9e-6, "interpolation": 2.6e-6}
+#: seconds of one core per IR frame and specimen pixel (the IR clock: its frames smoothed and sampled on nodes
+#: 1-2 px apart) and per DIC time and specimen pixel (the interpolation: edge tiles and windows per pixel)
+PIXEL_COSTS = {"clock": 6.8e-7, "interpolation": 2.6e-6}
+#: seconds of one core per DIC time of the whole record and point of the masks' plan (the positions filled in
+#: time, the masks each time reuses), before the first mask
+MASK_PLAN_COST = 2.5e-7
 #: specimen pixels per DIC point assumed until the points are projected (the benchmarks' tubes: 1 to 4)
 PIXELS_PER_POINT = 2
-#: the IR clock's nodes lie 1 px apart on the specimen: about this many per DIC point at the usual DIC spacing
-#: (the moving tube: ~58,000 specimen pixels, 13,104 points)
-NODES_PER_POINT = 4
 #: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads)
 STAGE_SHARES = {"setup": 0.0, "masks": 0.9, "clock": 0.25, "interpolation": 0.65, "rest": 0.3, "write": 0.0}
 
 
-def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None = None) -> dict:
-    """Expected seconds of one core of the stage's parts for ``n_t`` DIC times, ``n_points`` points,
-    ``n_frames`` IR frames and ``n_pixels`` specimen pixels (default :data:`PIXELS_PER_POINT` per point;
-    :data:`STAGE_COSTS`, :data:`PIXEL_COSTS`)."""
-    from ..timing.offset import MAX_FRAMES, MAX_SAMPLES
+def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None = None, *,
+                n_masks: int | None = None, n_record: int | None = None) -> dict:
+    """Expected seconds of one core of the stage's parts (:data:`STAGE_COSTS`, :data:`PIXEL_COSTS`).
+
+    ``n_t`` DIC times (of the chunk), ``n_points`` points, ``n_frames`` IR
+    frames and ``n_pixels`` specimen pixels (default :data:`PIXELS_PER_POINT`
+    per point); ``n_masks`` masks built (default one per DIC time: known once
+    their reuse is planned) and ``n_record`` DIC times of the whole record
+    (the IR clock's and the masks' plan; default ``n_t``).
+    """
+    from ..timing.offset import MAX_FRAMES
 
     px = PIXELS_PER_POINT * float(n_points) if n_pixels is None else float(n_pixels)
-    tm = float(n_t) * n_points
-    samples = min(float(min(n_frames, MAX_FRAMES)) * NODES_PER_POINT * n_points, MAX_SAMPLES)
-    return {k: c * (samples if k == "clock" else tm) + PIXEL_COSTS.get(k, 0.0) * float(n_t) * px
-            for k, c in STAGE_COSTS.items()}
+    record = float(n_t if n_record is None else n_record) * n_points
+    size = {"masks": float(n_t if n_masks is None else n_masks) * n_points, "clock": record}
+    per_pixel = {"clock": float(min(n_frames, MAX_FRAMES)) * px, "interpolation": float(n_t) * px}
+    out = {k: c * size.get(k, float(n_t) * n_points) + PIXEL_COSTS.get(k, 0.0) * per_pixel.get(k, 0.0)
+           for k, c in STAGE_COSTS.items()}
+    out["masks"] += MASK_PLAN_COST * record
+    return out
 
 
 def specimen_pixels(local, seen) -> float:
@@ -234,15 +245,21 @@ def _footprint(dic, ir, calibration, p, only=None):
     pr = project_points(camera, dic, u, v)
     _check_extent(pr)
     side = footprint_side(pr)  # from the record's first stage: the same in every chunk
-    # the masks and the interpolation cost per specimen pixel too: known now that the points are projected
+    # the clock and the interpolation cost per specimen pixel too, and the masks per mask built: known now that
+    # the points are projected, and once the masks' reuse is planned
     n_t = pr.x.shape[0] if only is None else only.stop - only.start
-    reweigh(stage_costs(n_t, pr.x.shape[1], ir.sizes["time"], specimen_pixels(pr.local, pr.in_frame)))
+    pixels = specimen_pixels(pr.local, pr.in_frame)
+
+    def planned(n_masks):
+        reweigh(stage_costs(n_t, pr.x.shape[1], ir.sizes["time"], pixels, n_masks=n_masks, n_record=pr.x.shape[0]))
+
+    planned(None)
     report("setup", 1.0)
     report("masks", 0.0)  # running from here: the masks' sources and first triangulations come before a report
     masks, facing = masks_and_facing(
         pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
         np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],
-        max_angle=p["max_view_angle_deg"], only=only)
+        max_angle=p["max_view_angle_deg"], only=only, planned=planned)
     return pr, side, masks, facing
 
 
@@ -344,13 +361,13 @@ MIN_EXTENT_PX = 3.0
 
 def _check_extent(pr: Projection) -> None:
     """DataError when the DIC points of every time project onto a few pixels (coordinates not in mm)."""
-    pix = np.where((pr.valid & np.isfinite(pr.pix).all(axis=-1))[..., None], pr.pix, np.nan)
-    if not np.isfinite(pix).any():
+    # pixel positions are NaN where a point is invalid or behind the camera; fmax / fmin skip NaN without copies
+    if not pr.front.any():
         return  # nothing in front of the camera: the frame coverage check says so
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        span = np.nanmax(pix, axis=1) - np.nanmin(pix, axis=1)  # (n_t, 2)
-        size = np.nanmax(np.nanmax(pr.x, axis=1) - np.nanmin(pr.x, axis=1), axis=-1)  # (n_t,)
+        span = np.fmax.reduce(pr.pix, axis=1) - np.fmin.reduce(pr.pix, axis=1)  # (n_t, 2)
+        size = np.nanmax(np.fmax.reduce(pr.x, axis=1) - np.fmin.reduce(pr.x, axis=1), axis=-1)  # (n_t,)
     widest = float(np.nanmax(span.min(axis=-1)))
     if widest < MIN_EXTENT_PX and int(pr.valid.sum(axis=1).max()) >= 3:
         raise DataError(f"the DIC points span at most {widest:.3g} px of the IR image (their cloud is "

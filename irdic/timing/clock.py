@@ -32,15 +32,18 @@ log = logging.getLogger(__name__)
 CHECK_SIGMAS = 3.0
 
 
-def estimate_from_stores(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, key: str, **options):
+def estimate_from_stores(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, key: str, projection=None,
+                         **options):
     """:func:`irdic.timing.estimate_offset` on the stores: points projected with the calibration, frames cropped.
 
-    ``key`` is the configuration key named in errors; ``options`` go to
-    :func:`~irdic.timing.estimate_offset` (``centre``, ``max_frames``).
+    ``key`` is the configuration key named in errors; ``projection``: the
+    points of every DIC time already projected into ``ir``'s frames
+    (:func:`irdic.footprint.visibility.project_points`; the couple stage has
+    them); ``options`` go to :func:`~irdic.timing.estimate_offset`
+    (``centre``, ``max_frames``).
     """
-    camera = load_camera(calibration)
     u, v = ir["u"].values, ir["v"].values
-    pr = project_points(camera, dic, u, v)
+    pr = project_points(load_camera(calibration), dic, u, v) if projection is None else projection
     # points that leave the frame at some time are left out; missing ones are interpolated in time
     seen_always = (pr.in_frame | ~pr.valid).all(axis=0)
     local = np.where(seen_always[None, :, None] & pr.valid[..., None], pr.local, np.nan)
@@ -58,7 +61,8 @@ def estimate_from_stores(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Datase
                            **options)
 
 
-def ir_clock(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, experiment: str | None = None):
+def ir_clock(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, experiment: str | None = None,
+             projection=None):
     """``ir`` on the DIC clock and the ``points.zarr`` attributes that say how.
 
     Parameters
@@ -67,6 +71,9 @@ def ir_clock(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, experimen
         The couple stage's inputs (the whole record).
     experiment : str, optional
         The experiment's name, for the configuration key in messages.
+    projection : irdic.footprint.visibility.Projection, optional
+        The DIC points of every time projected into ``ir``'s frames, where
+        the caller has them (projected here without).
 
     Returns
     -------
@@ -87,7 +94,7 @@ def ir_clock(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, experimen
     key = f"experiments.{experiment or '<name>'}.ir.time_offset"
     mode = ir.attrs.get("time_offset")
     if mode == "auto":
-        est = estimate_from_stores(dic, ir, calibration, key)
+        est = estimate_from_stores(dic, ir, calibration, key, projection)
         log.info("couple: IR clock offset estimated from the data: %.6g s +- %.2g s (%.3f +- %.3f IR frames), "
                  "added to the IR times", est.offset, est.std, est.offset / est.frame_period,
                  est.std / est.frame_period)
@@ -98,7 +105,7 @@ def ir_clock(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, experimen
     attrs = {"ir_time_offset": configured, "ir_time_offset_std": 0.0, "ir_time_offset_source": "configured"} \
         if configured is not None else {}
     try:
-        est = estimate_from_stores(dic, ir, calibration, key)
+        est = estimate_from_stores(dic, ir, calibration, key, projection)
     except DataError as exc:
         log.info("couple: the data do not check the IR clock offset (%s)", exc)
         return ir, attrs

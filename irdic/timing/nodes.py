@@ -27,6 +27,8 @@ __all__ = ["Mesh", "Nodes", "MAX_EDGE_FACTOR"]
 
 #: triangles with an edge longer than this many median point spacings are not specimen (holes, concave outlines)
 MAX_EDGE_FACTOR = 3.0
+#: times per block of the nodes' reference velocities
+TIME_BLOCK = 16
 
 
 class Mesh:
@@ -143,8 +145,12 @@ class Nodes:
         return out
 
     def _combine(self, V: np.ndarray) -> np.ndarray:
-        n = V.shape[0]
-        return (self.weights @ V.transpose(1, 0, 2).reshape(self.N, -1)).reshape(self.M, n, 2).transpose(1, 0, 2)
+        """The nodes' (n, M, 2) barycentric combinations of the points' ``V`` (n, N, 2), one time at a time (a
+        product over all times at once needs (N, n, 2) copies of both, which cost more than the products)."""
+        out = np.empty((V.shape[0], self.M, 2))
+        for i, Vi in enumerate(V):
+            out[i] = self.weights @ Vi
+        return out
 
     def at(self, t: np.ndarray) -> np.ndarray:
         """Image positions (n, M, 2) px of the nodes at times ``t`` (n,) s."""
@@ -177,14 +183,20 @@ class Nodes:
                          E[..., 2] * inv[..., 0] + E[..., 3] * inv[..., 2], E[..., 2] * inv[..., 1] + E[..., 3] * inv[..., 3]],
                         axis=-1)
         Finv = (self.around @ np.nan_to_num(Finv).transpose(1, 0, 2).reshape(-1, at.size * 4)).reshape(self.N, -1, 4)
-        if at.size > 1:  # linear in time between the deformations' times
-            k = np.clip(np.searchsorted(at, t) - 1, 0, at.size - 2)
-            x = ((t - at[k]) / (at[k + 1] - at[k]))[None, :, None]
-            Finv = Finv[:, k] * (1.0 - x) + Finv[:, k + 1] * x
-        W = self.velocity(t).reshape(n, self.N, 2).transpose(1, 0, 2)
-        R = np.stack([Finv[..., 0] * W[..., 0] + Finv[..., 1] * W[..., 1],
-                      Finv[..., 2] * W[..., 0] + Finv[..., 3] * W[..., 1]], axis=-1)
-        return (self.weights @ R.reshape(self.N, n * 2)).reshape(self.M, n, 2).transpose(1, 0, 2)
+        out = np.empty((n, self.M, 2))
+        # a few times at a time: the (N, times, 4) temporaries of all times at once cost more than the arithmetic
+        for s in range(0, n, TIME_BLOCK):
+            tb = t[s:s + TIME_BLOCK]
+            F = Finv
+            if at.size > 1:  # linear in time between the deformations' times
+                k = np.clip(np.searchsorted(at, tb) - 1, 0, at.size - 2)
+                x = ((tb - at[k]) / (at[k + 1] - at[k]))[None, :, None]
+                F = Finv[:, k] * (1.0 - x) + Finv[:, k + 1] * x
+            W = self.velocity(tb).reshape(tb.size, self.N, 2).transpose(1, 0, 2)
+            R = np.stack([F[..., 0] * W[..., 0] + F[..., 1] * W[..., 1],
+                          F[..., 2] * W[..., 0] + F[..., 3] * W[..., 1]], axis=1)  # (N, 2, times)
+            out[s:s + tb.size] = self._combine(R.transpose(2, 0, 1))
+        return out
 
     def gradient(self, values: np.ndarray, bandwidth: float) -> np.ndarray:
         """Gradient (M, 2), per px of the reference image, of ``values`` (M,) over the nodes.
