@@ -80,6 +80,7 @@ if stage == "couple":
     timed("irdic.coupling.compute", "evaluate_series", "interpolation")
 else:
     timed("irdic.fields.space_time", "uncertainties", "probes")
+    timed("irdic.fields.compute", "with_strain_std", "probes")  # the strain's noise probes, run after the IR terms
 # when the stage's progress starts (after its inputs are read): the ETA's reference is the time from there
 import irdic.logs
 _init = irdic.logs.StageProgress.__init__
