@@ -64,3 +64,23 @@ def test_projection_in_blocks_of_times_equals_one_block(monkeypatch):
     np.testing.assert_allclose(whole.pix[ok], camera.project(x[ok]), rtol=0, atol=1e-9)
     with pytest.raises(DataError, match="no valid DIC point"):
         project_points(camera, _dic(np.full((2, 3, 3), np.nan)), u, v)
+
+
+def test_masks_are_planned_before_they_are_built():
+    """``planned`` hears how many masks will be built before the first is (the couple stage's progress model):
+    one per run of times whose points move less than MASK_REUSE_PX, here two of five times."""
+    from irdic.footprint.visibility import MASK_REUSE_PX, masks_and_facing
+
+    gx, gy = np.meshgrid(np.arange(20.0), np.arange(20.0))
+    plane = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    x = np.repeat(plane[None], 5, axis=0)
+    pix = 40.0 + 5.0 * x[..., :2]
+    pix[3:] += 2.0 * MASK_REUSE_PX  # the outline moves once, before the fourth time
+    heard = []
+    masks, facing = masks_and_facing(x, pix, np.array([10.0, 10.0, -200.0]), np.arange(200), np.arange(200),
+                                     erosion=0.0, edge_factor=3.0, max_angle=80.0, planned=heard.append)
+    assert heard == [2]
+    assert facing.all() and masks[:, 100, 100].all() and not masks[:, 10, 10].any()
+    _, _ = masks_and_facing(x, pix, np.array([10.0, 10.0, -200.0]), np.arange(200), np.arange(200), erosion=0.0,
+                            edge_factor=3.0, max_angle=80.0, only=slice(3, 5), planned=heard.append)
+    assert heard == [2, 1]  # a chunk of the last two times builds the one mask it uses
