@@ -58,7 +58,12 @@ def test_projection_in_blocks_of_times_equals_one_block(monkeypatch):
     monkeypatch.setattr(visibility, "PROJECT_BLOCK", 120)  # two times per block, the last block short
     blocks = project_points(camera, _dic(x), u, v)
     for name in ("x", "flat_x", "valid", "front", "pix", "in_frame", "local"):
-        np.testing.assert_array_equal(getattr(blocks, name), getattr(whole, name), err_msg=name)
+        a, b = np.asarray(getattr(blocks, name)), np.asarray(getattr(whole, name))
+        if a.dtype.kind == "f":  # the BLAS may round a block's products differently from the whole's (1e-16)
+            np.testing.assert_array_equal(np.isnan(a), np.isnan(b), err_msg=name)
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * np.nanmax(np.abs(b)), err_msg=name)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=name)
     assert not whole.front.reshape(7, 50)[2, :3].any() and np.isnan(whole.pix[2, :3]).all()
     ok = whole.front.reshape(7, 50)
     np.testing.assert_allclose(whole.pix[ok], camera.project(x[ok]), rtol=0, atol=1e-9)
