@@ -13,8 +13,8 @@ import logging
 
 from ..errors import ConfigError, DataError
 from ..footprint.fields import pixel_pitch
-from ..numerics.series import fill_series, smooth_series
-from ..numerics.temporal import RATE_MAX_FRACTION
+from ..numerics.series import gcv_columns
+from ..numerics.temporal import RATE_MAX_FRACTION, gcv_temporal
 from ..parameters import settings
 from ..surface import fit_surface
 from .spatial import regressed_gradient, space_gcv
@@ -80,11 +80,13 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
             # judged on the spatially regressed series, as the fields regress them (see irdic.fields.space_time.space_time)
             theta = regressed_gradient(theta, psi, None, p["temperature_smoothing_space"], c=p["c_space"],
                                         R0=p["R0_space"], ops=ops)[1]
-        theta = fill_series([theta], t[w], c=p["c_time"], R0=p["R0_time"])[0]  # once for both GCVs below
-        p["temperature_smoothing"] = smooth_series(theta, t[w], smoothing="gcv", c=p["c_time"], R0=p["R0_time"]).smoothing
+        # what smooth_series(theta, smoothing="gcv") would choose, at the cost of the series GCV judges; once
+        # for both choices below
+        theta = gcv_columns(theta, t[w], c=p["c_time"], R0=p["R0_time"])
+        p["temperature_smoothing"] = gcv_temporal(t[w], theta, c=p["c_time"], R0=p["R0_time"])[0]
         if p["temperature_smoothing_space"] is not None:  # the rate's own spacing (see irdic.fields.space_time)
-            p["temperature_smoothing_rate"] = smooth_series(theta, t[w], c=p["c_time"], R0=p["R0_time"],
-                                                            gcv_max_fraction=RATE_MAX_FRACTION).smoothing
+            p["temperature_smoothing_rate"] = gcv_temporal(t[w], theta, c=p["c_time"], R0=p["R0_time"],
+                                                           max_fraction=RATE_MAX_FRACTION)[0]
     log.info("fields: smoothing chosen once on DIC times %d..%d: %s", w.start, w.stop - 1,
              ", ".join(f"{k} {p[k]}" for k in gcv))
     return p

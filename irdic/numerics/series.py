@@ -5,8 +5,10 @@ times (the temporal interpolant), then interpolates or regresses in time
 (:class:`~irdic.numerics.temporal.TemporalInterpolant`); for point
 temperatures its derivative is the material rate. :func:`fill_series` fills
 several arrays at once (one interpolant per pattern of missing times,
-shared by all of them); :func:`cardinal_weights` are the weights of one gap
-from its neighbouring samples (also the surface's short-gap fill).
+shared by all of them); :func:`gcv_columns` fills only the series that
+:func:`~irdic.numerics.temporal.gcv_temporal` judges; :func:`cardinal_weights`
+are the weights of one gap from its neighbouring samples (also the surface's
+short-gap fill).
 """
 
 from __future__ import annotations
@@ -20,10 +22,10 @@ from ..validation import float_array, increasing_times, smoothing_factor
 from .imq import imq
 from .patterns import same_patterns
 from .saddle import solve_dense
-from .temporal import TIME_SNAP, TemporalInterpolant, gcv_temporal, temporal_window
+from .temporal import GCV_MAX_SERIES, TIME_SNAP, TemporalInterpolant, gcv_temporal, judged_columns, temporal_window
 from .threads import blas_threads, parallel_map
 
-__all__ = ["SeriesFit", "smooth_series", "fill_series", "fill_gaps", "cardinal_weights"]
+__all__ = ["SeriesFit", "smooth_series", "fill_series", "gcv_columns", "fill_gaps", "cardinal_weights"]
 
 
 def cardinal_weights(s, c=1.0):
@@ -118,6 +120,44 @@ def fill_series(values, times, *, c=1.0, R0=1.0, record_times=None):
     F[:, dead] = np.nan
     bounds = np.cumsum([0] + [v[0].size for v in parts])
     return [F[:, a:b].reshape(v.shape) for a, b, v in zip(bounds[:-1], bounds[1:], parts)]
+
+
+def gcv_columns(values, times, *, c=1.0, R0=1.0, max_series=GCV_MAX_SERIES):
+    """The series :func:`smooth_series` judges with ``smoothing="gcv"``, filled; no other series filled.
+
+    Parameters
+    ----------
+    values : array_like, shape (M, ...)
+        Series at ``times``; NaN where missing.
+    times, c, R0
+        As :func:`smooth_series` (the fill's interpolant).
+    max_series : int
+        As :func:`~irdic.numerics.temporal.gcv_temporal`.
+
+    Returns
+    -------
+    ndarray, shape (M, n)
+        The series with at least 2 valid times, at most ``max_series`` of them
+        evenly spaced, filled as :func:`fill_series` fills them; all series
+        unfilled when none has 2 valid times (GCV then refuses them).
+
+    Notes
+    -----
+    :func:`smooth_series` fills every series before GCV pools at most
+    ``max_series`` of them; a choice made for a whole record (every time
+    chunk's) needs only the choice, and the fill of a gap pattern (a global
+    interpolant per pattern) is most of its cost: ``gcv_temporal(times,
+    gcv_columns(values, times))`` is the choice of ``smooth_series(values,
+    times)`` at the cost of the judged series.
+    """
+    t = increasing_times(times, "times", "n_times")
+    F = _series_array(values, t).reshape(t.size, -1)
+    live = np.flatnonzero(np.isfinite(F).sum(axis=0) >= 2)
+    if live.size == 0:
+        return F
+    F = F[:, live[judged_columns(live.size, max_series)]]
+    fill_gaps(F, t, c, R0, temporal_window(t, c=c, R0=R0))
+    return F
 
 
 def _series_array(values, t):

@@ -23,7 +23,7 @@ from ..validation import as_int, float_array, increasing_times, positive, smooth
 from .imq import imq, imq_dr, regression_R0
 from .saddle import SaddleFactor
 
-__all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "temporal_reach",
+__all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "GCV_MAX_SERIES", "temporal_reach",
            "temporal_window", "REACH_TOL", "REGRESSION_SPACINGS", "RATE_MAX_FRACTION", "local_rate_weights",
            "LOCAL_RATE_SAMPLES", "rate_reference_stencil", "rate_reference_weights", "RATE_REFERENCE_MIN_SPACING",
            "RATE_REFERENCE_DEGREE"]
@@ -42,6 +42,10 @@ TIME_SNAP = 1e-9
 #: error 3.5 %, against 2.7 % at 2). Not more: with 17 parameters of 21 (spacing 1.5) the GCV
 #: denominator is 0.04 and its choice scatters.
 RATE_MAX_FRACTION = 2.0 / 3.0
+
+#: Series (columns) :func:`gcv_temporal` pools at most, evenly spaced among those given: its choice is a
+#: property of the record's signal and noise, which a few thousand points judge as well as all of them.
+GCV_MAX_SERIES = 4096
 
 
 #: Samples of the local polynomial (degree one less) whose derivative is the reference of a temporal
@@ -268,7 +272,8 @@ class TemporalInterpolant:
         return np.tensordot(self.weights(t_eval, derivative), f, axes=(1, 0))
 
 
-def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=4096, max_fraction=0.5):
+def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=GCV_MAX_SERIES,
+                 max_fraction=0.5):
     """Choose the temporal regression's centre spacing by generalised cross-validation.
 
     Parameters
@@ -310,7 +315,7 @@ def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=40
     if not np.isfinite(F).all():
         raise DataError("series contain NaN or inf; GCV needs complete series")
     if F.shape[1] > max_series:
-        F = F[:, np.linspace(0, F.shape[1] - 1, max_series).astype(int)]
+        F = F[:, judged_columns(F.shape[1], max_series)]
     M = t.size
     if candidates is None:
         candidates = (1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
@@ -335,6 +340,11 @@ def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=40
     best = min(table, key=lambda r: r[2])
     log.info("temporal GCV: centres every %.3g times (%d parameters of %d)", best[0], best[1], M)
     return best[0], table
+
+
+def judged_columns(n, max_series=GCV_MAX_SERIES):
+    """Indices of the columns of ``n`` that :func:`gcv_temporal` pools: all, or ``max_series`` evenly spaced."""
+    return np.arange(n) if n <= max_series else np.linspace(0, n - 1, max_series).astype(int)
 
 
 def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):

@@ -238,3 +238,33 @@ def test_gcv_max_fraction_admits_the_rates_lighter_regression():
     rate = (np.pi / 2.0 * np.cos(2 * np.pi * t / 4.0))[1:-1, None]
     err = lambda fit: np.sqrt(np.mean((fit.rate[1:-1] - rate) ** 2))  # noqa: E731
     assert err(fit_r) < 0.5 * err(fit_v), (err(fit_r), err(fit_v))
+
+
+@pytest.mark.parametrize("n_series", [300, 5000])
+def test_gcv_on_the_judged_columns_is_the_choice_of_smooth_series(n_series):
+    """gcv_columns fills only the series GCV pools (at most GCV_MAX_SERIES of those with two valid times, evenly
+    spaced): GCV on them chooses as smooth_series does after filling every series, with the same table, for
+    the value's and the rate's limit, with gaps inside and at the ends and dead series among the others."""
+    from irdic.numerics.series import gcv_columns
+    from irdic.numerics.temporal import GCV_MAX_SERIES, RATE_MAX_FRACTION, gcv_temporal
+
+    rng = np.random.default_rng(4)
+    t = np.arange(48) * 0.25
+    F = np.sin(t / 2.0)[:, None] * rng.uniform(0.5, 2.0, n_series) + rng.normal(0.0, 0.02, (48, n_series))
+    F[rng.random(F.shape) < 0.03] = np.nan
+    F[:5, ::7] = np.nan  # lost at the start
+    F[-3:, ::11] = np.nan  # and at the end
+    F[1:, ::13] = np.nan  # one valid time: not judged
+    judged = gcv_columns(F, t, c=1.0, R0=1.0)
+    assert judged.shape == (48, min(GCV_MAX_SERIES, int((np.isfinite(F).sum(axis=0) >= 2).sum())))
+    assert np.isfinite(judged).all()
+    for limit in ({}, {"max_fraction": RATE_MAX_FRACTION}):
+        k, table = gcv_temporal(t, judged, **limit)
+        fit = smooth_series(F, t, smoothing="gcv",
+                            **({"gcv_max_fraction": limit["max_fraction"]} if limit else {}))
+        assert fit.smoothing == k and len(fit.gcv) == len(table) > 1
+        np.testing.assert_allclose([g for *_, g in table], [g for *_, g in fit.gcv], rtol=1e-12, atol=0)
+    dead = np.full((48, 3), np.nan)
+    dead[0] = 1.0
+    with pytest.raises(DataError, match="NaN"):
+        gcv_temporal(t, gcv_columns(dead, t))
