@@ -23,7 +23,7 @@ from ..validation import as_int, float_array, increasing_times, positive, smooth
 from .imq import imq, imq_dr, regression_R0
 from .saddle import SaddleFactor
 
-__all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "GCV_MAX_SERIES", "temporal_reach",
+__all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "GCV_MAX_SERIES", "judged_columns", "temporal_reach",
            "temporal_window", "REACH_TOL", "REGRESSION_SPACINGS", "RATE_MAX_FRACTION", "local_rate_weights",
            "LOCAL_RATE_SAMPLES", "rate_reference_stencil", "rate_reference_weights", "RATE_REFERENCE_MIN_SPACING",
            "RATE_REFERENCE_DEGREE"]
