@@ -12,7 +12,7 @@ import yaml
 
 from irdic.chunks import chunk_slice, gathered, n_chunks, window
 from irdic.errors import ConfigError, DataError
-from irdic.numerics.temporal import TemporalInterpolant, temporal_reach
+from irdic.numerics.temporal import FLAT_KERNEL_SPACINGS, TemporalInterpolant, temporal_reach
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -49,9 +49,18 @@ def test_window_of_the_reach_reproduces_the_whole_series(h):
     assert np.abs(TemporalInterpolant(t[short])(f[short], te) - whole(f, te)).max() > 1e-6
 
 
-def test_flat_kernel_reaches_over_the_whole_record():
-    t = np.arange(500) * 0.02  # 50 Hz with c R0 = 1 s: 50 spacings, the saddle system loses the tail
-    assert temporal_reach(t, c=1.0, R0=1.0) == t.size
+def test_a_flat_kernel_is_narrowed_and_reaches_a_window_not_the_whole_record():
+    t = np.arange(500) * 0.02  # 50 Hz with c R0 = 1 s: 50 spacings, which the saddle system loses the digits of
+    n = temporal_reach(t, c=1.0, R0=1.0)
+    assert n == temporal_reach(t, c=1.0, R0=FLAT_KERNEL_SPACINGS * 0.02) <= t.size // 8
+    # a chunk of a fast record gets the whole record's values and rates
+    rng = np.random.default_rng(2)
+    f = 20 + 3 * np.tanh(t - 5) + 0.05 * rng.standard_normal(t.size)
+    te = np.linspace(t[200], t[260], 37)
+    w = window(t, te[0], te[-1], n)
+    whole, part = TemporalInterpolant(t, window=n), TemporalInterpolant(t[w], window=n)
+    for d in (0, 1):
+        np.testing.assert_allclose(part(f[w], te, d), whole(f, te, d), rtol=0, atol=1e-10)
 
 
 def test_gather_refuses_overlapping_chunks():

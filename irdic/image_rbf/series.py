@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import ConfigError, DataError, IrdicWarning
 from ..logs import Progress, report
-from ..numerics.temporal import TemporalInterpolant
+from ..numerics.temporal import FLAT_KERNEL_SPACINGS, TemporalInterpolant
 from ..numerics.threads import parallel_map
 from ..threads import blas_threads
 from ..validation import as_int, bool_mask, choice, float_array
@@ -240,6 +240,10 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     frames, (n_frames, H, W) = _frame_shape(frames)
     ft = _frame_times(frame_times, n_frames)
     temporal = TemporalInterpolant(ft, c=c_time, R0=R0_time, window=time_window)
+    if temporal.R0 < R0_time:
+        log.info("%s: the temporal kernel (c_time %g x R0_time %g s) spans %.0f IR frame spacings; narrowed to %g "
+                 "(R0 %.3g s): flatter kernels lose the digits of the interpolant's weights", name, c_time, R0_time,
+                 c_time * R0_time / float(np.median(np.diff(ft))), FLAT_KERNEL_SPACINGS, temporal.R0)
     te = _eval_times(eval_times)
     pts = _points(points, te.size)
     masks, mask_of = _masks(mask, te.size, H, W)

@@ -26,7 +26,7 @@ from .saddle import SaddleFactor
 __all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "GCV_MAX_SERIES", "judged_columns", "temporal_reach",
            "temporal_window", "REACH_TOL", "REGRESSION_SPACINGS", "RATE_MAX_FRACTION", "local_rate_weights",
            "LOCAL_RATE_SAMPLES", "rate_reference_stencil", "rate_reference_weights", "RATE_REFERENCE_MIN_SPACING",
-           "RATE_REFERENCE_DEGREE"]
+           "RATE_REFERENCE_DEGREE", "FLAT_KERNEL_SPACINGS", "kernel_R0"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +58,24 @@ RATE_REFERENCE_MIN_SPACING = 6.0
 RATE_REFERENCE_DEGREE = 6
 
 
+#: The interpolation kernel is never flatter than this many median sample spacings (``c R0 <= n h``): the
+#: saddle system of a flatter IMQ kernel loses the digits its weights are made of. Measured on uniform records
+#: of 300-3,000 samples: at ``c R0 = 6 h`` the rate's noise gain is ``1.8 / h`` (a difference quotient's:
+#: ``1.41 / h``) and the value's between samples 0.98, and the cardinal weights fall below
+#: :data:`REACH_TOL` within 50 samples whatever the rounding; at ``8 h`` that reach already changes with a
+#: 1e-12 change of the kernel; at ``12 h`` the gains are ``5-260 / h`` and 6-100, at ``25 h`` (the paper's 1 s
+#: kernel on a 25 Hz camera) ``84 / h`` and 230: rates of hundreds of K/s from 0.05 K of pixel noise.
+FLAT_KERNEL_SPACINGS = 6.0
+
+
+def kernel_R0(times, c, R0) -> float:
+    """The time normalisation (s) the interpolant uses: ``R0``, or less where ``c R0`` would exceed
+    :data:`FLAT_KERNEL_SPACINGS` median spacings of ``times`` (increasing, at least 2)."""
+    limit = FLAT_KERNEL_SPACINGS * float(np.median(np.diff(times))) / c
+    # at the limit itself (10 Hz and the paper's kernel) R0 stays as given, not its rounding
+    return float(limit) if 0 < limit < R0 * (1.0 - 1e-9) else float(R0)
+
+
 #: Cardinal-weight tail (sum of |weights| of the samples a time window leaves
 #: out) below which a window reproduces the whole-series interpolant: with
 #: series varying by at most ~10 K about a straight line this bounds the
@@ -80,7 +98,9 @@ class TemporalInterpolant:
     c : float
         Shape factor (the paper: 1).
     R0 : float
-        Time normalisation in s (the paper: 1 s).
+        Time normalisation in s (the paper: 1 s). Interpolation uses at most
+        :data:`FLAT_KERNEL_SPACINGS` median sample spacings over ``c``
+        (:func:`kernel_R0`; :attr:`R0` holds the value used).
     smoothing : None or float >= 1
         None / 1: interpolation (the paper). ``k > 1``: least squares with
         centres on about every k-th time (first and last always) and a kernel
@@ -125,6 +145,9 @@ class TemporalInterpolant:
         self.c = positive(c, "c")
         self.R0 = positive(R0, "R0")
         self.k = smoothing_factor(smoothing, "smoothing", allow_gcv=False)
+        if self.k <= 1.0:
+            # a flatter kernel's weights are rounding noise (FLAT_KERNEL_SPACINGS); the regression has its own
+            self.R0 = kernel_R0(t, self.c, self.R0)
         self._mid = 0.5 * (t[0] + t[-1])
         self.window = None if window is None else as_int(window, "window", 1)
         if self.window is not None:
@@ -392,23 +415,23 @@ def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):
     one are reproduced only to that level. Neither result is the better
     one there: both are the same interpolant's boundary behaviour.
     ``tol = 1e-5`` holds the difference to 1e-4 K for series within 10 K of
-    a straight line (tests compare windowed and whole-series results). Very
-    flat kernels (``c R0 > 8 h``) make the saddle system ill-conditioned and
-    the weights of the model meaningless (their tails then depend on the
-    model's length): those, like tails that do not fall below ``tol`` within
-    the model, give the whole series.
+    a straight line (tests compare windowed and whole-series results). The
+    kernel is the interpolant's, no flatter than :data:`FLAT_KERNEL_SPACINGS`
+    spacings (:func:`kernel_R0`: flatter ones make the saddle system
+    ill-conditioned and the weights meaningless); tails that do not fall
+    below ``tol`` within the model give the whole series.
     """
     t = increasing_times(times, "times", "n_times")
     if t.size < 8:
         return t.size
-    reach = _model_reach(float(np.median(np.diff(t))), float(c), float(R0), float(tol), int(model))
+    reach = _model_reach(float(np.median(np.diff(t))), float(c), kernel_R0(t, c, R0), float(tol), int(model))
     return t.size if reach is None else min(reach, t.size)
 
 
 @functools.lru_cache(maxsize=256)
 def _model_reach(h, c, R0, tol, model):
     """:func:`temporal_reach` on the uniform model series of spacing ``h``; None: the whole series."""
-    if c * R0 > 8.0 * h:
+    if c * R0 > FLAT_KERNEL_SPACINGS * h * (1.0 + 1e-9):
         # flatter kernels: the saddle system loses the digits the tail is made of
         return None
     n = int(model)
@@ -450,8 +473,8 @@ def temporal_window(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL):
     Returns
     -------
     None or int
-        None when the window would cover the record (a short record, a
-        flat kernel): the paper's one global operator. Else ``n``: the
+        None when the window would cover the record (a short record): the
+        paper's one global operator. Else ``n``: the
         record is longer than any evaluation time's window of ``2 n + 2``
         samples, and every time chunk gets the whole-record result.
 

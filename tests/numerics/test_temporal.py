@@ -8,7 +8,7 @@ import pytest
 from irdic.errors import ConfigError, DataError
 from irdic.chunks import window as chunk_window
 from irdic.numerics.series import smooth_series
-from irdic.numerics.temporal import TemporalInterpolant, temporal_window
+from irdic.numerics.temporal import FLAT_KERNEL_SPACINGS, TemporalInterpolant, kernel_R0, temporal_window
 
 # --------------------------------------------------------------------------
 # time
@@ -137,10 +137,41 @@ def test_windowed_operator_matches_the_global_one_inside_and_the_truth_at_the_en
     assert not np.any(W[(cols[None, :] < lo[:, None]) | (cols[None, :] >= hi[:, None])])
 
 
-def test_short_records_and_flat_kernels_keep_the_global_operator():
+def test_short_records_keep_the_global_operator_and_fast_records_get_a_window():
     assert temporal_window(np.arange(30) * 0.5) is None  # shorter than two reaches: the paper's operator
-    assert temporal_window(np.arange(3000) * 0.02) is None  # 50 Hz with c R0 = 1 s: the kernel spans the record
+    # 50 Hz with c R0 = 1 s: the kernel narrowed to FLAT_KERNEL_SPACINGS frames, whose weights decay in a window
+    assert temporal_window(np.arange(3000) * 0.02) == temporal_window(np.arange(3000) * 0.02, R0=0.12)
     assert temporal_window(np.arange(3000) * 0.02, R0=0.05) is not None  # R0 scaled to the frame rate
+
+
+def test_the_kernel_is_narrowed_only_where_it_is_flatter_than_the_limit():
+    assert kernel_R0(np.arange(40) * 0.5, 1.0, 1.0) == 1.0  # the paper's kernel at 2 Hz
+    assert kernel_R0(np.arange(40) / 6.0, 1.0, 1.0) == 1.0  # at the limit itself: as given, not its rounding
+    assert kernel_R0(np.arange(40) * 0.04, 1.0, 1.0) == pytest.approx(FLAT_KERNEL_SPACINGS * 0.04)
+    assert kernel_R0(np.arange(40) * 0.04, 2.0, 1.0) == pytest.approx(FLAT_KERNEL_SPACINGS * 0.04 / 2.0)
+    assert TemporalInterpolant(np.arange(40) * 0.04).R0 == pytest.approx(FLAT_KERNEL_SPACINGS * 0.04)
+    assert TemporalInterpolant(np.arange(40) * 0.04, smoothing=3.0).R0 == 1.0  # the regression has its own kernel
+
+
+@pytest.mark.parametrize("rate_hz, n", [(25.0, 500), (50.0, 1500), (12.5, 300), (2.0, 60)])
+def test_a_fast_camera_with_the_papers_kernel_gives_rates_at_the_noise_of_a_difference_quotient(rate_hz, n):
+    """The paper's kernel (c R0 = 1 s) on 12.5-50 Hz records spanned 12-50 frame spacings: its weights were
+    rounding noise and 0.05 K of pixel noise gave rates of hundreds of K/s. Narrowed, the rate's noise is that
+    of a difference quotient (``sqrt(2) sigma / h``) within 30 %, and a smooth signal's rate stays exact."""
+    h = 1.0 / rate_hz
+    t = np.arange(n) * h
+    rng = np.random.default_rng(5)
+    truth = 22.0 + 2.0 * np.sin(0.7 * t) + 0.3 * t
+    noisy = truth[:, None] + 0.05 * rng.standard_normal((n, 400))
+    ti = TemporalInterpolant(t, window=temporal_window(t))
+    te = t[n // 4: 3 * n // 4: 7] + 0.37 * h  # between frames, inside the record
+    rate = 1.4 * np.cos(0.7 * te) + 0.3
+    np.testing.assert_allclose(ti(truth, te, 1), rate, atol=1e-3)  # of 1.7 K/s
+    np.testing.assert_allclose(ti(truth, te, 0), 22.0 + 2.0 * np.sin(0.7 * te) + 0.3 * te, atol=1e-4)
+    err = ti(noisy, te, 1) - rate[:, None]
+    assert np.sqrt(np.mean(err ** 2)) <= 1.4 * np.sqrt(2.0) * 0.05 / h
+    err0 = ti(noisy, te, 0) - (22.0 + 2.0 * np.sin(0.7 * te) + 0.3 * te)[:, None]
+    assert np.sqrt(np.mean(err0 ** 2)) <= 1.4 * 0.05
 
 
 def test_smooth_series_of_a_chunk_uses_the_record_window():
@@ -155,8 +186,8 @@ def test_smooth_series_of_a_chunk_uses_the_record_window():
     np.testing.assert_allclose(part.value, whole.value[600:], rtol=0, atol=1e-10)
 
 
-@pytest.mark.parametrize("R0, threads", [(0.3, 1), (1.0, 1), (1.0, 3)])
-def test_gap_fill_equals_each_series_own_interpolant(R0, threads):
+@pytest.mark.parametrize("n_t, R0, threads", [(200, 0.3, 1), (90, 1.0, 1), (90, 1.0, 3)])
+def test_gap_fill_equals_each_series_own_interpolant(n_t, R0, threads):
     """Series with scattered gaps (failed DIC points), shared gap patterns, series ends and all-but-one gaps:
     the grouped and the windowed fills give what each column's own (windowed) interpolant gives, also with
     the patterns on worker threads."""
@@ -164,14 +195,14 @@ def test_gap_fill_equals_each_series_own_interpolant(R0, threads):
     from irdic.threads import stage_threads
 
     rng = np.random.default_rng(0)
-    t = np.arange(200) * 0.1
-    F = np.sin(t)[:, None] + 0.01 * rng.normal(size=(200, 300))
+    t = np.arange(n_t) * 0.1
+    F = np.sin(t)[:, None] + 0.01 * rng.normal(size=(n_t, 300))
     bad = rng.random(F.shape) < 0.02
     bad[:, 100:150] = bad[:, [100]]  # one pattern shared by 50 series
     bad[:3, 5], bad[-2:, 6], bad[1:, 8] = True, True, True
     F[bad] = np.nan
     n = temporal_window(t, c=1.0, R0=R0)
-    assert (n is None) == (R0 == 1.0)  # both operators are exercised
+    assert (n is None) == (n_t < 100)  # both operators are exercised (the window of 2 x 50 + 2 covers 90 times)
     got = F.copy()
     with stage_threads(threads):
         dead = fill_gaps(got, t, 1.0, R0, n)
