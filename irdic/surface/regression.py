@@ -196,9 +196,10 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
     return best[0], table
 
 
-def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None):
+def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row=None):
     """``(k, n_parameters, risk)`` of each candidate that fits (Notes of :func:`gradient_risk_spatial`);
-    ``operator(p, design, c, R0)`` the derivative whose risk counts (default the gradient's)."""
+    ``operator(p, design, c, R0)`` the derivative whose risk counts (default the gradient's). ``per_row``: a
+    list that gets each candidate's terms of the risk per judged row (their sum over ``nj`` is ``risk``)."""
     operator = _gradient_operator if operator is None else operator
     n, ns = p.shape[0], F.shape[1]
     pilot = None
@@ -221,10 +222,39 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None):
             var = rss / ns / (nj - float(np.sum(Qm[jr] ** 2)))
             pilot = (Qm, M, g, float(np.sum(M ** 2)), var)
         Q0, M0, g0, norm0, var = pilot
-        cross = float(np.sum((M @ (Qm.T @ Q0)) * M0))
+        MQ = M @ (Qm.T @ Q0)
+        cross = float(np.sum(MQ * M0))
         risk = (float(np.sum((g - g0) ** 2)) / ns - var * (norm0 - 2.0 * cross)) / nj
         table.append((k, Qm.shape[1], risk))
+        if per_row is not None:
+            per_row.append(np.sum((g - g0) ** 2, axis=1) / ns - var * np.sum(M0 * (M0 - 2.0 * MQ), axis=1))
     return table
+
+
+def _widest_within_one_se(table, terms, pj, h):
+    """The index in ``table`` of the widest candidate whose estimated risk exceeds the least one by at most the
+    standard error of that difference (the one-standard-error rule).
+
+    ``terms`` are the candidates' risk terms per judged point at ``pj`` (nj, 2) mm (:func:`_gradient_risks`,
+    one row block), ``h`` the spacing the factors are in (mm). A regression's outputs are correlated over
+    its centre spacing, so the difference's standard error is that of its sums over square tiles of twice the
+    wider candidate's spacing, taken as independent."""
+    best = min(range(len(table)), key=lambda i: table[i][2])
+    out = best
+    nj = pj.shape[0]
+    for i in range(best + 1, len(table)):
+        d = terms[i] - terms[best]
+        side = 2.0 * table[i][0] * h
+        cell = np.floor((pj - pj.min(axis=0)) / side).astype(np.int64)
+        tile = np.unique(cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1], return_inverse=True)[1].ravel()
+        n_t = np.bincount(tile)
+        if n_t.size < 4:
+            break  # too few tiles to say how well the difference is known
+        mean = float(d.mean())
+        se = float(np.sqrt(np.sum((np.bincount(tile, d) - n_t * mean) ** 2) * n_t.size / (n_t.size - 1))) / nj
+        if mean <= se:
+            out = i
+    return out
 
 
 def _gradient_operator(p, design, c, R0):
@@ -321,9 +351,11 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
                         _gradient_operator, 2)
 
 
-def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, what, operator, copies):
+def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, what, operator, copies,
+                 one_se=False):
     """The spacing of least estimated risk of the derivative ``operator`` (its ``copies`` row blocks per point)
-    and the table of :func:`gradient_risk_spatial` / :func:`laplacian_risk_spatial`."""
+    and the table of :func:`gradient_risk_spatial` / :func:`laplacian_risk_spatial`; ``one_se`` (one row block):
+    the widest within one standard error of it (:func:`_widest_within_one_se`)."""
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
@@ -336,13 +368,18 @@ def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation
     nj = int(rows.sum()) // copies
     if nj == 0:
         raise DataError(f"{what}_risk_spatial: no point is judged (judged is all False)")
-    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator)
+    terms = [] if one_se else None
+    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator, terms)
     if not table:
         raise DataError(f"{what}_risk_spatial: no candidate spacing fits {n} points (too few points)")
+    chosen = _widest_within_one_se(table, terms, p[rows[:n]], h) if one_se else None
     table = [(k * h / h_all, n_par, r) for k, n_par, r in table]
-    best = min(table, key=lambda r: r[2])
+    least = min(table, key=lambda r: r[2])
+    best = least if chosen is None else table[chosen]
     log.info("spatial %s risk: centre spacing %.3g x %.3g mm (%d parameters, judged on %d points %.3g mm "
-             "apart); %s", what, best[0], h_all, best[1], n, h, ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
+             "apart%s); %s", what, best[0], h_all, best[1], n, h,
+             "" if best is least else f"; the widest within one standard error of the least, {least[0]:.3g}",
+             ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
     return best[0], table
 
 
@@ -391,6 +428,15 @@ def laplacian_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=LAPLACIAN
     Laplacian's risk minimises the surface one's. A second derivative weighs
     noise by the fourth power of its wavenumber, so the risk keeps falling
     to wider spacings than the gradient's (:data:`LAPLACIAN_CANDIDATES`).
+
+    Of the candidates wider than the least estimated risk's, the widest whose
+    estimate exceeds it by at most the standard error of the difference is
+    taken (the one-standard-error rule, :func:`_widest_within_one_se`): at the
+    wide end of a noise-dominated Laplacian the estimates differ by less than
+    the pilot's scatter lets them be told apart, while the true noise still
+    falls like ``H^-3`` (the paper-scale moving tube: 12 to 32 spacings within
+    1 % of the pilot's scatter, the least at 16 with four times the error of
+    32). A wider spacing whose bias stands out of that scatter is not taken.
     """
     return _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, "Laplacian",
-                        _laplacian_operator, 1)
+                        _laplacian_operator, 1, one_se=True)
