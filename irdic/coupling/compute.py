@@ -219,7 +219,7 @@ def _couple_chunk(dic, ir, calibration, chunk, p, footprint=None) -> xr.Dataset:
     frames = window(t_ir, t_dic[sl.start], t_dic[sl.stop - 1], reach)
     if reach is None and chunk[1] > 1:
         log.warning("couple: the temporal kernel (c_time %g, R0_time %g s) reaches over all %d IR frames "
-                    "(spacing %.3g s; its window holds about 100 frames): every chunk reads the whole IR record, so "
+                    "(spacing %.3g s; its window holds at most about 100 frames): every chunk reads the whole IR record, so "
                     "chunking does not bound memory; set execution.chunk_frames: 0",
                     p["c_time"], p["R0_time"], t_ir.size, float(np.median(np.diff(t_ir))))
     log.info("couple: chunk %d of %d, DIC times %d..%d, IR frames %d..%d (kernel reach %s frames)", chunk[0] + 1,

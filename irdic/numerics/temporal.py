@@ -72,7 +72,7 @@ def kernel_R0(times, c, R0) -> float:
     """The time normalisation (s) the interpolant uses: ``R0``, or less where ``c R0`` would exceed
     :data:`FLAT_KERNEL_SPACINGS` median spacings of ``times`` (increasing, at least 2)."""
     limit = FLAT_KERNEL_SPACINGS * float(np.median(np.diff(times))) / c
-    # at the limit itself (10 Hz and the paper's kernel) R0 stays as given, not its rounding
+    # at the limit itself (6 Hz and the paper's kernel) R0 stays as given, not its rounding
     return float(limit) if 0 < limit < R0 * (1.0 - 1e-9) else float(R0)
 
 
