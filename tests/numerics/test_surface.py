@@ -857,7 +857,7 @@ def test_the_laplacian_risk_takes_the_widest_spacing_within_one_standard_error()
     flat = [base + 5.0, base] + [base + tile_noise(0.3) for _ in ks[2:]]
     table = [(k, 10, float(np.mean(t))) for k, t in zip(ks, flat)]
     assert _widest_within_one_se(table, flat, pj, h) == len(ks) - 1
-    # the widest two carry a bias far outside the noise: the least-risk one of the others is kept
+    # the widest two carry a bias far outside the noise: the widest of the others is taken
     biased = flat[:3] + [flat[3] + 2.0, flat[4] + 4.0]
     table = [(k, 10, float(np.mean(t))) for k, t in zip(ks, biased)]
     assert _widest_within_one_se(table, biased, pj, h) == 2
