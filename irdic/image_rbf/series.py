@@ -243,7 +243,7 @@ def evaluate_series(frames, frame_times, eval_times, points, mask, *, method="rb
     if temporal.R0 < R0_time:
         log.info("%s: the temporal kernel (c_time %g x R0_time %g s) spans %.0f IR frame spacings; narrowed to %g "
                  "(R0 %.3g s): flatter kernels lose the digits of the interpolant's weights", name, c_time, R0_time,
-                 c_time * R0_time / float(np.median(np.diff(ft))), FLAT_KERNEL_SPACINGS, temporal.R0)
+                 FLAT_KERNEL_SPACINGS * R0_time / temporal.R0, FLAT_KERNEL_SPACINGS, temporal.R0)
     te = _eval_times(eval_times)
     pts = _points(points, te.size)
     masks, mask_of = _masks(mask, te.size, H, W)

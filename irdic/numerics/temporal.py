@@ -430,10 +430,8 @@ def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):
 
 @functools.lru_cache(maxsize=256)
 def _model_reach(h, c, R0, tol, model):
-    """:func:`temporal_reach` on the uniform model series of spacing ``h``; None: the whole series."""
-    if c * R0 > FLAT_KERNEL_SPACINGS * h * (1.0 + 1e-9):
-        # flatter kernels: the saddle system loses the digits the tail is made of
-        return None
+    """:func:`temporal_reach` on the uniform model series of spacing ``h`` (``R0`` already narrowed by
+    :func:`kernel_R0`); None: the whole series."""
     n = int(model)
     n -= 1 - n % 2  # odd: the evaluation point sits in the middle
     m = n // 2

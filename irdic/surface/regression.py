@@ -78,12 +78,17 @@ def monomials(pts, centre, R0, kind):
     return out
 
 
+def _cells(psi, H):
+    """Each point's square cell of side H from the points' lower corner: ``(cell (n, 2), key (n,))``, the key
+    one integer per cell."""
+    cell = np.floor((psi - psi.min(axis=0)) / H).astype(np.int64)
+    return cell, cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1]
+
+
 def grid_subset(psi, H):
     """Indices of a subset of points, about one per square cell of side H (nearest to the cell centre)."""
-    lo = psi.min(axis=0)
-    cell = np.floor((psi - lo) / H).astype(np.int64)
-    d = np.linalg.norm(psi - (lo + (cell + 0.5) * H), axis=1)
-    key = cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1]
+    cell, key = _cells(psi, H)
+    d = np.linalg.norm(psi - (psi.min(axis=0) + (cell + 0.5) * H), axis=1)
     order = np.lexsort((d, key))
     first = np.r_[True, key[order][1:] != key[order][:-1]]
     return np.sort(order[first])
@@ -244,9 +249,7 @@ def _widest_within_one_se(table, terms, pj, h):
     nj = pj.shape[0]
     for i in range(best + 1, len(table)):
         d = terms[i] - terms[best]
-        side = 2.0 * table[i][0] * h
-        cell = np.floor((pj - pj.min(axis=0)) / side).astype(np.int64)
-        tile = np.unique(cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1], return_inverse=True)[1].ravel()
+        tile = np.unique(_cells(pj, 2.0 * table[i][0] * h)[1], return_inverse=True)[1].ravel()
         n_t = np.bincount(tile)
         if n_t.size < 4:
             break  # too few tiles to say how well the difference is known
