@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["local_normals", "plane_normal"]
+__all__ = ["local_normals", "nearest_neighbours", "plane_normal"]
 
 
-def local_normals(x, k=12):
+def local_normals(x, k=12, neighbours=None):
     """Unit normals by PCA of each point's ``k`` nearest neighbours.
 
     Parameters
@@ -22,6 +22,10 @@ def local_normals(x, k=12):
         Finite point coordinates (mm).
     k : int
         Neighbours per local plane fit, including the point itself (capped at n).
+    neighbours : ndarray of int, shape (n, k'), optional
+        Each point's neighbours (rows of ``x``), where they are known (e.g.
+        :func:`nearest_neighbours` of the same material points in another
+        configuration); ``k`` is then ignored.
 
     Returns
     -------
@@ -33,8 +37,7 @@ def local_normals(x, k=12):
     The normal is the eigenvector of the smallest eigenvalue of the
     neighbourhood's covariance ``sum_j (x_j - xbar)(x_j - xbar)^T``.
     """
-    k = min(k, x.shape[0])
-    _, idx = cKDTree(x).query(x, k=k)
+    idx = nearest_neighbours(x, k) if neighbours is None else np.asarray(neighbours)
     nb = x[idx]
     nb -= nb.mean(axis=1, keepdims=True)
     # the 6 distinct entries, summed over the neighbours in order (the same numbers as
@@ -48,6 +51,12 @@ def local_normals(x, k=12):
             cov[:, i, j] = acc
             cov[:, j, i] = acc
     return np.linalg.eigh(cov)[1][:, :, 0]
+
+
+def nearest_neighbours(x, k=12):
+    """Indices (n, min(k, n)) of each of the points ``x`` (n, 3)'s ``k`` nearest (itself included)."""
+    k = min(k, x.shape[0])
+    return cKDTree(x).query(x, k=k)[1].reshape(x.shape[0], k)
 
 
 def plane_normal(points):

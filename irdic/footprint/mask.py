@@ -22,7 +22,8 @@ from ..pointcloud import local_normals
 __all__ = ["point_normals", "facing_camera", "specimen_mask", "edge_distance"]
 
 
-def point_normals(x: np.ndarray, *, k: int = 12, towards: np.ndarray | None = None) -> np.ndarray:
+def point_normals(x: np.ndarray, *, k: int = 12, towards: np.ndarray | None = None,
+                  neighbours: np.ndarray | None = None) -> np.ndarray:
     """Unit surface normals of a point cloud by local principal component analysis.
 
     Parameters
@@ -34,6 +35,11 @@ def point_normals(x: np.ndarray, *, k: int = 12, towards: np.ndarray | None = No
     towards : ndarray, shape (3,), optional
         A location (e.g. a camera centre) the normals are oriented towards;
         without it the orientation is made consistent with the mean normal.
+    neighbours : ndarray of int, shape (n_finite, k), optional
+        Each finite row's neighbours, as indices among the finite rows (the
+        same material points' neighbours in a reference configuration:
+        :func:`irdic.pointcloud.nearest_neighbours`); default the ``k``
+        nearest in ``x`` itself.
 
     Returns
     -------
@@ -47,7 +53,9 @@ def point_normals(x: np.ndarray, *, k: int = 12, towards: np.ndarray | None = No
     pts = x[ok]
     if pts.shape[0] < 3:
         raise GeometryError(f"need at least 3 valid points to estimate surface normals, got {pts.shape[0]}")
-    normals = local_normals(pts, k)
+    if neighbours is not None and len(neighbours) != pts.shape[0]:
+        raise ConfigError(f"neighbours must have one row per finite point ({pts.shape[0]}), got {len(neighbours)}")
+    normals = local_normals(pts, k, neighbours)
     if towards is not None:
         sign = np.sign(np.einsum("ni,ni->n", normals, np.asarray(towards, float) - pts))
     else:

@@ -21,6 +21,7 @@ from ..errors import CalibrationError, DataError
 from ..logs import report
 from .mask import facing_camera, point_normals, specimen_mask
 from ..numerics.threads import parallel_map
+from ..pointcloud import nearest_neighbours
 
 __all__ = ["Projection", "project_points", "fill_in_time", "masks_and_facing", "MASK_REUSE_PX"]
 
@@ -60,7 +61,9 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, o
     specimen: masks and normals are built from positions filled in time from
     the point's nearest valid stage. While the points move less than
     ``MASK_REUSE_PX`` the previous mask is reused, so a static specimen has
-    one mask and the interpolant is set up once.
+    one mask and the interpolant is set up once. A point's normal is fitted
+    to its 12 nearest material points of the first time (the same
+    neighbours at every time).
 
     ``only`` (a slice of the times): masks and flags of those times alone,
     equal to the same rows of the whole result (a time chunk): which mask a
@@ -72,6 +75,11 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, o
     n_t, M, _ = x.shape
     xf = fill_in_time(x)
     pf = fill_in_time(pix)
+    # the normals' neighbours once, among the material points of the first time (filled in time: the points
+    # with coordinates at any time, the same at every time): a surface deforms smoothly, so a point's nearest
+    # neighbours stay near it, and a tree per mask cost a fifth of the masks' time
+    ref = xf[0][np.isfinite(xf[0]).all(axis=1)]
+    neighbours = nearest_neighbours(ref) if ref.shape[0] >= 3 else None
     source = _mask_sources(pf)
     keep_t = np.arange(n_t) if only is None else np.arange(n_t)[only]
     masks = np.zeros((keep_t.size, v.size, u.size), dtype=bool)
@@ -81,7 +89,7 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, o
     lock = threading.Lock()
 
     def build(j):
-        n = point_normals(xf[j], towards=centre)
+        n = point_normals(xf[j], towards=centre, neighbours=neighbours)
         f = facing_camera(xf[j], n, centre, max_angle_deg=max_angle)
         keep = np.isfinite(pf[j]).all(axis=1) & f
         out = specimen_mask(pf[j][keep], u, v, erosion_px=erosion, max_edge_factor=edge_factor), f

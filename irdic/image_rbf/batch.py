@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .tiles import EDGE_BLOCK, Window, check_unisolvent, eval_tile_block
+from .tiles import check_unisolvent, eval_tiles
 
 __all__ = ["EdgeBatch"]
 
@@ -73,13 +73,7 @@ class EdgeBatch:
         k, n = len(inst), win.n
         patterns = np.zeros((k, n), bool)
         values = np.zeros((k, n, nf))
-        r = 0
-        while r < k:
-            e = inst[r][0]
-            r1 = r
-            while r1 < k and inst[r1][0] is e:
-                r1 += 1
-            t = np.array([i for _, i in inst[r:r1]])
+        for r, r1, e, t in _runs(inst):
             C = e.tile
             # window pixels in the interpolant's padded grid (every masked pixel lies inside it)
             gv = (e.ty[t] * C - e.rv0)[:, None] + win.dv
@@ -98,19 +92,29 @@ class EdgeBatch:
                 check_unisolvent(win.lu[pat[bad[0]]], win.lv[pat[bad[0]]],
                                  f"mask: the masked pixels within halo = {e.halo} px of pixels u = "
                                  f"{u0}..{u0 + C - 1}, v = {v0}..{v0 + C - 1}")
-            r = r1
         alpha, beta = win.solve(patterns, values)
-        for j, (e, i) in enumerate(inst):
-            # the kernel at the pattern's pixels only: the others' coefficients are zero
-            on = np.flatnonzero(patterns[j])
+        for r, r1, e, t in _runs(inst):
+            # every point of the entry's tiles in this block, with the tile it lies in
+            counts = e.ends[t] - e.starts[t]
+            first = np.cumsum(counts) - counts
+            pts = np.repeat(e.starts[t] - first, counts) + np.arange(int(counts.sum()))
             c0 = 0.5 * (e.tile - 1)
-            w = Window(float(e.ty[i] * e.tile + c0), float(e.tx[i] * e.tile + c0), win.lu[on], win.lv[on])
-            A = np.ascontiguousarray(alpha[j, on].T)
-            B = beta[j].T
-            for b0 in range(e.starts[i], e.ends[i], EDGE_BLOCK):
-                b1 = min(b0 + EDGE_BLOCK, e.ends[i])
-                eval_tile_block(w, A, B, e.ce, e.u, e.v, e.idx[b0:b1], None if e.grp is None else e.grp[b0:b1],
-                                e.g, e.derivs, e.out, None if e.need is None else e.need[b0:b1])
+            eval_tiles(win.lu, win.lv, alpha[r:r1], beta[r:r1], e.ce, e.tx[t] * e.tile + c0, e.ty[t] * e.tile + c0,
+                       np.repeat(np.arange(r1 - r), counts), e.u, e.v, e.idx[pts],
+                       None if e.grp is None else e.grp[pts], e.g, e.derivs, e.out,
+                       None if e.need is None else e.need[pts])
+
+
+def _runs(inst):
+    """``(r, r1, entry, tiles)`` of each run of consecutive instances of one entry."""
+    r, k = 0, len(inst)
+    while r < k:
+        e = inst[r][0]
+        r1 = r
+        while r1 < k and inst[r1][0] is e:
+            r1 += 1
+        yield r, r1, e, np.array([i for _, i in inst[r:r1]])
+        r = r1
 
 
 class _EdgeEntry(NamedTuple):

@@ -17,22 +17,20 @@ from __future__ import annotations
 import math
 import threading
 from functools import lru_cache
-from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
-from scipy.spatial.distance import cdist
 
 from ..errors import DataError
 from ..numerics.imq import imq_matrix, imq_scaled_inverse
 from ..numerics.saddle import SaddleFactor
 from ..threads import blas_threads
 
-__all__ = ["EDGE_BLOCK", "DIRECTIONS", "Window", "EdgeWindows", "edge_windows", "check_unisolvent", "eval_tile_block"]
+__all__ = ["EDGE_BLOCK", "DIRECTIONS", "EdgeWindows", "edge_windows", "check_unisolvent", "eval_tiles"]
 
-# Rows per block in the direct (edge tile) evaluation: keeps the temporaries in
-# the CPU cache.
-EDGE_BLOCK = 128
+# Points per block in the edge tiles' evaluation (:func:`eval_tiles`): a few window-wide temporaries
+# (block x ~840 px x 8 B) stay small
+EDGE_BLOCK = 256
 #: Pixel orders of the window (directions of the outline's normal, evenly spread; a multiple of 8: the
 #: window's symmetries map one octant's orders onto the others, so DIRECTIONS / 8 factorisations serve all)
 DIRECTIONS = 128
@@ -57,15 +55,6 @@ def check_unisolvent(u, v, what):
         f"{what}: {n} pixel(s){' on one line' if n >= 3 else ''}; the linear "
         "monomials {1, u, v} need at least 3 pixels not on one line"
     )
-
-
-class Window(NamedTuple):
-    """Centres of a tile's window for :func:`eval_tile_block`: local coordinates relative to the core centre."""
-
-    ov: float  # origin of the local coordinates (core centre), frame px
-    ou: float
-    cu: np.ndarray  # local coordinates of the centres (n,)
-    cv: np.ndarray
 
 
 def _symmetries():
@@ -413,21 +402,27 @@ def _edge_windows(ce, tile, halo):
     return EdgeWindows(ce, tile, halo)
 
 
-def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out, need=None):
-    """Evaluate points ``sel`` of one tile from its coefficients, into ``out = (val, du, dv)``.
+def eval_tiles(lu, lv, alpha, beta, ce, ou, ov, tile_of, u, v, sel, gb, g, derivs, out, need=None):
+    """Evaluate the points of many tiles of one window from their coefficients, into ``out = (val, du, dv)``.
 
     Parameters
     ----------
-    tile : Window
-    alpha, beta : ndarray, shape (n_fields, n_t), (n_fields, 3)
-        RBF and monomial coefficients of every fitted field on the tile.
+    lu, lv : ndarray, shape (n,)
+        The window's pixels relative to its core centre (px).
+    alpha, beta : ndarray, shape (k, n, n_fields), (k, 3, n_fields)
+        RBF coefficients (zero outside each tile's pattern) and monomial
+        coefficients of every fitted field on each of ``k`` tiles.
     ce : float
         ``c * R0`` (px).
+    ou, ov : ndarray, shape (k,)
+        The tiles' core centres (px, the frame coordinates of ``u``, ``v``).
+    tile_of : ndarray of int, shape (P,)
+        The tile of each point.
     u, v : ndarray
         Point coordinates (px), indexed by ``sel``.
-    sel : ndarray of int
+    sel : ndarray of int, shape (P,)
         Rows of ``out`` (and of ``u``, ``v``) to evaluate.
-    gb : ndarray of int or None
+    gb : ndarray of int, shape (P,), or None
         Group of each point (fields ``gb * g + slot``); None: one group, the
         fields ``0 .. g-1`` for every point.
     g : int
@@ -435,43 +430,44 @@ def eval_tile_block(tile, alpha, beta, ce, u, v, sel, gb, g, derivs, out, need=N
     derivs : sequence of bool, length g
         Which slots want ``d/du``, ``d/dv``.
     out : tuple of ndarray, shape (n_points, g)
-    need : ndarray of bool, shape (sel.size,), optional
+    need : ndarray of bool, shape (P,), optional
         Which points want the derivatives (default all); the others' stay as they are.
 
     Notes
     -----
     ``f(x) = ce sum_j alpha_j s_j + beta . (1, xu, xv)`` with
     ``s_j = 1 / sqrt(ce^2 + |x - c_j|^2)``; ``df/du = -ce sum_j alpha_j s_j^3
-    (xu - cu_j) + beta_u``.
+    (xu - cu_j) + beta_u``. The sums run over the whole window (the
+    coefficients off a tile's pattern are zero), point by point in blocks of
+    :data:`EDGE_BLOCK` points of any tiles: a few vectorised passes instead
+    of a matrix product per tile and group (the points of a tile at one
+    time are a handful, and the products' call overhead dominated).
     """
     val, du, dv = out
-    want = np.flatnonzero(np.array(derivs, bool))
-    xu = u[sel] - tile.ou
-    xv = v[sel] - tile.ov
-    # np.column_stack, not np.c_: this runs ~10^4 times per evaluation pass
-    s = cdist(np.column_stack([xu, xv]), np.column_stack([tile.cu, tile.cv]), "sqeuclidean")
-    imq_scaled_inverse(s, ce, out=s)
-    # Points come sorted by group (time) within a tile: one matrix product per
-    # run of a group instead of a gather of coefficient rows per point.
-    if gb is None:
-        runs = [(0, sel.size, 0)]
-    else:
-        cut = np.flatnonzero(np.concatenate([[True], gb[1:] != gb[:-1], [True]]))
-        runs = [(a, b, int(gb[a])) for a, b in zip(cut[:-1], cut[1:])]
-    for r0, r1, q in runs:
-        A = alpha[q * g:(q + 1) * g].T  # (n_t, g)
-        B = beta[q * g:(q + 1) * g]  # (g, 3)
-        rows = sel[r0:r1]
-        x1, x2 = xu[r0:r1, None], xv[r0:r1, None]
-        val[rows] = ce * (s[r0:r1] @ A) + B[:, 0] + x1 * B[:, 1] + x2 * B[:, 2]
-        d = slice(r0, r1) if need is None else r0 + np.flatnonzero(need[r0:r1])
-        if want.size and (need is None or d.size):
-            s3 = s[d]
-            s3 = s3 * s3 * s3
-            Aw = A[:, want]
-            # sum_j alpha_j s_j^3 (1, cu_j, cv_j) for the wanted slots at once
-            T = s3 @ np.concatenate([Aw, tile.cu[:, None] * Aw, tile.cv[:, None] * Aw], axis=1)
-            k = want.size
-            rows, x1, x2 = sel[d], xu[d, None], xv[d, None]
-            du[rows[:, None], want] = -ce * (x1 * T[:, :k] - T[:, k:2 * k]) + B[want, 1]
-            dv[rows[:, None], want] = -ce * (x2 * T[:, :k] - T[:, 2 * k:]) + B[want, 2]
+    n = lu.size
+    for b0 in range(0, sel.size, EDGE_BLOCK):
+        b1 = min(b0 + EDGE_BLOCK, sel.size)
+        j, rows = tile_of[b0:b1], sel[b0:b1]
+        xu = u[rows] - ou[j]
+        xv = v[rows] - ov[j]
+        s = np.subtract.outer(xu, lu)
+        s *= s
+        dd = np.subtract.outer(xv, lv)
+        s += dd * dd
+        imq_scaled_inverse(s, ce, out=s)
+        d = slice(None) if need is None else np.flatnonzero(need[b0:b1])
+        s3 = None
+        for f in range(g):
+            fld = np.full(b1 - b0, f) if gb is None else gb[b0:b1] * g + f
+            A = alpha[j, :, fld]  # (b, n): each point's tile and field
+            B = beta[j, :, fld]  # (b, 3)
+            val[rows, f] = ce * np.einsum("pn,pn->p", s, A) + B[:, 0] + xu * B[:, 1] + xv * B[:, 2]
+            if derivs[f] and (need is None or d.size):
+                if s3 is None:
+                    s3 = s[d]
+                    s3 = s3 * s3 * s3
+                As = s3 * A[d]
+                T = As @ np.column_stack([np.ones(n), lu, lv])  # sum_j alpha_j s_j^3 (1, cu_j, cv_j)
+                r = rows[d]
+                du[r, f] = -ce * (xu[d] * T[:, 0] - T[:, 1]) + B[d, 1]
+                dv[r, f] = -ce * (xv[d] * T[:, 0] - T[:, 2]) + B[d, 2]
