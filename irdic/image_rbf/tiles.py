@@ -23,6 +23,7 @@ import scipy.linalg
 
 from ..errors import DataError
 from ..numerics.imq import imq_matrix, imq_scaled_inverse
+from ..numerics import lapack
 from ..numerics.saddle import SaddleFactor
 from ..threads import blas_threads
 
@@ -309,11 +310,11 @@ class EdgeWindows:
         mc = np.repeat(m, nf)  # prefix length of each column
         y = np.zeros((n, K), order="F")
         blocks = _blocks(mc)
-        trmm = scipy.linalg.blas.dtrmm
+        trmm = lapack.trmm  # GIL-free: the stage's threads solve their edge tiles at once
         # forward: the first m rows of L^-1 f are those of L_mm^-1 f_m (L^-1 lower triangular)
         for c0, c1 in blocks:
             mb = int(mc[c0])
-            y[:mb, c0:c1] = trmm(1.0, Li[:mb, :mb], rhs[:mb, c0:c1], lower=1)
+            y[:mb, c0:c1] = trmm(1.0, Li[:mb, :mb], rhs[:mb, c0:c1], lower=True)
         y *= np.arange(n)[:, None] < mc[None, :]
         # Y_d = Y_j M_d: the monomials' part through the octant's Y_j and each order's 3 x 3 map
         Md = self._mono[d]  # (k, 3, 3)
@@ -325,20 +326,20 @@ class EdgeWindows:
         # columns before m and T from m on, the Schur complement is G = T T^T, and G^-1 r of the fields'
         # r = f_Q - B y_m and the monomials' P_Q - B Y_m give their shares of C and rb, and x_Q once beta is known
         extra = []
-        potrf, potrs = scipy.linalg.lapack.dpotrf, scipy.linalg.lapack.dpotrs
+        potrf, potrs = lapack.potrf, lapack.potrs
         for i in np.flatnonzero(m < on.sum(axis=1)):
             mi = int(m[i])
             q = mi + np.flatnonzero(on[i, mi:])
             Lq = L[q]
             B = Lq[:, :mi]
             T = Lq[:, mi:]
-            Mq, info = potrf(T @ T.T, lower=1, clean=0)
+            Mq, info = potrf(T @ T.T, lower=True)
             if info:
                 fail[i] = True
                 continue
             cols = slice(i * nf, (i + 1) * nf)
             r = np.concatenate([F[i, q] - B @ y[:mi, cols], self.Pord[d[i], q] - (B @ Yj[:mi]) @ Md[i]], axis=1)
-            w = potrs(Mq, r, lower=1)[0]
+            w = potrs(Mq, r, lower=True)[0]
             rP = r[:, nf:]
             C[i] += rP.T @ w[:, nf:]
             rb[i] += rP.T @ w[:, :nf]
@@ -358,7 +359,7 @@ class EdgeWindows:
         x = np.zeros((n, K), order="F")
         for c0, c1 in blocks:
             mb = int(mc[c0])
-            x[:mb, c0:c1] = trmm(1.0, Li[:mb, :mb], z[:mb, c0:c1], lower=1, trans_a=1)
+            x[:mb, c0:c1] = trmm(1.0, Li[:mb, :mb], z[:mb, c0:c1], lower=True, trans_a=True)
         x = x.T.reshape(k, nf, n).transpose(0, 2, 1)  # (k, n, nf) in each order
         for i, q, xp in xq:
             x[i, q] = xp

@@ -13,6 +13,8 @@ import logging
 import numpy as np
 import scipy.linalg
 
+from . import lapack
+
 __all__ = ["SaddleFactor", "solve_dense"]
 
 log = logging.getLogger(__name__)
@@ -47,8 +49,9 @@ class SaddleFactor:
         self.cho = None
         self._blocks = None
         try:
-            self.cho = scipy.linalg.cho_factor(A, lower=True, overwrite_a=rebuild is not None, check_finite=False)
-            self._schur(scipy.linalg.cho_solve(self.cho, P, check_finite=False))
+            # the GIL-free routines (numerics.lapack): the stages' worker threads factorise tiles at once
+            self.cho = lapack.cho_factor(A, lower=True, overwrite_a=rebuild is not None)
+            self._schur(lapack.cho_solve(self.cho, P))
             self.nbytes = A.nbytes + P.nbytes + self.Y.nbytes
             return
         except np.linalg.LinAlgError:
@@ -128,16 +131,16 @@ class SaddleFactor:
     def _cho_solve(self, F):
         """``A^-1 F`` by the Cholesky factor, whole or in blocks."""
         if self._blocks is None:
-            return scipy.linalg.cho_solve(self.cho, F, check_finite=False)
+            return lapack.cho_solve(self.cho, F)
         L_ss, X, L_rr = self._blocks
         s = L_ss.shape[0]
         # BLAS trsm directly: this runs for every tile and time, and
         # solve_triangular's checks cost as much as the solve itself here
-        trsm = scipy.linalg.blas.dtrsm
-        y_s = trsm(1.0, L_ss, F[:s], lower=1)
-        y_r = trsm(1.0, L_rr, F[s:] - X.T @ y_s, lower=1, overwrite_b=1)
-        x_r = trsm(1.0, L_rr, y_r, lower=1, trans_a=1, overwrite_b=1)
-        x_s = trsm(1.0, L_ss, y_s - X @ x_r, lower=1, trans_a=1, overwrite_b=1)
+        trsm = lapack.trsm
+        y_s = trsm(1.0, L_ss, F[:s], lower=True)
+        y_r = trsm(1.0, L_rr, F[s:] - X.T @ y_s, lower=True, overwrite_b=True)
+        x_r = trsm(1.0, L_rr, y_r, lower=True, trans_a=True, overwrite_b=True)
+        x_s = trsm(1.0, L_ss, y_s - X @ x_r, lower=True, trans_a=True, overwrite_b=True)
         return np.concatenate([x_s, x_r])
 
     def _schur(self, Y):

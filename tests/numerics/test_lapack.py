@@ -1,0 +1,76 @@
+"""The GIL-free BLAS/LAPACK calls: the same numbers as scipy.linalg's wrappers, bit for bit."""
+
+import ctypes
+
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy.linalg import blas, lapack as scipy_lapack
+
+from irdic.numerics import lapack
+
+
+def _spd(rng, n):
+    a = rng.standard_normal((n, n))
+    return a @ a.T + n * np.eye(n)
+
+
+@pytest.mark.parametrize("n, k", [(1, 1), (7, 3), (300, 40)])
+def test_cholesky_factor_and_solve_equal_scipys(n, k):
+    rng = np.random.default_rng(n)
+    a = _spd(rng, n)
+    b = rng.standard_normal((n, k))
+    ours, theirs = lapack.cho_factor(a, lower=True), scipy.linalg.cho_factor(a, lower=True, check_finite=False)
+    np.testing.assert_array_equal(np.tril(ours[0]), np.tril(theirs[0]))
+    np.testing.assert_array_equal(lapack.cho_solve(ours, b), scipy.linalg.cho_solve(theirs, b, check_finite=False))
+    np.testing.assert_array_equal(lapack.cho_solve(ours, b[:, 0]),
+                                  scipy.linalg.cho_solve(theirs, b[:, 0], check_finite=False))
+    c, info = lapack.potrf(a, lower=True)
+    c_s, info_s = scipy_lapack.dpotrf(a, lower=1, clean=0)
+    assert info == info_s == 0
+    np.testing.assert_array_equal(c, c_s)  # the other triangle kept as scipy keeps it (clean=0)
+    np.testing.assert_array_equal(lapack.potrs(c, b, lower=True)[0], scipy_lapack.dpotrs(c_s, b, lower=1)[0])
+
+
+@pytest.mark.parametrize("trans", [False, True])
+def test_triangular_products_and_solves_equal_scipys_on_blocks_and_copies(trans):
+    rng = np.random.default_rng(3)
+    L = np.asfortranarray(np.tril(scipy.linalg.cholesky(_spd(rng, 200), lower=True)))
+    b = rng.standard_normal((200, 17))
+    for a in (L, L[:57, :57], np.ascontiguousarray(L[:31, :31]), L.T[:40, :40]):  # Fortran, block, C, C view
+        lower = bool(np.allclose(a, np.tril(a)))
+        m = a.shape[0]
+        np.testing.assert_array_equal(lapack.trsm(1.0, a, b[:m], lower=lower, trans_a=trans),
+                                      blas.dtrsm(1.0, a, b[:m], lower=lower, trans_a=trans))
+        np.testing.assert_array_equal(lapack.trmm(2.5, a, b[:m], lower=lower, trans_a=trans),
+                                      blas.dtrmm(2.5, a, b[:m], lower=lower, trans_a=trans))
+
+
+def test_right_hand_sides_overwritten_only_when_asked():
+    rng = np.random.default_rng(5)
+    L = np.tril(scipy.linalg.cholesky(_spd(rng, 20), lower=True))
+    b = np.asfortranarray(rng.standard_normal((20, 4)))
+    kept = b.copy()
+    x = lapack.trsm(1.0, L, b, lower=True)
+    np.testing.assert_array_equal(b, kept)
+    y = lapack.trsm(1.0, L, b, lower=True, overwrite_b=True)
+    assert y is b
+    np.testing.assert_array_equal(y, x)
+
+
+def test_not_positive_definite_raises_linalgerror():
+    with pytest.raises(np.linalg.LinAlgError, match="2-th leading minor"):
+        lapack.cho_factor(np.diag([1.0, -1.0, 1.0]))
+
+
+def test_shapes_are_checked():
+    with pytest.raises(ValueError, match="square"):
+        lapack.trsm(1.0, np.ones((3, 2)), np.ones((3, 1)))
+    with pytest.raises(ValueError, match="3 rows"):
+        lapack.trsm(1.0, np.eye(3), np.ones((2, 1)))
+
+
+def test_routines_are_called_without_the_gil():
+    # ctypes releases the GIL for CFUNCTYPE functions, not for PYFUNCTYPE ones
+    for f in (lapack._dtrsm, lapack._dtrmm, lapack._dpotrf, lapack._dpotrs):
+        assert not f._flags_ & ctypes._FUNCFLAG_PYTHONAPI
