@@ -187,3 +187,22 @@ def test_couple_cost_model_counts_the_specimen_pixels_and_the_masks_built():
     seen = np.ones((2, 35), bool)
     assert specimen_pixels(local, seen) == pytest.approx(600.0)
     assert specimen_pixels(local[:, :2], seen[:, :2]) == 0.0
+
+
+def test_couple_cost_model_spares_the_clock_of_a_still_specimen():
+    """Points that stay within MIN_MOTION_PX are refused by the clock's motion check before its search: the
+    model keeps STILL_CLOCK_SHARE of the clock and every other part; the motion is the largest distance of a
+    point from its first position (unseen positions left out)."""
+    from irdic.coupling.compute import STILL_CLOCK_SHARE, _motion_px, stage_costs
+    from irdic.timing.offset import MIN_MOTION_PX
+
+    moving, still = stage_costs(300, 13104, 300, 12641), stage_costs(300, 13104, 300, 12641, still=True)
+    assert still["clock"] == pytest.approx(STILL_CLOCK_SHARE * moving["clock"])
+    assert all(still[k] == moving[k] for k in moving if k != "clock")
+    local = np.zeros((4, 3, 2))
+    local[2, 1] = [0.3, 0.4]  # 0.5 px
+    local[3, 2] = np.nan
+    assert _motion_px(local) == pytest.approx(0.5)
+    assert not _motion_px(local) < MIN_MOTION_PX
+    local[2, 1] = [0.3, 0.0]
+    assert _motion_px(local) < MIN_MOTION_PX

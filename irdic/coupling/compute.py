@@ -50,6 +50,7 @@ from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..numerics.temporal import temporal_window
 from ..parameters import settings
 from ..timing.clock import ir_clock
+from ..timing.offset import MIN_MOTION_PX
 from ..logs import StageProgress, report, reweigh
 from ..threads import thread_budget
 from ..vocabulary import Status, cf_attrs
@@ -146,32 +147,39 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 #: :data:`~irdic.footprint.visibility.MASK_REUSE_PX`) plus :data:`MASK_PLAN_COST`; per DIC time of the whole
 #: record and point plus per IR frame (at most :data:`irdic.timing.offset.MAX_FRAMES`) and specimen pixel (the
 #: IR clock, which reads the whole record in every time chunk); per DIC time and point plus per DIC time and
-#: specimen pixel (the interpolation; :data:`PIXEL_COSTS`). Fitted on three tubes (benchmarks/README.md): their
-#: ratios are what the ETA rests on. ``write`` is the stage's store, written after :func:`couple` returns
-#: (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 4e-7, "masks": 6.8e-6, "clock": 1.55e-6, "interpolation": 4.8e-6, "rest": 3e-8,
+#: specimen pixel (the interpolation; :data:`PIXEL_COSTS`). Fitted on three tubes (benchmarks/README.md), the
+#: masks, clock and set-up rescaled to the interpolation on the sweep tube since the edge tiles' evaluation
+#: and factorisations got lighter: their ratios are what the ETA rests on. ``write`` is the stage's store,
+#: written after :func:`couple` returns (never reported: the ETA includes it)
+STAGE_COSTS = {"setup": 5.5e-7, "masks": 8.8e-6, "clock": 2.03e-6, "interpolation": 4.8e-6, "rest": 3e-8,
                "write": 3e-7}
 #: seconds of one core per IR frame and specimen pixel (the IR clock: its frames smoothed and sampled on nodes
 #: 1-2 px apart) and per DIC time and specimen pixel (the interpolation: edge tiles and windows per pixel)
-PIXEL_COSTS = {"clock": 6.8e-7, "interpolation": 2.6e-6}
+PIXEL_COSTS = {"clock": 8.9e-7, "interpolation": 2.6e-6}
 #: seconds of one core per DIC time of the whole record and point of the masks' plan (the positions filled in
 #: time, the masks each time reuses), before the first mask
-MASK_PLAN_COST = 2.5e-7
+MASK_PLAN_COST = 3.2e-7
+#: the part of the IR clock's cost spent on a specimen whose points stay within
+#: :data:`irdic.timing.offset.MIN_MOTION_PX` of their first position in the image: its frames are read and
+#: the positions prepared, then the motion check refuses it before the search (the sweep tube's still row:
+#: 2.2 of the ~10 s of its moving rows)
+STILL_CLOCK_SHARE = 0.2
 #: specimen pixels per DIC point assumed until the points are projected (the benchmarks' tubes: 1 to 4)
 PIXELS_PER_POINT = 2
 #: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads)
-STAGE_SHARES = {"setup": 0.0, "masks": 0.9, "clock": 0.25, "interpolation": 0.65, "rest": 0.3, "write": 0.0}
+STAGE_SHARES = {"setup": 0.0, "masks": 0.95, "clock": 0.25, "interpolation": 0.9, "rest": 0.3, "write": 0.0}
 
 
 def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None = None, *,
-                n_masks: int | None = None, n_record: int | None = None) -> dict:
+                n_masks: int | None = None, n_record: int | None = None, still: bool = False) -> dict:
     """Expected seconds of one core of the stage's parts (:data:`STAGE_COSTS`, :data:`PIXEL_COSTS`).
 
     ``n_t`` DIC times (of the chunk), ``n_points`` points, ``n_frames`` IR
     frames and ``n_pixels`` specimen pixels (default :data:`PIXELS_PER_POINT`
     per point); ``n_masks`` masks built (default one per DIC time: known once
     their reuse is planned) and ``n_record`` DIC times of the whole record
-    (the IR clock's and the masks' plan; default ``n_t``).
+    (the IR clock's and the masks' plan; default ``n_t``); ``still``: the
+    points stay where the IR clock refuses them (:data:`STILL_CLOCK_SHARE`).
     """
     from ..timing.offset import MAX_FRAMES
 
@@ -182,7 +190,18 @@ def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None =
     out = {k: c * size.get(k, float(n_t) * n_points) + PIXEL_COSTS.get(k, 0.0) * per_pixel.get(k, 0.0)
            for k, c in STAGE_COSTS.items()}
     out["masks"] += MASK_PLAN_COST * record
+    if still:
+        out["clock"] *= STILL_CLOCK_SHARE
     return out
+
+
+def _motion_px(local) -> float:
+    """The largest distance (px) of a point from its first position in the image over the record (``local``
+    (T, M, 2); 0 where no point is seen twice)."""
+    d = np.full(local.shape[1], 0.0)
+    for q in local[1:]:
+        np.fmax(d, np.linalg.norm(q - local[0], axis=1), out=d)
+    return float(d.max()) if d.size else 0.0
 
 
 def specimen_pixels(local, seen) -> float:
@@ -249,9 +268,11 @@ def _footprint(dic, ir, calibration, p, only=None):
     # the points are projected, and once the masks' reuse is planned
     n_t = pr.x.shape[0] if only is None else only.stop - only.start
     pixels = specimen_pixels(pr.local, pr.in_frame)
+    still = _motion_px(pr.local) < MIN_MOTION_PX
 
     def planned(n_masks):
-        reweigh(stage_costs(n_t, pr.x.shape[1], ir.sizes["time"], pixels, n_masks=n_masks, n_record=pr.x.shape[0]))
+        reweigh(stage_costs(n_t, pr.x.shape[1], ir.sizes["time"], pixels, n_masks=n_masks, n_record=pr.x.shape[0],
+                            still=still))
 
     planned(None)
     report("setup", 1.0)

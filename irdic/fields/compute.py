@@ -115,10 +115,11 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
 
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
 #: DIC time and point of each part with the default settings (regressions, their noise probes and bias
-#: estimates), measured on the moving tube of the benchmarks; the ETA rests on their ratios. ``write`` is the
+#: estimates), measured on the moving tube of the benchmarks (the fill and regression rescaled on the sweep
+#: tube since their tiles' factorisations run on every thread); the ETA rests on their ratios. ``write`` is the
 #: stage's store, written after :func:`fields` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 3.8e-7, "fill": 3.3e-6, "surface": 9.3e-6, "regression": 4.4e-6, "uncertainty": 1.64e-5,
-               "rest": 4.6e-7, "write": 7.5e-7}
+STAGE_COSTS = {"setup": 3.8e-7, "fill": 2.0e-6, "surface": 9.3e-6, "regression": 3.2e-6, "uncertainty": 1.64e-5,
+               "rest": 9e-7, "write": 7.5e-7}
 #: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads)
 STAGE_SHARES = {"setup": 0.4, "fill": 0.38, "surface": 0.67, "regression": 0.34, "uncertainty": 0.62, "rest": 0.0,
                 "write": 0.0}
