@@ -215,6 +215,20 @@ def test_dic_time_in_a_gap_of_the_ir_record_gets_no_temperature(caplog):
             "t = 2 s, 1.5 s from the nearest frame)") in caplog.text
 
 
+def test_a_gap_is_judged_against_the_kernel_the_interpolant_uses():
+    from irdic.coupling.compute import in_ir_gap
+
+    p = {"c_time": 1.0, "R0_time": 1.0}
+    # a 25 Hz camera that stopped from 1.0 to 1.6 s: the interpolant's kernel spans 6 frame steps (0.24 s),
+    # not the configured 1 s, so a DIC time 0.3 s from every frame lies in a gap, one 0.1 s from a frame not
+    t_ir = np.r_[np.arange(0, 1.0001, 0.04), np.arange(1.6, 3.0001, 0.04)]
+    t_dic = np.array([0.5, 1.1, 1.3, 2.0])
+    np.testing.assert_array_equal(in_ir_gap(t_dic, t_ir, t_ir, p), [False, False, True, False])
+    # a 2 Hz camera keeps the configured kernel (2 frame steps): 0.9 s from every frame is covered, 1.25 s not
+    slow = np.r_[0.0, 0.5, 1.0, 3.5, 4.0]
+    np.testing.assert_array_equal(in_ir_gap(np.array([1.9, 2.25]), slow, slow, p), [False, True])
+
+
 # --- structure: a file holding more than the reader takes ---------------------------
 
 

@@ -47,7 +47,7 @@ from ..footprint.temperature import FootprintOperator, footprint_side
 from ..footprint.visibility import Projection, masks_and_facing, project_points
 from ..image_rbf import evaluate_series
 from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
-from ..numerics.temporal import temporal_window
+from ..numerics.temporal import kernel_R0, temporal_window
 from ..parameters import settings
 from ..timing.clock import ir_clock
 from ..timing.offset import MIN_MOTION_PX
@@ -338,7 +338,7 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
 
 
 #: A DIC time is covered by the IR record when an IR frame lies within the larger of the temporal kernel's
-#: width (c_time R0_time, s) and this many median IR frame steps: never on a regular record (a DIC time
+#: width (c_time R0_time, s, as the interpolant narrows it on a fast camera) and this many median IR frame steps: never on a regular record (a DIC time
 #: lies at most half a step from a frame), always across a stretch where the IR camera stopped recording
 GAP_STEPS = 1.5
 
@@ -360,10 +360,20 @@ def in_ir_gap(t_dic: np.ndarray, t_ir: np.ndarray, record_times: np.ndarray, p: 
         The whole record's IR frame times (its median step), s.
     p : dict
         ``interpolation`` settings (``c_time``, ``R0_time``).
+
+    Notes
+    -----
+    A time is in a gap when its nearest frame is farther than the temporal
+    kernel's width ``c_time R0`` (with ``R0`` as the interpolant narrows it
+    on a fast camera, :func:`~irdic.numerics.temporal.kernel_R0`) and
+    :data:`GAP_STEPS` median frame steps.
     """
     if t_ir.size < 2:
         return np.zeros(t_dic.shape, dtype=bool)
-    reach = max(float(p["c_time"]) * float(p["R0_time"]), GAP_STEPS * float(np.median(np.diff(record_times))))
+    # the kernel the interpolant uses: on a fast camera narrower than configured (kernel_R0)
+    c = float(p["c_time"])
+    kernel = c * kernel_R0(record_times, c, float(p["R0_time"]))
+    reach = max(kernel, GAP_STEPS * float(np.median(np.diff(record_times))))
     k = np.clip(np.searchsorted(t_ir, t_dic), 1, t_ir.size - 1)
     nearest = np.minimum(np.abs(t_dic - t_ir[k - 1]), np.abs(t_ir[k] - t_dic))
     gap = (t_dic > t_ir[0]) & (t_dic < t_ir[-1]) & (nearest > reach)
