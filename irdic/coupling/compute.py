@@ -338,8 +338,9 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
 
 
 #: A DIC time is covered by the IR record when an IR frame lies within the larger of the temporal kernel's
-#: width (c_time R0_time, s, as the interpolant narrows it on a fast camera) and this many median IR frame steps: never on a regular record (a DIC time
-#: lies at most half a step from a frame), always across a stretch where the IR camera stopped recording
+#: width (c_time R0_time, s, as the interpolant narrows it on a fast camera) and this many median IR frame
+#: steps: never on a regular record (a DIC time lies at most half a step from a frame), always across a
+#: stretch where the IR camera stopped recording
 GAP_STEPS = 1.5
 
 
