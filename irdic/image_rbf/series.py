@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import ConfigError, DataError, IrdicWarning
 from ..logs import Progress, report
 from ..numerics.temporal import FLAT_KERNEL_SPACINGS, TemporalInterpolant
-from ..numerics.threads import parallel_map
+from ..numerics.threads import parallel_map, workers
 from ..threads import blas_threads
 from ..validation import as_int, bool_mask, choice, float_array
 from .interpolant import METHODS, MaskedGridInterpolant
@@ -147,13 +147,29 @@ def _warn_out_of_span(in_span, te, ft):
     return in_span
 
 
-def _pieces(ks, chunk):
-    """Runs of consecutive in-span times, cut into chunks."""
+#: The fewest times in a piece of :func:`_pieces` (below, a piece's edge tiles are too few to share a solve)
+MIN_PIECE = 4
+
+
+def _pieces(ks, chunk, n_workers=1):
+    """Runs of consecutive in-span times, cut into pieces of at most ``chunk`` times.
+
+    With several workers the pieces shrink towards the end of each run
+    (guided scheduling: at most a ``2 n_workers``-th of what is left, and
+    :data:`MIN_PIECE` at least), so that the workers, which take the pieces
+    in turn, end about together instead of one running the last whole chunk
+    alone.
+    """
     pieces = []
     if ks.size:
         cut = np.flatnonzero(np.diff(ks) != 1) + 1
         for run in np.split(ks, cut):
-            pieces.extend(run[i:i + chunk] for i in range(0, run.size, chunk))
+            i = 0
+            while i < run.size:
+                left = run.size - i
+                size = chunk if n_workers == 1 else max(MIN_PIECE, min(chunk, -(-left // (2 * n_workers))))
+                pieces.append(run[i:i + size])
+                i += size
     return pieces
 
 
@@ -347,7 +363,7 @@ def _evaluate(F, lookup, temporal, te, in_span, pts, masks, mask_of, chunk, inte
             progress.update(done[0])
             report("interpolation", done[0] / ks.size)
 
-    parallel_map(work, _pieces(ks, chunk))
+    parallel_map(work, _pieces(ks, chunk, workers()))
     log.info("evaluate_series: %d times x %d points, %d masked px (union), %d mask(s)", te.size, pts.shape[1],
              F.shape[0], len(masks))
     return out

@@ -720,3 +720,20 @@ def test_series_of_a_fast_camera_with_the_papers_kernel_has_rates_at_the_noise_o
     rate = np.sqrt(np.mean(np.square(res.dtheta_dt)))
     assert rate <= 1.4 * np.sqrt(2.0) / h, rate * h
     assert np.sqrt(np.mean(np.square(res.theta))) <= 1.4
+
+
+def test_series_pieces_cover_every_time_once_and_shrink_towards_the_end():
+    """The evaluation's pieces: every in-span time once, in order, at most ``chunk`` each, runs of consecutive
+    times never joined; with several workers the last pieces shrink (guided), with one they do not."""
+    from irdic.image_rbf.series import MIN_PIECE, _pieces
+
+    ks = np.r_[np.arange(300), np.arange(310, 330)]
+    for n_workers in (1, 2, 4):
+        pieces = _pieces(ks, 32, n_workers)
+        np.testing.assert_array_equal(np.concatenate(pieces), ks)
+        assert all(p.size <= 32 and np.all(np.diff(p) == 1) for p in pieces)
+    one, two = _pieces(ks, 32, 1), _pieces(ks[:300], 32, 2)
+    assert [p.size for p in one[:10]] == [32] * 9 + [12]
+    sizes = [p.size for p in two]
+    assert sizes[0] == 32 and sizes == sorted(sizes, reverse=True)
+    assert max(sizes[-4:]) <= MIN_PIECE  # the workers' last pieces are short
