@@ -149,13 +149,14 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 #: IR clock, which reads the whole record in every time chunk); per DIC time and point plus per DIC time and
 #: specimen pixel (the interpolation; :data:`PIXEL_COSTS`). Fitted on three tubes (benchmarks/README.md), the
 #: masks, clock and set-up rescaled to the interpolation on the sweep tube since the edge tiles' evaluation
-#: and factorisations got lighter: their ratios are what the ETA rests on. ``write`` is the stage's store,
+#: and factorisations got lighter (and the interpolation x 0.92 since its pieces shrink towards the end):
+#: their ratios are what the ETA rests on. ``write`` is the stage's store,
 #: written after :func:`couple` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 5.5e-7, "masks": 8.8e-6, "clock": 2.03e-6, "interpolation": 4.8e-6, "rest": 3e-8,
+STAGE_COSTS = {"setup": 5.5e-7, "masks": 8.8e-6, "clock": 2.03e-6, "interpolation": 4.4e-6, "rest": 3e-8,
                "write": 3e-7}
 #: seconds of one core per IR frame and specimen pixel (the IR clock: its frames smoothed and sampled on nodes
 #: 1-2 px apart) and per DIC time and specimen pixel (the interpolation: edge tiles and windows per pixel)
-PIXEL_COSTS = {"clock": 8.9e-7, "interpolation": 2.6e-6}
+PIXEL_COSTS = {"clock": 8.9e-7, "interpolation": 2.4e-6}
 #: seconds of one core per DIC time of the whole record and point of the masks' plan (the positions filled in
 #: time, the masks each time reuses), before the first mask
 MASK_PLAN_COST = 3.2e-7
