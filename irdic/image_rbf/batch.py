@@ -73,7 +73,8 @@ class EdgeBatch:
         k, n = len(inst), win.n
         patterns = np.zeros((k, n), bool)
         values = np.zeros((k, n, nf))
-        for r, r1, e, t in _runs(inst):
+        runs = list(_runs(inst))
+        for r, r1, e, t in runs:
             C = e.tile
             # window pixels in the interpolant's padded grid (every masked pixel lies inside it)
             gv = (e.ty[t] * C - e.rv0)[:, None] + win.dv
@@ -93,13 +94,13 @@ class EdgeBatch:
                                  f"mask: the masked pixels within halo = {e.halo} px of pixels u = "
                                  f"{u0}..{u0 + C - 1}, v = {v0}..{v0 + C - 1}")
         alpha, beta = win.solve(patterns, values)
-        for r, r1, e, t in _runs(inst):
+        for r, r1, e, t in runs:
             # every point of the entry's tiles in this block, with the tile it lies in
             counts = e.ends[t] - e.starts[t]
             first = np.cumsum(counts) - counts
             pts = np.repeat(e.starts[t] - first, counts) + np.arange(int(counts.sum()))
             c0 = 0.5 * (e.tile - 1)
-            eval_tiles(win.lu, win.lv, alpha[r:r1], beta[r:r1], e.ce, e.tx[t] * e.tile + c0, e.ty[t] * e.tile + c0,
+            eval_tiles(win.P, alpha[r:r1], beta[r:r1], e.ce, e.tx[t] * e.tile + c0, e.ty[t] * e.tile + c0,
                        np.repeat(np.arange(r1 - r), counts), e.u, e.v, e.idx[pts],
                        None if e.grp is None else e.grp[pts], e.g, e.derivs, e.out,
                        None if e.need is None else e.need[pts])

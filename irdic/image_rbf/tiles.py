@@ -403,13 +403,14 @@ def _edge_windows(ce, tile, halo):
     return EdgeWindows(ce, tile, halo)
 
 
-def eval_tiles(lu, lv, alpha, beta, ce, ou, ov, tile_of, u, v, sel, gb, g, derivs, out, need=None):
+def eval_tiles(P, alpha, beta, ce, ou, ov, tile_of, u, v, sel, gb, g, derivs, out, need=None):
     """Evaluate the points of many tiles of one window from their coefficients, into ``out = (val, du, dv)``.
 
     Parameters
     ----------
-    lu, lv : ndarray, shape (n,)
-        The window's pixels relative to its core centre (px).
+    P : ndarray, shape (n, 3)
+        The monomials {1, u, v} at the window's pixels, relative to its core
+        centre (px): :attr:`EdgeWindows.P`.
     alpha, beta : ndarray, shape (k, n, n_fields), (k, 3, n_fields)
         RBF coefficients (zero outside each tile's pattern) and monomial
         coefficients of every fitted field on each of ``k`` tiles.
@@ -445,7 +446,7 @@ def eval_tiles(lu, lv, alpha, beta, ce, ou, ov, tile_of, u, v, sel, gb, g, deriv
     time are a handful, and the products' call overhead dominated).
     """
     val, du, dv = out
-    n = lu.size
+    lu, lv = P[:, 1], P[:, 2]
     for b0 in range(0, sel.size, EDGE_BLOCK):
         b1 = min(b0 + EDGE_BLOCK, sel.size)
         j, rows = tile_of[b0:b1], sel[b0:b1]
@@ -468,7 +469,7 @@ def eval_tiles(lu, lv, alpha, beta, ce, ou, ov, tile_of, u, v, sel, gb, g, deriv
                     s3 = s[d]
                     s3 = s3 * s3 * s3
                 As = s3 * A[d]
-                T = As @ np.column_stack([np.ones(n), lu, lv])  # sum_j alpha_j s_j^3 (1, cu_j, cv_j)
+                T = As @ P  # sum_j alpha_j s_j^3 (1, cu_j, cv_j)
                 r = rows[d]
                 du[r, f] = -ce * (xu[d] * T[:, 0] - T[:, 1]) + B[d, 1]
                 dv[r, f] = -ce * (xv[d] * T[:, 0] - T[:, 2]) + B[d, 2]
