@@ -10,6 +10,7 @@ series, is exact and cheap.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 
 import numpy as np
@@ -17,6 +18,7 @@ import scipy.linalg
 
 from ..errors import ConfigError, DataError, GeometryError
 from ..numerics.imq import imq_matrix, imq_planar, regression_R0
+from ..numerics.threads import blas_threads, parallel_map, workers
 from ..validation import float_array, positive, psi_array
 from .parametrisation import MIN_POINTS, median_spacing
 
@@ -185,15 +187,20 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
     c, R0 = positive(c, "c"), positive(R0, "R0")
     p, F, h, _ = _judged_patch(p, F, max_points)
     n = p.shape[0]
-    table = []
-    for k in _candidates(candidates):
+
+    def gcv(k):  # (k, parameters, GCV) of spacing k, or None where it does not fit
         try:
             _, _, _, Qm, _ = _fit_design(p, k, h, c, R0)
         except GeometryError:
-            continue
+            return None
         rss = float(np.sum((F - Qm @ (Qm.T @ F)) ** 2))
         pp = Qm.shape[1]
-        table.append((k, pp, n * rss / F.shape[1] / (n - pp) ** 2))
+        return k, pp, n * rss / F.shape[1] / (n - pp) ** 2
+
+    ks = _candidates(candidates)
+    # each candidate a QR and two products: on the stage's threads
+    with blas_threads(1) if workers() > 1 and len(ks) > 1 else contextlib.nullcontext():
+        table = [r for r in parallel_map(gcv, ks) if r is not None]
     if not table:
         raise DataError(f"gcv_spatial: no candidate spacing fits {n} points (too few points)")
     best = min(table, key=lambda r: r[2])
@@ -204,36 +211,68 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
 def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row=None):
     """``(k, n_parameters, risk)`` of each candidate that fits (Notes of :func:`gradient_risk_spatial`);
     ``operator(p, design, c, R0)`` the derivative whose risk counts (default the gradient's). ``per_row``: a
-    list that gets each candidate's terms of the risk per judged row (their sum over ``nj`` is ``risk``)."""
+    list that gets each candidate's terms of the risk per judged row (their sum over ``nj`` is ``risk``).
+
+    The pilot (the first candidate that fits) is fitted first; the others, each a QR and a few products
+    against the pilot's, run on the stage's threads."""
     operator = _gradient_operator if operator is None else operator
     n, ns = p.shape[0], F.shape[1]
-    pilot = None
-    table = []
-    for k in _candidates(candidates):
+
+    def fitted(k):  # (Q, M, g) of spacing k, or None where it does not fit
         try:
             design = _fit_design(p, k, h, c, R0)
         except GeometryError:
-            continue
+            return None
         Qm = design[3]
-        if k > 12.0 and Qm.shape[1] < GRADIENT_MIN_PARAMETERS:
-            break  # wider spacings have fewer still
-        coef = Qm.T @ F
         M = operator(p, design, c, R0)[rows]
-        g = M @ coef
-        if pilot is None:
-            # the residual r_i has variance σ² (1 - H_ii), H = Q Qᵀ; summed over the judged points
-            jr = rows[:n]
-            rss = float(np.sum((F - Qm @ coef)[jr] ** 2))
-            var = rss / ns / (nj - float(np.sum(Qm[jr] ** 2)))
-            pilot = (Qm, M, g, float(np.sum(M ** 2)), var)
-        Q0, M0, g0, norm0, var = pilot
+        return Qm, M, M @ (Qm.T @ F)
+
+    def risk(k, fit=None):  # (k, n_parameters, risk, terms per judged row) against the pilot, or None
+        fit = fitted(k) if fit is None else fit
+        if fit is None:
+            return None
+        Qm, M, g = fit
         MQ = M @ (Qm.T @ Q0)
         cross = float(np.sum(MQ * M0))
-        risk = (float(np.sum((g - g0) ** 2)) / ns - var * (norm0 - 2.0 * cross)) / nj
-        table.append((k, Qm.shape[1], risk))
-        if per_row is not None:
-            per_row.append(np.sum((g - g0) ** 2, axis=1) / ns - var * np.sum(M0 * (M0 - 2.0 * MQ), axis=1))
-    return table
+        d = np.sum((g - g0) ** 2, axis=1) / ns
+        return (k, Qm.shape[1], (float(np.sum(d)) - var * (norm0 - 2.0 * cross)) / nj,
+                d - var * np.sum(M0 * (M0 - 2.0 * MQ), axis=1))
+
+    ks = _widths(p, h, _candidates(candidates))
+    pilot = None
+    while ks and pilot is None:
+        k = ks.pop(0)
+        fit = fitted(k)
+        if fit is None:
+            continue
+        Q0, M0, g0 = fit
+        # the residual r_i has variance σ² (1 - H_ii), H = Q Qᵀ; summed over the judged points
+        jr = rows[:n]
+        rss = float(np.sum((F - Q0 @ (Q0.T @ F))[jr] ** 2))
+        var = rss / ns / (nj - float(np.sum(Q0[jr] ** 2)))
+        norm0 = float(np.sum(M0 ** 2))
+        pilot = risk(k, fit)
+
+    if pilot is None:
+        return []
+    with blas_threads(1) if workers() > 1 and len(ks) > 1 else contextlib.nullcontext():
+        out = [pilot] + [r for r in parallel_map(risk, ks) if r is not None]
+    if per_row is not None:
+        per_row += [r[3] for r in out]
+    return [r[:3] for r in out]
+
+
+def _widths(p, h, ks):
+    """The candidate spacings ``ks`` (factors of ``h``) :func:`_gradient_risks` tries on the points ``p``: beyond
+    12 spacings only those with at least :data:`GRADIENT_MIN_PARAMETERS` parameters (wider ones have fewer
+    still)."""
+    out = []
+    for k in ks:
+        n_par = grid_subset(p, k * h).size + 3
+        if k > 12.0 and n_par < GRADIENT_MIN_PARAMETERS:
+            break
+        out.append(k)
+    return out
 
 
 def _widest_within_one_se(table, terms, pj, h):

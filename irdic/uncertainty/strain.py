@@ -21,8 +21,11 @@ estimated on the tensor too (:func:`strain_std`).
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
+from ..numerics.threads import blas_threads, parallel_map, workers
 from ..strain import strain_components
 from ..surface import fit_surface
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
@@ -258,9 +261,17 @@ def _probe_tensors(points, sf, t, p, s_x, rng, window, ops, sub):
     samples = [[] for _ in kws]
     for start in range(0, PROBES, PROBE_GROUP):
         draws = [probe.draw(rng, s_x) for _ in range(min(PROBE_GROUP, PROBES - start))]
-        samples[0] += probe.tensors(kws[0], draws)
-        if regressed and start < BIAS_PROBES:
-            samples[1] += probe.tensors(kws[1], draws)
+        # the group's probes split over the stage's threads (its memory, not more), each block through the
+        # fit's operator and, for the first probes, the reference's; a probe that refits the whole record
+        # (a regression in time) is GBs at paper scale: those one at a time
+        step = -(-len(draws) // workers()) if probe.stagewise else len(draws)
+        jobs = [(i, draws[j:j + step]) for i in range(1 + (regressed and start < BIAS_PROBES))
+                for j in range(0, len(draws), step)]
+        run = parallel_map if probe.stagewise else lambda fn, items: [fn(i) for i in items]
+        with blas_threads(1) if probe.stagewise and workers() > 1 else contextlib.nullcontext():
+            done = run(lambda job: probe.tensors(kws[job[0]], job[1]), jobs)
+        for (i, _), tensors in zip(jobs, done):
+            samples[i] += tensors
     return base, samples, bases, regressed, kw["smoothing"]
 
 
