@@ -48,6 +48,7 @@ from ..footprint.visibility import Projection, masks_and_facing, project_points
 from ..image_rbf import evaluate_series
 from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..numerics.temporal import kernel_R0, temporal_window
+from ..numerics.threads import blas_threads, map_beside, parallel_map
 from ..parameters import settings
 from ..timing.clock import ir_clock
 from ..timing.offset import MIN_MOTION_PX
@@ -126,11 +127,14 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
     with StageProgress("couple", stage_costs(n_t, dic.sizes["point"], ir.sizes["time"], n_record=dic.sizes["time"]),
                        threads=thread_budget(),
                        shares=STAGE_SHARES, logger=log):
-        # the masks first: they do not depend on the IR clock, and their steady progress dates the stage early
-        footprint = _footprint(dic, ir, calibration, p, only)
-        report("clock", 0.0)
-        ir, clock = ir_clock(dic, ir, calibration, experiment, projection=footprint[0])
-        report("clock", 1.0)
+        def the_clock(pr):
+            report("clock", 0.0)
+            out = ir_clock(dic, ir, calibration, experiment, projection=pr)
+            report("clock", 1.0)
+            return out
+
+        # the masks and the IR clock (one thread) on one pool: neither depends on the other
+        footprint, (ir, clock) = _footprint(dic, ir, calibration, p, only, beside=the_clock)
         # the interpolation prepares (frames read, stencils and edge windows factorised) before its first time:
         # running from here, its silence moves the ETA on
         report("interpolation", 0.0)
@@ -150,13 +154,14 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 #: specimen pixel (the interpolation; :data:`PIXEL_COSTS`). Fitted on three tubes (benchmarks/README.md), the
 #: masks, clock and set-up rescaled to the interpolation on the sweep tube since the edge tiles' evaluation
 #: and factorisations got lighter (and the interpolation x 0.92 since its pieces shrink towards the end):
-#: their ratios are what the ETA rests on. ``write`` is the stage's store,
+#: their ratios are what the ETA rests on; the clock x 0.48 since it runs beside the masks (the pool's phase
+#: on the sweep tube grew by 5.6 s with it, :data:`STAGE_SHARES`). ``write`` is the stage's store,
 #: written after :func:`couple` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 5.5e-7, "masks": 8.8e-6, "clock": 2.03e-6, "interpolation": 4.4e-6, "rest": 3e-8,
+STAGE_COSTS = {"setup": 5.5e-7, "masks": 8.8e-6, "clock": 9.7e-7, "interpolation": 4.4e-6, "rest": 3e-8,
                "write": 3e-7}
 #: seconds of one core per IR frame and specimen pixel (the IR clock: its frames smoothed and sampled on nodes
 #: 1-2 px apart) and per DIC time and specimen pixel (the interpolation: edge tiles and windows per pixel)
-PIXEL_COSTS = {"clock": 8.9e-7, "interpolation": 2.4e-6}
+PIXEL_COSTS = {"clock": 4.3e-7, "interpolation": 2.4e-6}
 #: seconds of one core per DIC time of the whole record and point of the masks' plan (the positions filled in
 #: time, the masks each time reuses), before the first mask
 MASK_PLAN_COST = 3.2e-7
@@ -167,8 +172,9 @@ MASK_PLAN_COST = 3.2e-7
 STILL_CLOCK_SHARE = 0.2
 #: specimen pixels per DIC point assumed until the points are projected (the benchmarks' tubes: 1 to 4)
 PIXELS_PER_POINT = 2
-#: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads)
-STAGE_SHARES = {"setup": 0.0, "masks": 0.95, "clock": 0.25, "interpolation": 0.9, "rest": 0.3, "write": 0.0}
+#: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads; the IR clock, one
+#: thread, on the masks' pool beside them: it takes a share of the pool's threads)
+STAGE_SHARES = {"setup": 0.0, "masks": 0.95, "clock": 1.0, "interpolation": 0.9, "rest": 0.3, "write": 0.0}
 
 
 def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None = None, *,
@@ -256,9 +262,11 @@ def _couple_chunk(dic, ir, calibration, chunk, p, footprint=None) -> xr.Dataset:
     return ds
 
 
-def _footprint(dic, ir, calibration, p, only=None):
-    """``(pr, side, masks, facing)``: the DIC points projected into the IR frames (of every time), the
-    footprint's box side, and the specimen masks and facing flags of the times ``only`` (all: None)."""
+def _footprint(dic, ir, calibration, p, only=None, beside=None):
+    """``((pr, side, masks, facing), result)``: the DIC points projected into the IR frames (of every time), the
+    footprint's box side, and the specimen masks and facing flags of the times ``only`` (all: None); ``result``
+    that of ``beside(pr)``, a job of one thread run on the masks' pool beside them (the IR clock:
+    :func:`~irdic.numerics.threads.map_beside`), or None."""
     camera = load_camera(calibration)
     u, v = ir["u"].values, ir["v"].values
     _check_sensor(calibration, u, v)
@@ -278,11 +286,23 @@ def _footprint(dic, ir, calibration, p, only=None):
     planned(None)
     report("setup", 1.0)
     report("masks", 0.0)  # running from here: the masks' sources and first triangulations come before a report
+    result = []
+
+    def pool_map(fn, items):
+        if beside is None:
+            return parallel_map(fn, items)
+        with blas_threads(1):  # the job's products beside the masks: one thread each
+            done, built = map_beside(lambda: beside(pr), fn, items)
+        result.append(done)
+        return built
+
     masks, facing = masks_and_facing(
         pr.x, np.where(pr.in_frame[..., None], pr.local, np.nan), camera.decompose().C,
         np.arange(u.size), np.arange(v.size), erosion=p["mask_erosion_px"], edge_factor=p["max_edge_factor"],
-        max_angle=p["max_view_angle_deg"], only=only, planned=planned)
-    return pr, side, masks, facing
+        max_angle=p["max_view_angle_deg"], only=only, planned=planned, pool_map=pool_map)
+    if beside is not None and not result:  # no mask built
+        result.append(beside(pr))
+    return (pr, side, masks, facing), result[0] if result else None
 
 
 def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=None, footprint=None) -> xr.Dataset:
@@ -292,7 +312,7 @@ def _couple(dic, ir, calibration, p, require_span=True, only=None, record_times=
     started = _time.perf_counter()
     camera = load_camera(calibration)
     t_ir = ir["time"].values.astype(float)
-    pr, side, masks, facing = _footprint(dic, ir, calibration, p, only) if footprint is None else footprint
+    pr, side, masks, facing = _footprint(dic, ir, calibration, p, only)[0] if footprint is None else footprint
     n_t, M, _ = pr.x.shape
     if only is not None:
         pr, dic = pr.times(only), dic.isel(time=only)

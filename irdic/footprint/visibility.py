@@ -54,7 +54,7 @@ def fill_in_time(a: np.ndarray) -> np.ndarray:
 
 
 def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, only: slice | None = None,
-                     planned=None):
+                     planned=None, pool_map=None):
     """Per DIC time: specimen mask (H, W) and facing flags (M,).
 
     A point that failed correlation in one stage does not open a hole in the
@@ -71,6 +71,9 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, o
     all times (cheap: pixel positions only) and just the masks the slice
     uses are built. ``planned``, if given, is called with the number of
     masks to build once it is known (the couple stage's progress model).
+    ``pool_map(fn, items)``, if given, builds the masks instead of
+    :func:`~irdic.numerics.threads.parallel_map` (the couple stage runs its
+    IR clock on the same pool: :func:`~irdic.numerics.threads.map_beside`).
     """
     n_t, M, _ = x.shape
     xf = fill_in_time(x)
@@ -101,7 +104,7 @@ def masks_and_facing(x, pix, centre, u, v, *, erosion, edge_factor, max_angle, o
     sources = np.unique(source[keep_t][source[keep_t] >= 0])
     if planned is not None:
         planned(int(sources.size))
-    built = dict(zip(sources.tolist(), parallel_map(build, sources.tolist())))
+    built = dict(zip(sources.tolist(), (pool_map or parallel_map)(build, sources.tolist())))
     for row, k in enumerate(keep_t):
         if source[k] >= 0:
             masks[row], facing[row] = built[int(source[k])]

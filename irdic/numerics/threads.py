@@ -11,7 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 from ..threads import blas_threads, thread_budget
 
-__all__ = ["workers", "parallel_map", "blas_threads"]
+__all__ = ["workers", "parallel_map", "map_beside", "blas_threads"]
 
 
 def workers():
@@ -30,3 +30,21 @@ def parallel_map(fn, items):
         return [fn(i) for i in items]
     with ThreadPoolExecutor(max_workers=n) as ex:
         return list(ex.map(fn, items))
+
+
+def map_beside(task, fn, items):
+    """``(task(), list(map(fn, items)))`` on one pool of :func:`workers` threads: ``task`` starts first on one
+    worker, the items share the others and take that one too once ``task`` is done.
+
+    For an independent job of one thread (the couple stage's IR clock) beside many small ones (its masks):
+    the stage's threads stay busy to the end and the job costs no thread beyond the budget. With one worker,
+    ``task`` runs first, then the items.
+    """
+    items = list(items)
+    n = workers()
+    if n == 1:
+        return task(), [fn(i) for i in items]
+    with ThreadPoolExecutor(max_workers=n) as ex:
+        first = ex.submit(task)  # the pool's queue is first in, first out
+        rest = list(ex.map(fn, items))
+        return first.result(), rest

@@ -84,7 +84,7 @@ from ..surface import drop_derivative_weights
 from ..vocabulary import Status
 from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
-from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_times, spread
+from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_block, probe_times, spread
 from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
                               scaled_probes)
 from .strain import noise_floor_note, strain_std
@@ -405,7 +405,8 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     :data:`~irdic.uncertainty.probes.PROBES` white-noise fields of the point noise ``s_T`` (K) run
     through the regressions with the smoothing frozen, :data:`~irdic.uncertainty.probes.PROBE_GROUP` at
     a time (one regression call each, so memory does not grow with the
-    probes). Returns the mean squares over the probes (T, N): ``v`` (value),
+    probes; a group's probes split over the stage's threads,
+    :func:`~irdic.uncertainty.probes.probe_block`). Returns the mean squares over the probes (T, N): ``v`` (value),
     ``g`` (T, N, 3, gradient), ``r`` (rate, with ``W``); with ``bias``, the
     noise variance of the regression's difference to the exact interpolation
     (``v_var``, ``g_var``; ``rt_var``, ``rs_var``, ``vt_var`` of
@@ -430,10 +431,10 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         noise = rng.standard_normal((b, tw, N)) if draw is None else np.array(draw(rng, b), dtype=float)
         noise *= s_T
         noise[:, ~seen] = np.nan
-        with_ref = bias and start < BIAS_PROBES
+        ref_k = (reference_spacing(ks) or 1.0) if bias and start < BIAS_PROBES else None
 
         def part(rows):  # the group's probes split over the stage's threads: the group's memory, not more
-            return _probe_part(noise[rows], regress_space, geo, visible, ks, W, sub, off, bias, with_ref)
+            return probe_block(noise[rows], regress_space, geo, visible, ks, W, sub, off, bias, ref_k)
 
         rows = [slice(i, i + -(-b // workers())) for i in range(0, b, -(-b // workers()))]
         with blas_threads(1) if len(rows) > 1 else contextlib.nullcontext():
@@ -444,7 +445,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
                 acc[k] = acc[k] + (a if k == "g_var" else a / PROBES)
             for k, a in squares.items():
                 nulls[k] += a
-        if with_ref:
+        if ref_k is not None:
             n_bias += b
         report("uncertainty", PROGRESS["probes"] * (start + b) / PROBES)
     if n_bias:
@@ -454,58 +455,6 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     out = {k: (SpreadStack(a[None], near) if k in nulls else spread(a, near)) if np.ndim(a) else a
            for k, a in acc.items()}
     return {**out, **{f"{k}_null": SpreadStack(np.array(n), near) if n else None for k, n in nulls.items()}}
-
-
-def _probe_part(noise, regress_space, geo, visible, ks, W, sub, off, bias, with_ref):
-    """One block of probes of :func:`_spatial_probes`: ``noise`` (b, T_w, N) K, hidden points NaN (made 0 here).
-
-    Returns the sums over its ``b`` probes of the squares :func:`_spatial_probes` averages (``v``, ``g``,
-    ``res``; ``r`` with the temporal weights ``W``; with ``bias`` the differences' ``v_var``, ``rt_var``,
-    ``rs_var``, ``vt_var`` and, with ``with_ref``, ``g_var`` against the reference spacing), and with
-    ``with_ref`` each probe's squared differences (the bias estimates' nulls). ``sub``: the probed times,
-    ``off``: the first of the record's (or chunk's) times among the ``T_w``.
-    """
-    T, N = visible.shape
-    b = noise.shape[0]
-    m = b * sub.size
-    W0, W1, I0, I1 = W if W is not None else (None,) * 4
-    sums, squares = {}, {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
-    noise_c = noise[:, off:off + T][:, sub]
-    if W0 is None:
-        g, v = regress_space(noise_c.reshape(m, N), geo.dual[sub], ks)
-        value_in = noise_c
-        res = noise_c - v.reshape(noise_c.shape)
-    else:
-        # in space at each time first, then in time (irdic.fields.space_time.space_time)
-        s = np.nan_to_num(regress_space(noise.reshape(-1, N), None, ks)[1].reshape(noise.shape), copy=False)
-        res = noise_c - s[:, off:off + T][:, sub]
-        np.nan_to_num(noise, copy=False)  # the hidden points count as 0 from here on, as in the data's differences
-        sums["r"] = np.sum((W1[sub] @ s) ** 2, axis=0)  # (S, T_w) @ (b, T_w, N): one BLAS call per probe
-        smoothed = W0[sub] @ s
-        smoothed[:, ~visible[sub]] = np.nan
-        g, v = regress_space(smoothed.reshape(m, N), geo.dual[sub], ks)
-        # the bias is judged against the temporal regression of the points' own series
-        value_in = W0[sub] @ noise
-        if bias:  # the noise in the space-time regression's differences (_space_time_bias)
-            for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - noise), ("vt_var", W0 - I0, s)):
-                sq = (Wd[sub] @ x) ** 2
-                sums[key] = np.sum(sq, axis=0)
-                squares[key] += list(sq) if with_ref else []
-    g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)
-    sums["v"] = np.sum(v ** 2, axis=0)
-    sums["res"] = np.sum(res ** 2, axis=0)  # (noise - S noise): see noise_scale
-    sums["g"] = np.sum(g ** 2, axis=0)
-    if bias:
-        sums["v_var"] = np.sum((v - value_in) ** 2, axis=0)
-        squares["v_var"] += list((v - value_in) ** 2) if with_ref else []
-    if with_ref:
-        # the same probes through the exact interpolation (k = 1): the noise expected in the
-        # difference regression - interpolation, which is subtracted from the data's difference
-        g_int = regress_space(value_in.reshape(m, N), geo.dual[sub], reference_spacing(ks) or 1.0)[0].reshape(
-            b, sub.size, N, 3)
-        sums["g_var"] = np.sum((g - g_int) ** 2, axis=0)
-        squares["g_var"] += list((g - g_int) ** 2)
-    return sums, squares
 
 
 def _regressions_only(sf, ks):

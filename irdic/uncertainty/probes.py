@@ -1,4 +1,4 @@
-"""The noise probes' shared settings and their times.
+"""The noise probes' shared settings, their times, and a block of the IR probes' regressions.
 
 The per-point uncertainties (:mod:`irdic.uncertainty.model`,
 :mod:`irdic.uncertainty.strain`) run random noise probes through the
@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 
-__all__ = ["PROBES", "PROBE_GROUP", "BIAS_PROBES", "PROBE_TIMES", "probe_times", "spread", "SpreadStack"]
+__all__ = ["PROBES", "PROBE_GROUP", "BIAS_PROBES", "PROBE_TIMES", "probe_times", "spread", "SpreadStack", "probe_block"]
 
 #: random probes of the operators propagated by Monte Carlo
 PROBES = 16
@@ -95,3 +95,60 @@ class SpreadStack:
     def __array__(self, dtype=None, copy=None):
         out = np.array([spread(a, self._near) for a in self._a])
         return out if dtype is None else out.astype(dtype)
+
+
+def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k):
+    """A block of the noise probes of the spatial (and temporal) regression of the temperatures
+    (:func:`irdic.uncertainty.model.uncertainties`; its probe groups run a block per thread).
+
+    ``noise`` (b, T_w, N) K, the hidden points NaN (made 0 here) at the window's ``T_w`` times of which the
+    ``T`` of ``visible`` (T, N) start at ``off``; ``sub``: the probed times among the ``T``; ``W`` the temporal
+    weights (value, rate, their exact interpolation's) or None; ``ks`` the spatial spacing; ``bias``: with the
+    noise of the regressions' differences; ``ref_k``: the spacing of the gradient's reference (1: the exact
+    interpolation) these probes also run through, or None.
+
+    Returns the sums over the ``b`` probes of the squares the uncertainty averages (``v``, ``g``, ``res``;
+    ``r`` with ``W``; with ``bias`` ``v_var``, ``rt_var``, ``rs_var``, ``vt_var``; with ``ref_k``
+    ``g_var``), and with ``ref_k`` each probe's squared differences (the bias estimates' nulls).
+    """
+    T, N = visible.shape
+    b = noise.shape[0]
+    m = b * sub.size
+    W0, W1, I0, I1 = W if W is not None else (None,) * 4
+    sums, squares = {}, {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
+    noise_c = noise[:, off:off + T][:, sub]
+    if W0 is None:
+        g, v = regress_space(noise_c.reshape(m, N), geo.dual[sub], ks)
+        value_in = noise_c
+        res = noise_c - v.reshape(noise_c.shape)
+    else:
+        # in space at each time first, then in time (irdic.fields.space_time.space_time)
+        s = np.nan_to_num(regress_space(noise.reshape(-1, N), None, ks)[1].reshape(noise.shape), copy=False)
+        res = noise_c - s[:, off:off + T][:, sub]
+        np.nan_to_num(noise, copy=False)  # the hidden points count as 0 from here on, as in the data's differences
+        sums["r"] = np.sum((W1[sub] @ s) ** 2, axis=0)  # (S, T_w) @ (b, T_w, N): one BLAS call per probe
+        smoothed = W0[sub] @ s
+        smoothed[:, ~visible[sub]] = np.nan
+        g, v = regress_space(smoothed.reshape(m, N), geo.dual[sub], ks)
+        # the bias is judged against the temporal regression of the points' own series
+        value_in = W0[sub] @ noise
+        if bias:  # the noise in the space-time regression's differences (model._space_time_bias)
+            for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - noise), ("vt_var", W0 - I0, s)):
+                sq = (Wd[sub] @ x) ** 2
+                sums[key] = np.sum(sq, axis=0)
+                squares[key] += list(sq) if ref_k is not None else []
+    g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)
+    sums["v"] = np.sum(v ** 2, axis=0)
+    sums["res"] = np.sum(res ** 2, axis=0)  # (noise - S noise): see noise_scale
+    sums["g"] = np.sum(g ** 2, axis=0)
+    if bias:
+        sums["v_var"] = np.sum((v - value_in) ** 2, axis=0)
+        squares["v_var"] += list((v - value_in) ** 2) if ref_k is not None else []
+    if ref_k is not None:
+        # the same probes through the exact interpolation (k = 1): the noise expected in the
+        # difference regression - interpolation, which is subtracted from the data's difference
+        g_int = regress_space(value_in.reshape(m, N), geo.dual[sub], ref_k)[0].reshape(
+            b, sub.size, N, 3)
+        sums["g_var"] = np.sum((g - g_int) ** 2, axis=0)
+        squares["g_var"] += list((g - g_int) ** 2)
+    return sums, squares
