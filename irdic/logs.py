@@ -230,6 +230,10 @@ class StageProgress:
         Seconds between checks for a line while a part runs without reporting
         (a thread of its own while the stage runs; None: no thread, lines on
         reports only).
+    beside : iterable of str
+        Parts that run on one of the stage's threads beside the others (the
+        couple stage's IR clock beside its masks) and report only their start
+        and end.
 
     Notes
     -----
@@ -242,7 +246,10 @@ class StageProgress:
     running part that has reported 20 % of itself or more since its first
     report gives its own rest at its own pace instead; the parts after it
     come at ``s``. A part that ends in less than half the time expected (it
-    stopped early) takes the weight of the time it took. The ETA is right as
+    stopped early) takes the weight of the time it took. A part run beside
+    the others takes one of the ``n`` threads while it runs: it counts as
+    ``Δt s / n`` done after ``Δt`` (at most 90 % of it), and ``s`` is the work
+    reported done over the elapsed time less ``Δt / n``. The ETA is right as
     far as the model's ratios of the parts are, whatever the machine's speed.
     Lines at about every tenth of ``w' / W``. Used as a
     context manager it is the stage's current one, which :func:`report` feeds
@@ -251,7 +258,7 @@ class StageProgress:
 
     def __init__(self, what: str, parts: dict, *, threads: int = 1, shares: dict | None = None,
                  logger: logging.Logger | None = None, clock: Callable[[], float] = time.perf_counter,
-                 tick: float | None = 1.0):
+                 tick: float | None = 1.0, beside=()):
         self.what = what
         self._shares, self._threads = shares or {}, max(1, int(threads))
         self.weights = {k: self._wall(k, c) for k, c in parts.items()}
@@ -267,6 +274,9 @@ class StageProgress:
         self._running = None  # (part, time of its last report)
         self._last = None  # (work done, time) at the last report
         self._began = {}  # part: (time, fraction) of its first report
+        self._beside = set(beside) & set(self.weights)
+        self._beside_since = {}  # part run beside the others: the time it started, while it runs
+        self._beside_spans = []  # (start, end) of those that ended
         self._stop = threading.Event()
 
     def _wall(self, part, cost):
@@ -291,15 +301,32 @@ class StageProgress:
         return self._state(self.clock() if now is None else now)[0]
 
     def _speed(self):
-        """Expected wall seconds of work done per second so far (at the last report)."""
+        """Expected wall seconds of work done per second so far (at the last report), the threads' time taken by
+        the parts running beside the others left out."""
         w_last, t_last = self._last
-        return w_last / max(t_last - self.started, 1e-9)
+        taken = sum(max(0.0, t_last - t) for t in self._beside_since.values()) / self._threads
+        return w_last / max(t_last - self.started - taken, 1e-9)
+
+    def _taken(self, t0, t1):
+        """Thread seconds (per thread of the stage) the parts run beside the others took between ``t0`` and
+        ``t1``."""
+        spans = self._beside_spans + [(t, t1) for t in self._beside_since.values()]
+        return sum(max(0.0, min(b, t1) - max(a, t0)) for a, b in spans) / self._threads
+
+    def _beside_done(self, now, speed, parts=None):
+        """Work the parts running beside the others (``parts``: those of them) count as done at ``now`` (see the
+        Notes)."""
+        return sum(min(0.9 * self.weights[k], max(0.0, now - t) * speed / self._threads)
+                   for k, t in self._beside_since.items() if parts is None or k in parts)
 
     def _state(self, now):
         done = sum(self.weights[k] * self.done[k] for k in self.weights)
-        if self._last is None or done <= 0:
+        if self._last is None:
             return done / self.total, None
         speed = self._speed()
+        done += self._beside_done(now, speed)
+        if done <= 0:
+            return 0.0, None
         if self._running is None:
             return min(1.0, done / self.total), (self.total - done) / speed
         part, since = self._running
@@ -309,8 +336,10 @@ class StageProgress:
         t0, f0 = self._began.get(part, (since, self.done[part]))
         f = self.done[part]
         if f - f0 >= OWN_RATE_SHARE and since > t0:
-            # the model's ratios between parts are rough; a part's own progress since its first report is not
-            own = max(0.0, (1.0 - f) * (since - t0) / (f - f0) - (now - since))
+            # the model's ratios between parts are rough; a part's own progress since its first report is not;
+            # while a part ran beside it, that one had a thread of it
+            pace = (since - t0 - self._taken(t0, since)) / (f - f0)
+            own = max(0.0, (1.0 - f) * pace - (now - since))
             eta = own + (self.total - done - left) / speed
         return min(1.0, w / self.total), eta
 
@@ -320,6 +349,8 @@ class StageProgress:
             if part not in self.done:
                 return None
             now = self.clock()
+            if part in self._beside:
+                return self._beside_update(part, fraction, now)
             if fraction >= 1.0:
                 self._shrink_if_short(part, now)
             self.done[part] = max(self.done[part], min(1.0, float(fraction)))
@@ -330,6 +361,23 @@ class StageProgress:
             if w > 0:
                 self._last = (w, now)
             return self._line(now)
+
+    def _beside_update(self, part, fraction, now):
+        """:meth:`update` of a part run beside the others: its start, or its end (call with the lock held)."""
+        if fraction < 1.0:
+            self._beside_since.setdefault(part, now)
+            return self._line(now)
+        if part in self._beside_since and self._last is not None:
+            credit = self._beside_done(now, self._speed(), (part,))
+            self._beside_spans.append((self._beside_since.pop(part), now))
+            left = self.weights[part]
+            if credit < SHORT_PART * left:  # it stopped early: the weight of the time it took
+                self.total -= left - credit
+                self.weights[part] = credit
+        self._beside_since.pop(part, None)
+        self.done[part] = 1.0
+        self._last = (sum(self.weights[k] * self.done[k] for k in self.weights), now)
+        return self._line(now)
 
     def _shrink_if_short(self, part, now):
         """A part that ends in less than :data:`SHORT_PART` of the time the model expected at the speed so far

@@ -137,6 +137,53 @@ def test_stage_progress_running_part_at_its_own_pace():
         assert eta == pytest.approx(0.7 * 40.0 + 5.0 / (16.0 / 22.0), rel=0.01)
 
 
+def test_stage_progress_part_beside_the_others():
+    """The IR clock (4 s of one core) runs on one of 2 threads beside the masks (10 s of one core, all parallel):
+    the masks go at half speed until the clock ends at 4 s, then on both threads to 7 s, the interpolation
+    (10 s of one core) to 12 s. From the first report on, the ETA says 12 s (without the clock's share of the time
+    the masks' half speed made it 24 s)."""
+    from irdic.logs import StageProgress, report
+
+    now = [0.0]
+    parts = {"masks": 10.0, "clock": 4.0, "interpolation": 10.0}
+    with StageProgress("couple", parts, threads=2, logger=logging.getLogger("irdic.test_beside"),
+                       clock=lambda: now[0], tick=None, beside=("clock",)) as sp:
+        report("clock", 0.0)
+        ends = []
+        for t in (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0):
+            now[0] = t
+            if t == 4.0:
+                report("clock", 1.0)
+            report("masks", (t if t <= 4.0 else 4.0 + 2.0 * (t - 4.0)) / 10.0)
+            ends.append(t + sp._state(t)[1])
+            if t == 2.0:  # the masks' fifth and the clock's half (its share of the time) of 12 s
+                assert sp.fraction() == pytest.approx(2.0 / 12.0)
+        for k in range(1, 10):
+            now[0] = 7.0 + 0.5 * k
+            report("interpolation", k / 10)
+            ends.append(now[0] + sp._state(now[0])[1])
+        assert ends == pytest.approx([12.0] * len(ends), rel=1e-9)
+
+
+def test_stage_progress_beside_part_that_stops_early():
+    """A clock beside the masks that finds no motion and ends after 0.5 s of the 4 s expected weighs the time it
+    took: the ETA stays that of the masks and the interpolation."""
+    from irdic.logs import StageProgress, report
+
+    now = [0.0]
+    parts = {"masks": 10.0, "clock": 4.0, "interpolation": 10.0}
+    with StageProgress("couple", parts, threads=2, logger=logging.getLogger("irdic.test_beside_early"),
+                       clock=lambda: now[0], tick=None, beside=("clock",)) as sp:
+        report("clock", 0.0)
+        now[0] = 0.5
+        report("masks", 0.05)
+        report("clock", 1.0)
+        now[0] = 3.0
+        report("masks", 0.55)
+        # masks 5 model seconds then at 2 threads per second: 2.25 s to go, then the interpolation's 5 s
+        assert sp._state(3.0)[1] == pytest.approx(2.25 + 5.0, rel=0.02)
+
+
 def test_stage_progress_reweighs_the_parts_not_yet_begun():
     """Costs known only once the stage has begun (the couple stage's specimen pixels after the projection)
     replace those of the parts that have reported no progress yet (a part that has only started, like the

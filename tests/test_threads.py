@@ -127,3 +127,40 @@ def test_progress_reports_about_every_tenth():
         if p.update(i):
             said.append(i)
     assert said == list(range(100, 1001, 100))
+
+
+def test_pools_keep_to_the_budget():
+    """A stage's pools run at most its threads: a pool inside a pool's worker runs inline, and the job run beside
+    a map takes one of the pool's workers, not one more."""
+    import threading
+    import time
+
+    from irdic.numerics.threads import map_beside, parallel_map, workers
+
+    busy, peak, lock = [0], [0], threading.Lock()
+
+    def work(_):
+        with lock:
+            busy[0] += 1
+            peak[0] = max(peak[0], busy[0])
+        time.sleep(0.02)
+        with lock:
+            busy[0] -= 1
+        return threading.get_ident()
+
+    with stage_threads(2):
+        assert workers() == 2
+        nested = parallel_map(lambda i: (workers(), parallel_map(work, range(4))), range(4))
+        assert [n for n, _ in nested] == [1] * 4
+        # the inner maps ran on their outer worker's own thread
+        assert all(len(set(ids)) == 1 for _, ids in nested)
+        assert peak[0] <= 2
+        peak[0] = 0
+        first, rest = map_beside(lambda: work(None), work, range(6))
+        assert peak[0] <= 2 and len(rest) == 6
+        # the job started first: the items shared the other worker until it was done
+        assert first in rest
+    with stage_threads(1):
+        peak[0] = 0
+        first, rest = map_beside(lambda: work(None), work, range(3))
+        assert peak[0] == 1 and set(rest) == {first} == {threading.get_ident()}

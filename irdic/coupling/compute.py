@@ -126,7 +126,7 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
     n_t = dic.sizes["time"] if only is None else only.stop - only.start
     with StageProgress("couple", stage_costs(n_t, dic.sizes["point"], ir.sizes["time"], n_record=dic.sizes["time"]),
                        threads=thread_budget(),
-                       shares=STAGE_SHARES, logger=log):
+                       shares=STAGE_SHARES, logger=log, beside=("clock",)):
         def the_clock(pr):
             report("clock", 0.0)
             out = ir_clock(dic, ir, calibration, experiment, projection=pr)

@@ -12,6 +12,7 @@ import logging
 import numpy as np
 
 from ..surface.parametrisation import median_spacing
+from ..threads import thread_budget
 
 __all__ = ["JUDGED_MARGIN", "regressed_gradient", "space_gcv", "space_gcv_filled"]
 
@@ -96,7 +97,8 @@ def regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
     val = np.full((T, N), np.nan)
     cols = np.flatnonzero(have)
     if dual is not None:
-        step = max(1, (1 << 24) // max(1, 6 * cols.size))  # rows per block: ~128 MB of dual basis
+        # rows per block: ~128 MB of dual basis over the stage's threads (the noise probes' blocks run on each)
+        step = max(1, (1 << 24) // max(1, 6 * cols.size) // thread_budget())
         every = cols.size == N  # all points: slices, not gathers (GBs of dual basis at paper scale)
         for s in range(0, times.size, step):
             tt = times[s:s + step]

@@ -1,25 +1,37 @@
-"""Thread pool for the many small factorisations of the local surface tiles.
+"""Thread pools of a stage: its parallel parts share the stage's thread budget.
 
 The stage's thread budget (:func:`irdic.threads.thread_budget`) caps the
 workers; each worker runs single-threaded BLAS (see the callers), since
-LAPACK and BLAS release the GIL.
+LAPACK and BLAS release the GIL. A pool started inside a pool's worker runs
+inline (:func:`workers` is 1 there): the stage's threads are taken, and a
+nested pool would run more threads than the stage was given.
 """
 
 from __future__ import annotations
 
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 from ..threads import blas_threads, thread_budget
 
 __all__ = ["workers", "parallel_map", "map_beside", "blas_threads"]
 
+#: set in the threads of a pool of this module
+_pool = threading.local()
+
 
 def workers():
-    """Workers of :func:`parallel_map`: the stage's thread budget, at most 8.
+    """Workers of :func:`parallel_map`: the stage's thread budget, at most 8; 1 inside a pool's worker.
 
     Beyond 8 the tiles are too few to share.
     """
+    if getattr(_pool, "inside", False):
+        return 1
     return max(1, min(thread_budget(), 8))
+
+
+def _marked():
+    _pool.inside = True
 
 
 def parallel_map(fn, items):
@@ -28,7 +40,7 @@ def parallel_map(fn, items):
     n = workers()
     if n == 1 or len(items) < 2:
         return [fn(i) for i in items]
-    with ThreadPoolExecutor(max_workers=n) as ex:
+    with ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
         return list(ex.map(fn, items))
 
 
@@ -44,7 +56,7 @@ def map_beside(task, fn, items):
     n = workers()
     if n == 1:
         return task(), [fn(i) for i in items]
-    with ThreadPoolExecutor(max_workers=n) as ex:
+    with ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
         first = ex.submit(task)  # the pool's queue is first in, first out
         rest = list(ex.map(fn, items))
         return first.result(), rest

@@ -20,7 +20,8 @@ from ..logs import report
 from ..numerics.patterns import same_patterns
 from ..numerics.imq import imq_matrix, imq_planar
 from ..numerics.saddle import SaddleFactor
-from ..numerics.threads import blas_threads, parallel_map
+from ..numerics.threads import blas_threads, parallel_map, workers
+from ..threads import thread_budget
 from ..validation import choice, float_array, positive, psi_array, smoothing_factor
 from .parametrisation import MIN_POINTS
 from .regression import ls_design, monomials
@@ -365,15 +366,23 @@ class SpatialInterpolant:
                 self._ls_at = dict(zip((0, 1, 2), self._ls_rows(pts, (0, 1, 2))))
             return [self._ls_at[k] @ coef for k in kinds]
         out = [np.empty((pts.shape[0], F.shape[1])) for _ in kinds]
-        step = max(1, _BLOCK_BYTES // (8 * max(len(centres), 1)))
+        # the blocks of all the stage's threads together hold _BLOCK_BYTES per kind (they run on its threads here,
+        # or one per worker where a pool's workers each evaluate)
+        step = max(1, _BLOCK_BYTES // (8 * max(len(centres), 1) * thread_budget()))
         nc = len(centres)
-        for i in range(0, pts.shape[0], step):
+
+        def block(i):
             q = pts[i:i + step]
             # the kernel's and the monomials' columns apart: a block's rows are not copied side by side
             m = self._kernel_rows(q, kinds)
             for o, k in zip(out, kinds):
                 o[i:i + step] = m[k] @ coef[:nc]
                 o[i:i + step] += monomials(q, ctr, self.R0, k) @ coef[nc:]
+
+        starts = range(0, pts.shape[0], step)
+        # the blocks' kernel columns (one thread's elementwise work each) on the stage's threads
+        with blas_threads(1) if workers() > 1 and len(starts) > 1 else contextlib.nullcontext():
+            parallel_map(block, starts)
         return out
 
     # ---- public -----------------------------------------------------------

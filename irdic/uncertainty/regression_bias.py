@@ -20,6 +20,8 @@ import threading
 
 import numpy as np
 
+from ..numerics.threads import workers
+
 __all__ = ["local_bias", "reference_spacing", "reference_options", "strain_reference_options", "noise_scale",
            "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z", "REFERENCE_SHARE", "REFERENCE_Z"]
 
@@ -340,7 +342,7 @@ def _neighbours(psi, k=BIAS_NEIGHBOURS):
 
     have = np.flatnonzero(np.isfinite(psi).all(axis=1))
     k = min(k, have.size)
-    nb = cKDTree(psi[have]).query(psi[have], k=k)[1].reshape(have.size, k)
+    nb = cKDTree(psi[have]).query(psi[have], k=k, workers=workers())[1].reshape(have.size, k)
     # the sum over each point's neighbours is one sparse product over all times and components
     # (a[:, nb] at once would hold T x N x k (x 3) values: GBs at paper scale)
     S = sparse.csr_matrix((np.ones(nb.size), (np.repeat(np.arange(have.size), k), nb.ravel())),
