@@ -116,9 +116,10 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
 #: DIC time and point of each part with the default settings (regressions, their noise probes and bias
 #: estimates), measured on the moving tube of the benchmarks (the fill and regression rescaled on the sweep
-#: tube since their tiles' factorisations run on every thread); the ETA rests on their ratios. ``write`` is the
+#: tube since their tiles' factorisations run on every thread; the set-up x 1.84 from six runs' set-up on it,
+#: 1.7-2.9 s against the 1.2 s modelled); the ETA rests on their ratios. ``write`` is the
 #: stage's store, written after :func:`fields` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 3.8e-7, "fill": 2.0e-6, "surface": 9.3e-6, "regression": 3.2e-6, "uncertainty": 1.64e-5,
+STAGE_COSTS = {"setup": 7.0e-7, "fill": 2.0e-6, "surface": 9.3e-6, "regression": 3.2e-6, "uncertainty": 1.64e-5,
                "rest": 9e-7, "write": 7.5e-7}
 #: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads; the surface's and
 #: the uncertainty's from their wall times on the sweep tube since the smoothing's candidates and the noise
