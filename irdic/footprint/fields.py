@@ -106,7 +106,7 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None, plan=None):
         n_in = int(inner.sum())
         out[:, k, inner] = box[:, :n_in]
         if lines is not None:
-            out[:, k, ext] = _extrapolated_noise(box[:, n_in:].reshape(b, -1, EXTRAP_SAMPLES), *lines[1:], side)
+            out[:, k, ext] = _extrapolated_noise(box[:, n_in:].reshape(b, -1, EXTRAP_SAMPLES), *lines[2:])
     return out
 
 
@@ -114,8 +114,8 @@ def _footprint_pixels(pix, side, extrapolated):
     """One time's boxes of :func:`footprint_noise`: ``(inner, ext, inv, n_pixels, lines)``, the points inside
     and extrapolated (N,) bool, each box's pixels (n, side²) as indices into the ``n_pixels`` distinct ones
     (sorted by pixel), the points inside first and then the extrapolation samples, and
-    :func:`_extrapolation_lines`; None where no point has a position. ``pix`` (N, 2) px,
-    ``extrapolated`` (N,) px or None."""
+    :func:`_extrapolation_lines` with :func:`_combination_std` last; None where no point has a position.
+    ``pix`` (N, 2) px, ``extrapolated`` (N,) px or None."""
     N = pix.shape[0]
     ok = np.isfinite(pix).all(axis=1)
     if not ok.any():
@@ -128,6 +128,8 @@ def _footprint_pixels(pix, side, extrapolated):
     centres = np.round(pix[inner])
     lines = None if not ext.any() else _extrapolation_lines(pix, inner, ext, extrapolated[ext])
     if lines is not None:
+        # the combinations' std, the same for every probe group: once per time
+        lines = lines + (_combination_std(*lines[1:], side),)
         centres = np.concatenate([centres, np.round(lines[0].reshape(-1, 2))])
     c = centres.astype(np.int64)
     keys = (c[:, 0:1] + ou) * 1_000_003 + (c[:, 1:2] + ov)  # (n, side²): the box's pixels
@@ -155,14 +157,19 @@ def _extrapolation_lines(pix, inner, ext, L):
     return samples, offsets, w
 
 
-def _extrapolated_noise(box, offsets, w, side):
-    """Unit-variance noise of the extrapolated points from their samples' box noise ``box`` (b, n_ext, S):
-    the parabola weights ``w`` (n_ext, S), normalised by the combination's std (boxes ``offsets`` apart
-    share ``(side - |du|)(side - |dv|)`` pixels)."""
+def _combination_std(offsets, w, side):
+    """The std (n_ext,) of the parabola weights ``w`` (n_ext, S) over unit-variance box noise of boxes
+    ``offsets`` (n_ext, S, 2) px apart: they share ``(side - |du|)(side - |dv|)`` pixels."""
     d = np.abs(offsets[:, :, None, :] - offsets[:, None, :, :])
     corr = np.prod(np.clip(side - d, 0, None), axis=-1) / side ** 2  # (n_ext, S, S)
-    var = np.einsum("ns,nst,nt->n", w, corr, w)
-    return np.einsum("bns,ns->bn", box, w) / np.sqrt(np.maximum(var, 1e-12))
+    return np.sqrt(np.maximum(np.einsum("ns,nst,nt->n", w, corr, w), 1e-12))
+
+
+def _extrapolated_noise(box, w, std):
+    """Unit-variance noise of the extrapolated points from their samples' box noise ``box`` (b, n_ext, S):
+    the parabola weights ``w`` (n_ext, S) over their combination's std ``std`` (n_ext,),
+    :func:`_combination_std`."""
+    return np.einsum("bns,ns->bn", box, w) / std
 
 
 def footprint_probes(points, window, sigma):
