@@ -135,7 +135,7 @@ def test_pools_keep_to_the_budget():
     import threading
     import time
 
-    from irdic.numerics.threads import map_beside, parallel_map, workers
+    from irdic.numerics.threads import map_beside, parallel_map, worker_slices, workers
 
     busy, peak, lock = [0], [0], threading.Lock()
 
@@ -160,6 +160,15 @@ def test_pools_keep_to_the_budget():
         assert peak[0] <= 2 and len(rest) == 6
         # the job started first: the items shared the other worker until it was done
         assert first in rest
+        assert worker_slices(5) == [slice(0, 3), slice(3, 6)] and worker_slices(0) == []
+
+        def blas(_):
+            return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+        # BLAS on one thread per worker while a pool runs, the stage's threads again after it
+        before = blas(None)
+        assert all(n == [1] * len(n) for n in parallel_map(blas, range(2), one_blas_thread=True))
+        assert blas(None) == before
     with stage_threads(1):
         peak[0] = 0
         first, rest = map_beside(lambda: work(None), work, range(3))

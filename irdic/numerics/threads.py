@@ -9,12 +9,13 @@ nested pool would run more threads than the stage was given.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
 from ..threads import blas_threads, thread_budget
 
-__all__ = ["workers", "parallel_map", "map_beside", "blas_threads"]
+__all__ = ["workers", "parallel_map", "map_beside", "worker_slices", "blas_threads"]
 
 #: set in the threads of a pool of this module
 _pool = threading.local()
@@ -34,14 +35,28 @@ def _marked():
     _pool.inside = True
 
 
-def parallel_map(fn, items):
-    """``list(map(fn, items))`` on a thread pool of :func:`workers` threads."""
+def parallel_map(fn, items, *, one_blas_thread=False):
+    """``list(map(fn, items))`` on a thread pool of :func:`workers` threads.
+
+    ``one_blas_thread``: while the pool runs, BLAS on one thread per worker
+    (:func:`blas_threads`; threaded BLAS beside the other workers only
+    contends); run in the calling thread (one worker or one item), BLAS keeps
+    the stage's threads.
+    """
     items = list(items)
     n = workers()
     if n == 1 or len(items) < 2:
         return [fn(i) for i in items]
-    with ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
-        return list(ex.map(fn, items))
+    with blas_threads(1) if one_blas_thread else contextlib.nullcontext():
+        with ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
+            return list(ex.map(fn, items))
+
+
+def worker_slices(n):
+    """Consecutive slices of ``range(n)``, one per worker of :func:`parallel_map` at most (``ceil(n / workers)``
+    items each)."""
+    step = max(1, -(-n // workers()))
+    return [slice(i, i + step) for i in range(0, n, step)]
 
 
 def map_beside(task, fn, items):

@@ -20,7 +20,7 @@ from ..logs import report
 from ..numerics.patterns import same_patterns
 from ..numerics.imq import imq_matrix, imq_planar
 from ..numerics.saddle import SaddleFactor
-from ..numerics.threads import blas_threads, parallel_map, workers
+from ..numerics.threads import blas_threads, parallel_map
 from ..threads import thread_budget
 from ..validation import choice, float_array, positive, psi_array, smoothing_factor
 from .parametrisation import MIN_POINTS
@@ -379,10 +379,8 @@ class SpatialInterpolant:
                 o[i:i + step] = m[k] @ coef[:nc]
                 o[i:i + step] += monomials(q, ctr, self.R0, k) @ coef[nc:]
 
-        starts = range(0, pts.shape[0], step)
         # the blocks' kernel columns (one thread's elementwise work each) on the stage's threads
-        with blas_threads(1) if workers() > 1 and len(starts) > 1 else contextlib.nullcontext():
-            parallel_map(block, starts)
+        parallel_map(block, range(0, pts.shape[0], step), one_blas_thread=True)
         return out
 
     # ---- public -----------------------------------------------------------

@@ -10,7 +10,6 @@ series, is exact and cheap.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 
 import numpy as np
@@ -18,7 +17,7 @@ import scipy.linalg
 
 from ..errors import ConfigError, DataError, GeometryError
 from ..numerics.imq import imq_matrix, imq_planar, regression_R0
-from ..numerics.threads import blas_threads, parallel_map, workers
+from ..numerics.threads import parallel_map
 from ..validation import float_array, positive, psi_array
 from .parametrisation import MIN_POINTS, median_spacing
 
@@ -197,10 +196,8 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
         pp = Qm.shape[1]
         return k, pp, n * rss / F.shape[1] / (n - pp) ** 2
 
-    ks = _candidates(candidates)
     # each candidate a QR and two products: on the stage's threads
-    with blas_threads(1) if workers() > 1 and len(ks) > 1 else contextlib.nullcontext():
-        table = [r for r in parallel_map(gcv, ks) if r is not None]
+    table = [r for r in parallel_map(gcv, _candidates(candidates), one_blas_thread=True) if r is not None]
     if not table:
         raise DataError(f"gcv_spatial: no candidate spacing fits {n} points (too few points)")
     best = min(table, key=lambda r: r[2])
@@ -255,8 +252,7 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row
 
     if pilot is None:
         return []
-    with blas_threads(1) if workers() > 1 and len(ks) > 1 else contextlib.nullcontext():
-        out = [pilot] + [r for r in parallel_map(risk, ks) if r is not None]
+    out = [pilot] + [r for r in parallel_map(risk, ks, one_blas_thread=True) if r is not None]
     if per_row is not None:
         per_row += [r[3] for r in out]
     return [r[:3] for r in out]

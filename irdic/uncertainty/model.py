@@ -68,7 +68,6 @@ spacings of the point cloud's edge.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import logging
 from typing import NamedTuple
@@ -79,7 +78,7 @@ from ..gradient import material_rate, surface_gradient
 from ..logs import report
 from ..numerics.temporal import TemporalInterpolant, rate_reference_weights, temporal_window
 from ..numerics.memory import release
-from ..numerics.threads import blas_threads, parallel_map, workers
+from ..numerics.threads import parallel_map, worker_slices
 from ..surface import drop_derivative_weights
 from ..vocabulary import Status
 from ..footprint.fields import footprint_probes
@@ -436,9 +435,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         def part(rows):  # the group's probes split over the stage's threads: the group's memory, not more
             return probe_block(noise[rows], regress_space, geo, visible, ks, W, sub, off, bias, ref_k)
 
-        rows = [slice(i, i + -(-b // workers())) for i in range(0, b, -(-b // workers()))]
-        with blas_threads(1) if len(rows) > 1 else contextlib.nullcontext():
-            parts = parallel_map(part, rows)
+        parts = parallel_map(part, worker_slices(b), one_blas_thread=True)
         del noise
         for sums, squares in parts:
             for k, a in sums.items():  # the exact interpolation's over the probes that ran through it (below)

@@ -21,11 +21,9 @@ estimated on the tensor too (:func:`strain_std`).
 
 from __future__ import annotations
 
-import contextlib
-
 import numpy as np
 
-from ..numerics.threads import blas_threads, parallel_map, workers
+from ..numerics.threads import parallel_map, worker_slices
 from ..strain import strain_components
 from ..surface import fit_surface
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, probe_times, spread
@@ -264,12 +262,12 @@ def _probe_tensors(points, sf, t, p, s_x, rng, window, ops, sub):
         # the group's probes split over the stage's threads (its memory, not more), each block through the
         # fit's operator and, for the first probes, the reference's; a probe that refits the whole record
         # (a regression in time) is GBs at paper scale: those one at a time
-        step = -(-len(draws) // workers()) if probe.stagewise else len(draws)
-        jobs = [(i, draws[j:j + step]) for i in range(1 + (regressed and start < BIAS_PROBES))
-                for j in range(0, len(draws), step)]
-        run = parallel_map if probe.stagewise else lambda fn, items: [fn(i) for i in items]
-        with blas_threads(1) if probe.stagewise and workers() > 1 else contextlib.nullcontext():
-            done = run(lambda job: probe.tensors(kws[job[0]], job[1]), jobs)
+        blocks = worker_slices(len(draws)) if probe.stagewise else [slice(None)]
+        jobs = [(i, draws[b]) for i in range(1 + (regressed and start < BIAS_PROBES)) for b in blocks]
+        def tensors(job):
+            return probe.tensors(kws[job[0]], job[1])
+
+        done = parallel_map(tensors, jobs, one_blas_thread=True) if probe.stagewise else list(map(tensors, jobs))
         for (i, _), tensors in zip(jobs, done):
             samples[i] += tensors
     return base, samples, bases, regressed, kw["smoothing"]
