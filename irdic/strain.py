@@ -24,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import ConfigError
+from .numerics.threads import parallel_map, worker_slices
 from .validation import shaped_array
 
 __all__ = [
@@ -248,6 +249,25 @@ def strain(tangents, ref_tangents, *, tensors=True):
     except ValueError:
         raise ConfigError(f"tangents {a.shape} and ref_tangents {A.shape} do not broadcast") from None
     lead = shape[:-2]
+    if tensors or a.shape != shape or A.ndim >= a.ndim or not lead[0]:
+        return _strain(a, A, lead, tensors)
+    # pointwise: blocks of the first axis (times) on the stage's threads give the same numbers
+    trail = dict(E2=(2, 2), direction_max=(3,), direction_min=(3,), direction_max_current=(3,),
+                 direction_min_current=(3,))
+    out = {k: np.empty(lead + trail.get(k, ())) for k in Strain._fields if k not in ("F", "E", "basis")}
+
+    def block(sl):
+        part = _strain(a[sl], A, (a[sl].shape[0],) + lead[1:], False)
+        for k, v in out.items():
+            v[sl] = getattr(part, k)
+        return part.basis
+
+    basis = parallel_map(block, worker_slices(lead[0]))[0]
+    return Strain(F=None, E=None, basis=basis, **out)
+
+
+def _strain(a, A, lead, tensors):
+    """:func:`strain` of the arrays ``a`` and ``A`` of broadcast leading shape ``lead``."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         E2, basis, Ad = _components(a, A, lead)
         B1, B2 = basis[..., 0, :], basis[..., 1, :]

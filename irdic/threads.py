@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import numbers
 import os
+import threading
 from typing import Iterator
 
 from threadpoolctl import threadpool_limits
@@ -89,6 +90,34 @@ def blas_threads(n: int) -> Iterator[None]:
     thread pool: threaded BLAS spends more time synchronising than computing
     on them (measured 3 GF/s against 30 GF/s single-threaded for n = 1000 on a
     loaded 2-core VM).
+
+    Notes
+    -----
+    BLAS has one limit for the process, so the blocks of all threads share
+    it: the first to enter sets it, a later one may only lower it, and the
+    last to leave restores the stage's. That is the block of a pool's caller
+    (:func:`irdic.numerics.threads.parallel_map`), whose workers, and their own
+    blocks, end before it; OpenBLAS 0.3.30 applies a limit set from a worker
+    thread to that thread only, so a worker restoring the limit it found would
+    not restore the process's.
     """
-    with threadpool_limits(limits=max(1, min(int(n), thread_budget())), user_api="blas"):
+    limit = max(1, min(int(n), thread_budget()))
+    with _BLAS_LOCK:
+        if _blas["depth"] == 0:
+            _blas["limits"], _blas["limit"] = threadpool_limits(limits=limit, user_api="blas"), limit
+        elif limit < _blas["limit"]:
+            threadpool_limits(limits=limit, user_api="blas")
+            _blas["limit"] = limit
+        _blas["depth"] += 1
+    try:
         yield
+    finally:
+        with _BLAS_LOCK:
+            _blas["depth"] -= 1
+            if _blas["depth"] == 0:
+                _blas.pop("limits").restore_original_limits()
+
+
+#: the BLAS limit of :func:`blas_threads` in force: blocks inside it (all threads), the limit, its restorer
+_blas: dict = {"depth": 0}
+_BLAS_LOCK = threading.Lock()

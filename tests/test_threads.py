@@ -167,9 +167,36 @@ def test_pools_keep_to_the_budget():
 
         # BLAS on one thread per worker while a pool runs, the stage's threads again after it
         before = blas(None)
-        assert all(n == [1] * len(n) for n in parallel_map(blas, range(2), one_blas_thread=True))
+        assert all(n == [1] * len(n) for n in parallel_map(blas, range(2)))
         assert blas(None) == before
     with stage_threads(1):
         peak[0] = 0
         first, rest = map_beside(lambda: work(None), work, range(3))
         assert peak[0] == 1 and set(rest) == {first} == {threading.get_ident()}
+
+
+def test_blas_limit_outlives_the_blocks_of_other_threads_inside_it():
+    # the limit is the process's: a worker leaving its own block while the pool's is open must not lift it
+    # (BLAS on several threads beside the other workers computes in an order that depends on the timing)
+    import threading
+
+    from irdic.threads import blas_threads
+
+    def blas():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    with stage_threads(2):
+        before = blas()
+        seen = []
+
+        def worker():
+            with blas_threads(1):
+                seen.append(blas())
+
+        with blas_threads(1):
+            t = threading.Thread(target=worker)
+            t.start()
+            t.join()
+            seen.append(blas())  # the worker's block is over, the pool's not yet
+        assert len(seen) == 2 and all(n == [1] * len(n) for n in seen)
+        assert blas() == before

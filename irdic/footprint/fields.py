@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
+from ..numerics.threads import parallel_map, worker_slices
 from ..vocabulary import Status
 from .extrapolation import EXTRAP_SAMPLES
 
@@ -95,9 +96,8 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None, plan=None):
     T, N = pixel.shape[:2]
     out = np.zeros((b, T, N))
     plan = {} if plan is None else plan
+    _plan_times(plan, pixel, side, extrapolated)
     for k in range(T):
-        if k not in plan:
-            plan[k] = _footprint_pixels(pixel[k], side, None if extrapolated is None else extrapolated[k])
         if plan[k] is None:
             continue
         inner, ext, inv, n_pixels, lines = plan[k]
@@ -108,6 +108,19 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None, plan=None):
         if lines is not None:
             out[:, k, ext] = _extrapolated_noise(box[:, n_in:].reshape(b, -1, EXTRAP_SAMPLES), *lines[2:])
     return out
+
+
+def _plan_times(plan, pixel, side, extrapolated):
+    """:func:`_footprint_pixels` of every time of ``pixel`` (T, N, 2) not yet in ``plan``, into it; the times
+    split over the stage's threads (each time's on its own: the same as one after the other)."""
+    missing = [k for k in range(pixel.shape[0]) if k not in plan]
+
+    def build(ks):
+        return [_footprint_pixels(pixel[k], side, None if extrapolated is None else extrapolated[k]) for k in ks]
+
+    blocks = [missing[s] for s in worker_slices(len(missing))]
+    for ks, built in zip(blocks, parallel_map(build, blocks)):
+        plan.update(zip(ks, built))
 
 
 def _footprint_pixels(pix, side, extrapolated):

@@ -177,7 +177,7 @@ class SaddleFactor:
         """
         if self.lu is not None:
             rhs = np.concatenate([F, np.zeros((self.P.shape[1], F.shape[1])) if Q is None else Q])
-            sol = scipy.linalg.lu_solve(self.lu, rhs, check_finite=False)
+            sol = lapack.lu_solve(self.lu, rhs)
             return sol[: self.K], sol[self.K:]
         if self._Y is None:
             m = self.P.shape[1]
@@ -210,7 +210,7 @@ class SaddleFactor:
         """
         if self.lu is not None:
             rhs = np.concatenate([B, Q], axis=1).T
-            return scipy.linalg.lu_solve(self.lu, rhs, trans=1, check_finite=False)[: self.K].T
+            return lapack.lu_solve(self.lu, rhs, trans=1)[: self.K].T
         return self.solve(B.T, Q.T)[0].T
 
     def coefficients(self, F):

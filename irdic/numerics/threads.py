@@ -9,7 +9,6 @@ nested pool would run more threads than the stage was given.
 
 from __future__ import annotations
 
-import contextlib
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -35,21 +34,20 @@ def _marked():
     _pool.inside = True
 
 
-def parallel_map(fn, items, *, one_blas_thread=False):
+def parallel_map(fn, items):
     """``list(map(fn, items))`` on a thread pool of :func:`workers` threads.
 
-    ``one_blas_thread``: while the pool runs, BLAS on one thread per worker
-    (:func:`blas_threads`; threaded BLAS beside the other workers only
-    contends); run in the calling thread (one worker or one item), BLAS keeps
-    the stage's threads.
+    While the pool runs, BLAS runs on one thread per worker
+    (:func:`blas_threads`): threaded BLAS beside the other workers would run
+    more threads than the stage was given, and only contend. Run in the
+    calling thread (one worker or one item), BLAS keeps the stage's threads.
     """
     items = list(items)
     n = workers()
     if n == 1 or len(items) < 2:
         return [fn(i) for i in items]
-    with blas_threads(1) if one_blas_thread else contextlib.nullcontext():
-        with ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
-            return list(ex.map(fn, items))
+    with blas_threads(1), ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
+        return list(ex.map(fn, items))
 
 
 def worker_slices(n):
@@ -71,7 +69,7 @@ def map_beside(task, fn, items):
     n = workers()
     if n == 1:
         return task(), [fn(i) for i in items]
-    with ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
+    with blas_threads(1), ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
         first = ex.submit(task)  # the pool's queue is first in, first out
         rest = list(ex.map(fn, items))
         return first.result(), rest

@@ -9,6 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, GeometryError
+from ..numerics.threads import parallel_map, worker_slices
 from ..validation import float_array, positive, psi_array
 from .parametrisation import short_triangles
 
@@ -116,6 +117,33 @@ def surface_geometry(tangents, *, min_sine=MIN_SINE):
     a = float_array(tangents, "tangents")
     if a.ndim < 2 or a.shape[-2:] != (2, 3):
         raise ConfigError(f"tangents must have shape (..., 2, 3), got {a.shape}")
+    lead = a.shape[:-2]
+    metric, inv, dual = (np.empty(lead + (2, n)) for n in (2, 2, 3))
+    normal, area = np.empty(lead + (3,)), np.empty(lead)
+    finite, degenerate = np.empty(lead, bool), np.empty(lead, bool)
+    outs = (metric, inv, dual, normal, area, finite, degenerate)
+
+    def block(sl):
+        for out, part in zip(outs, _geometry(a[sl], min_sine)):
+            out[sl] = part
+
+    # pointwise: blocks of the leading axis (times) on the stage's threads give the same numbers
+    parallel_map(block, worker_slices(lead[0]) if lead else [Ellipsis])
+    nd = int(degenerate.sum())
+    if nd:
+        if nd == int(finite.sum()):
+            raise GeometryError(
+                f"all {nd} tangent pairs are degenerate (parallel or zero): the surface has no area; "
+                "duplicate or collinear points?"
+            )
+        log.warning("%d of %d tangent pairs are degenerate (sine of their angle < %g): NaN there",
+                    nd, int(finite.sum()), min_sine)
+    return Geometry(metric, inv, dual, normal, area, degenerate)
+
+
+def _geometry(a, min_sine):
+    """:func:`surface_geometry`'s arrays of tangents ``a`` (..., 2, 3): metric, its inverse, dual vectors, unit
+    normal, area ratio (NaN where degenerate or not finite), whether finite and whether degenerate."""
     a1, a2 = a[..., 0, :], a[..., 1, :]
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         g11 = np.einsum("...i,...i->...", a1, a1)
@@ -133,13 +161,4 @@ def surface_geometry(tangents, *, min_sine=MIN_SINE):
         # a^a = a^ab a_b, written out (a batched 2 x 2 einsum is slow on 5e6 points)
         dual = np.stack([i11[..., None] * a1 + i12[..., None] * a2, i12[..., None] * a1 + i22[..., None] * a2], -2)
         normal = cross / np.where(bad, np.nan, area)[..., None]
-    nd = int(degenerate.sum())
-    if nd:
-        if nd == int(finite.sum()):
-            raise GeometryError(
-                f"all {nd} tangent pairs are degenerate (parallel or zero): the surface has no area; "
-                "duplicate or collinear points?"
-            )
-        log.warning("%d of %d tangent pairs are degenerate (sine of their angle < %g): NaN there",
-                    nd, int(finite.sum()), min_sine)
-    return Geometry(metric, inv, dual, normal, np.where(bad, np.nan, area), degenerate)
+    return metric, inv, dual, normal, np.where(bad, np.nan, area), finite, degenerate

@@ -19,6 +19,7 @@ from ..errors import ConfigError, DataError, GeometryError
 from ..logs import report
 from ..numerics.patterns import same_patterns
 from ..numerics.imq import imq_matrix, imq_planar
+from ..numerics.lapack import lu_solve
 from ..numerics.saddle import SaddleFactor
 from ..numerics.threads import blas_threads, parallel_map
 from ..threads import thread_budget
@@ -380,7 +381,7 @@ class SpatialInterpolant:
                 o[i:i + step] += monomials(q, ctr, self.R0, k) @ coef[nc:]
 
         # the blocks' kernel columns (one thread's elementwise work each) on the stage's threads
-        parallel_map(block, range(0, pts.shape[0], step), one_blas_thread=True)
+        parallel_map(block, range(0, pts.shape[0], step))
         return out
 
     # ---- public -----------------------------------------------------------
@@ -492,7 +493,7 @@ class SpatialInterpolant:
                 mb = ms[b:b + batch]
                 f = np.where(V[mb].reshape(V[mb].shape + (1,) * len(tail)), X[mb], 0.0).reshape(mb.size, self.n, -1)
                 rhs = -(GQ @ f.transpose(1, 0, 2).reshape(self.n, -1))
-                fq = scipy.linalg.lu_solve(lu, rhs, check_finite=False).reshape(Q.size, mb.size, width)
+                fq = lu_solve(lu, rhs).reshape(Q.size, mb.size, width)
                 out[mb[:, None], Q] = fq.transpose(1, 0, 2).reshape((mb.size, Q.size) + tail)
         log.info("filled %d missing (stage, point) values in %d stage(s): %.1f s", int(miss.sum()),
                  int(miss.any(axis=1).sum()), _time.perf_counter() - t0)

@@ -197,7 +197,7 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
         return k, pp, n * rss / F.shape[1] / (n - pp) ** 2
 
     # each candidate a QR and two products: on the stage's threads
-    table = [r for r in parallel_map(gcv, _candidates(candidates), one_blas_thread=True) if r is not None]
+    table = [r for r in parallel_map(gcv, _candidates(candidates)) if r is not None]
     if not table:
         raise DataError(f"gcv_spatial: no candidate spacing fits {n} points (too few points)")
     best = min(table, key=lambda r: r[2])
@@ -252,7 +252,7 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row
 
     if pilot is None:
         return []
-    out = [pilot] + [r for r in parallel_map(risk, ks, one_blas_thread=True) if r is not None]
+    out = [pilot] + [r for r in parallel_map(risk, ks) if r is not None]
     if per_row is not None:
         per_row += [r[3] for r in out]
     return [r[:3] for r in out]

@@ -260,14 +260,21 @@ def paper_std(points, sf, J):
     """
     _, _, _, (s_T, s_g, s_r) = _ir_noise(points.attrs)
     T, N = sf.x.shape[:2]
-    e = np.zeros((T, N, 2))
-    e[..., 0] = 1
-    Lu = surface_gradient(e, J, sf.tangents)
-    cu = material_rate(np.zeros((T, N)), e, J, sf.velocity).convective
-    e[..., 0], e[..., 1] = 0, 1
-    Lv = surface_gradient(e, J, sf.tangents)
-    cv = material_rate(np.zeros((T, N)), e, J, sf.velocity).convective
-    return np.full((T, N), s_T), s_g * np.sqrt(Lu ** 2 + Lv ** 2), np.sqrt(s_r ** 2 + s_g ** 2 * (cu ** 2 + cv ** 2))
+    grad, rate = np.empty((T, N, 3)), np.empty((T, N))
+
+    def block(sl):  # pointwise: blocks of times on the stage's threads give the same numbers
+        e = np.zeros(J[sl].shape[:2] + (2,))
+        e[..., 0] = 1
+        Lu = surface_gradient(e, J[sl], sf.tangents[sl])
+        cu = material_rate(np.zeros(e.shape[:2]), e, J[sl], sf.velocity[sl]).convective
+        e[..., 0], e[..., 1] = 0, 1
+        Lv = surface_gradient(e, J[sl], sf.tangents[sl])
+        cv = material_rate(np.zeros(e.shape[:2]), e, J[sl], sf.velocity[sl]).convective
+        grad[sl] = s_g * np.sqrt(Lu ** 2 + Lv ** 2)
+        rate[sl] = np.sqrt(s_r ** 2 + s_g ** 2 * (cu ** 2 + cv ** 2))
+
+    parallel_map(block, worker_slices(T))
+    return np.full((T, N), s_T), grad, rate
 
 
 def uncertainty_notes(unc, e_max):
@@ -435,7 +442,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         def part(rows):  # the group's probes split over the stage's threads: the group's memory, not more
             return probe_block(noise[rows], regress_space, geo, visible, ks, W, sub, off, bias, ref_k)
 
-        parts = parallel_map(part, worker_slices(b), one_blas_thread=True)
+        parts = parallel_map(part, worker_slices(b))
         del noise
         for sums, squares in parts:
             for k, a in sums.items():  # the exact interpolation's over the probes that ran through it (below)

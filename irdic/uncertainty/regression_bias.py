@@ -20,7 +20,7 @@ import threading
 
 import numpy as np
 
-from ..numerics.threads import workers
+from ..numerics.threads import parallel_map, worker_slices, workers
 
 __all__ = ["local_bias", "reference_spacing", "reference_options", "strain_reference_options", "noise_scale",
            "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z", "REFERENCE_SHARE", "REFERENCE_Z"]
@@ -286,7 +286,7 @@ def _local_estimate(d, noise_var, ok, nbs, scales, z):
     a = np.where(ok, np.square(d) - noise_var, 0.0)
     res = None
     for nb, scale in zip(nbs, scales):
-        count = _local_count(ok, nb)
+        count = _local_count(_one_mask(ok), nb)
         est = _local_mean(a, ok, nb, count)
         if scale is None:
             return np.maximum(est, 0.0)
@@ -324,7 +324,7 @@ def _null_scale(null, ok, nb):
         centre = np.ones(T, bool)
     ok = ok & np.isfinite(null).all(axis=0)
     mean = np.where(ok, null.mean(axis=0), 0.0)
-    count = _local_count(ok, nb)
+    count = _local_count(_one_mask(ok), nb)
     lv = _local_mean(mean, ok, nb, count)
     dev2 = sum(np.square(_local_mean(np.where(ok, n, 0.0) - mean, ok, nb, count)) for n in null) / (K - 1)
     ok, lv, dev2 = ok[centre], lv[centre], dev2[centre]
@@ -365,6 +365,13 @@ def _local_count(ok, nb):
     return _window_sum(np.asarray(ok, dtype=float), nb)
 
 
+def _one_mask(ok):
+    """``ok`` (T, N[, C]) as (T, N, 1) where every component has the same mask (counted once), else as it is."""
+    if ok.ndim == 3 and ok.shape[2] > 1 and (ok == ok[..., :1]).all():
+        return ok[..., :1]
+    return ok
+
+
 def _window_sum(v, nb):
     """Sum of ``v`` (T, N[, C]) over the neighbours ``nb`` of each point at its time and the adjacent ones
     (``nb`` None: over all points)."""
@@ -374,7 +381,14 @@ def _window_sum(v, nb):
         have, S = nb
         s = np.zeros(v.shape)
         vh = np.moveaxis(v[:, have], 1, 0)
-        s[:, have] = np.moveaxis((S @ vh.reshape(have.size, -1)).reshape(vh.shape), 0, 1)
+        X = vh.reshape(have.size, -1)
+        Y = np.empty(X.shape)
+
+        def part(cols):  # each column's sums on their own: blocks of columns on the stage's threads
+            Y[:, cols] = S @ X[:, cols]
+
+        parallel_map(part, worker_slices(X.shape[1]))
+        s[:, have] = np.moveaxis(Y.reshape(vh.shape), 0, 1)
     s2 = s.copy()
     s2[1:] += s[:-1]
     s2[:-1] += s[1:]

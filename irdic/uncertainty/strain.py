@@ -267,7 +267,7 @@ def _probe_tensors(points, sf, t, p, s_x, rng, window, ops, sub):
         def tensors(job):
             return probe.tensors(kws[job[0]], job[1])
 
-        done = parallel_map(tensors, jobs, one_blas_thread=True) if probe.stagewise else list(map(tensors, jobs))
+        done = parallel_map(tensors, jobs) if probe.stagewise else list(map(tensors, jobs))
         for (i, _), tensors in zip(jobs, done):
             samples[i] += tensors
     return base, samples, bases, regressed, kw["smoothing"]

@@ -155,3 +155,19 @@ def test_tensors_can_be_left_out_and_rebuilt():
     assert lean.E is None and lean.F is None
     np.testing.assert_array_equal(lean.e_max, full.e_max)
     np.testing.assert_allclose(strain_tensor(lean.E2, lean.basis), full.E, atol=1e-15)
+
+
+def test_strain_in_blocks_of_times_on_threads_equals_the_whole():
+    from irdic.strain import _strain
+    from irdic.threads import stage_threads
+
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(40, 2, 3))
+    a = A + 0.02 * rng.normal(size=(7, 40, 2, 3))
+    a[2, 5] = np.nan
+    with stage_threads(2):
+        got = strain(a, A, tensors=False)
+    want = _strain(a, A, (7, 40), False)
+    for name in got._fields:
+        x, y = getattr(got, name), getattr(want, name)
+        assert (x is None and y is None) or np.array_equal(x, y, equal_nan=True), name

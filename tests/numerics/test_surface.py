@@ -864,3 +864,19 @@ def test_the_laplacian_risk_takes_the_widest_spacing_within_one_standard_error()
     # too few tiles to judge a difference: no wider candidate is taken
     table = [(k, 10, float(np.mean(t))) for k, t in zip(ks, flat)]
     assert _widest_within_one_se(table, flat, pj, 100.0) == min(range(len(ks)), key=lambda i: table[i][2])
+
+
+def test_surface_geometry_in_blocks_of_times_equals_one_block():
+    from irdic.surface.geometry import _geometry
+    from irdic.threads import stage_threads
+
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(5, 30, 2, 3))
+    a[1, 3, 1] = 2 * a[1, 3, 0]  # degenerate
+    with stage_threads(2):
+        g = surface_geometry(a)
+    metric, inv, dual, normal, area, _, degenerate = _geometry(a, 1e-6)
+    for x, y in ((g.metric, metric), (g.inverse_metric, inv), (g.dual, dual), (g.normal, normal),
+                 (g.area_ratio, area), (g.degenerate, degenerate)):
+        assert np.array_equal(x, y, equal_nan=True)
+    assert g.degenerate[1, 3] and np.isnan(g.normal[1, 3]).all()

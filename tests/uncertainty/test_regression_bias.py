@@ -179,3 +179,22 @@ def test_spread_stack_rows_are_the_spread_arrays_rows_before_and_after_scaling()
     np.testing.assert_array_equal(st.rows(times), np.array([spread(x * 3.0, near)[times] for x in a]))
     every = SpreadStack(a[:, :3], np.arange(3))
     np.testing.assert_array_equal(every.rows(np.array([2, 0])), a[:, [2, 0]])
+
+
+def test_window_sums_on_threads_and_the_mask_counted_once_equal_one_thread():
+    from irdic.threads import stage_threads
+    from irdic.uncertainty.regression_bias import local_bias
+
+    rng = np.random.default_rng(5)
+    T, N = 9, 400
+    psi = rng.uniform(size=(N, 2))
+    d = rng.normal(size=(T, N, 3))
+    d[2, 7] = np.nan
+    var = np.abs(rng.normal(size=(T, N, 3)))
+    null = np.abs(rng.normal(size=(4, T, N, 3)))
+    with stage_threads(1):
+        one = [local_bias(d, var, psi, None, null, 6.0, {}, **kw) for kw in ({}, dict(z=2.0, share=0.5, pooled=True))]
+    with stage_threads(2):
+        two = [local_bias(d, var, psi, None, null, 6.0, {}, **kw) for kw in ({}, dict(z=2.0, share=0.5, pooled=True))]
+    for a, b in zip(one, two):
+        np.testing.assert_array_equal(a, b)
