@@ -1,8 +1,8 @@
 """Thread pools of a stage: its parallel parts share the stage's thread budget.
 
 The stage's thread budget (:func:`irdic.threads.thread_budget`) caps the
-workers; each worker runs single-threaded BLAS (see the callers), since
-LAPACK and BLAS release the GIL. A pool started inside a pool's worker runs
+workers; while a pool runs, each worker runs single-threaded BLAS (LAPACK and
+BLAS release the GIL, so the workers' factorisations run at once). A pool started inside a pool's worker runs
 inline (:func:`workers` is 1 there): the stage's threads are taken, and a
 nested pool would run more threads than the stage was given.
 """
