@@ -93,3 +93,16 @@ def test_lu_solves_on_one_factorisation_from_threads_equal_the_serial_solve():
     np.testing.assert_allclose(ref, scipy.linalg.solve(a, b), rtol=1e-10, atol=1e-12)
     assert all(np.array_equal(x, ref) for x in out)
     np.testing.assert_allclose(lapack.lu_solve(lu, b, trans=1), scipy.linalg.solve(a.T, b), rtol=1e-10, atol=1e-12)
+
+
+def test_no_module_solves_with_scipys_lu_solve_directly():
+    # every LU solve goes through lapack.lu_solve (private pivots): the fill's and the saddle factor's LU factors
+    # are shared by the stage's threads
+    from pathlib import Path
+
+    import irdic
+
+    root = Path(irdic.__file__).parent
+    direct = [str(f.relative_to(root)) for f in root.rglob("*.py")
+              if f.name != "lapack.py" and "linalg.lu_solve(" in f.read_text(encoding="utf-8")]
+    assert direct == []
