@@ -170,12 +170,12 @@ def trmm(alpha, a, b, lower=False, trans_a=False, overwrite_b=False):
 def lu_solve(lu_and_piv, b, trans=0):
     """``scipy.linalg.lu_solve`` with a private copy of the pivots: safe on a factorisation shared by threads.
 
-    scipy's ``getrs`` wrapper makes the pivots 1-based in place for the call
-    and 0-based again after it, with the GIL released: two threads solving
-    with one factorisation at once read each other's shifted pivots and
-    return wrong solutions without an error (scipy 1.17.1: 183 of 400
-    concurrent solves of a 60 x 60 system wrong, by up to 1.2 on a solution
-    of order 1; 295 of 400 at 400 x 400, by up to 52).
+    Two threads solving with one factorisation at once through scipy's
+    ``getrs`` wrapper get wrong solutions without an error (scipy 1.17.1:
+    183 of 400 concurrent solves of a 60 x 60 system wrong, by up to 1.2 on a
+    solution of order 1; 295 of 400 at 400 x 400, by up to 52). The wrapper
+    changes the pivot array during the call: with a copy of the pivots per
+    call every solve is right, the LU matrix itself still shared.
     """
     lu, piv = lu_and_piv
     return scipy.linalg.lu_solve((lu, np.array(piv, copy=True)), b, trans=trans, check_finite=False)
