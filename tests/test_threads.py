@@ -22,6 +22,11 @@ def _blas_threads_now():
     return {p["num_threads"] for p in threadpool_info() if p["user_api"] in ("blas", "openmp")}
 
 
+def _blas():
+    """The BLAS libraries' thread counts in force."""
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
 @pytest.fixture
 def recorder(monkeypatch):
     seen = []
@@ -162,13 +167,12 @@ def test_pools_keep_to_the_budget():
         assert first in rest
         assert worker_slices(5) == [slice(0, 3), slice(3, 6)] and worker_slices(0) == []
 
-        def blas(_):
-            return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
-
         # BLAS on one thread per worker while a pool runs, the stage's threads again after it
-        before = blas(None)
-        assert all(n == [1] * len(n) for n in parallel_map(blas, range(2)))
-        assert blas(None) == before
+        before = _blas()
+        assert all(n == [1] * len(n) for n in parallel_map(lambda _: _blas(), range(2)))
+        assert _blas() == before
+        done, built = map_beside(_blas, lambda _: _blas(), range(2))
+        assert all(n == [1] * len(n) for n in [done, *built]) and _blas() == before
     with stage_threads(1):
         peak[0] = 0
         first, rest = map_beside(lambda: work(None), work, range(3))
@@ -177,26 +181,23 @@ def test_pools_keep_to_the_budget():
 
 def test_blas_limit_outlives_the_blocks_of_other_threads_inside_it():
     # the limit is the process's: a worker leaving its own block while the pool's is open must not lift it
-    # (BLAS on several threads beside the other workers computes in an order that depends on the timing)
+    # (the workers' BLAS would then run more threads than the stage was given)
     import threading
 
     from irdic.threads import blas_threads
 
-    def blas():
-        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
-
     with stage_threads(2):
-        before = blas()
+        before = _blas()
         seen = []
 
         def worker():
             with blas_threads(1):
-                seen.append(blas())
+                seen.append(_blas())
 
         with blas_threads(1):
             t = threading.Thread(target=worker)
             t.start()
             t.join()
-            seen.append(blas())  # the worker's block is over, the pool's not yet
+            seen.append(_blas())  # the worker's block is over, the pool's not yet
         assert len(seen) == 2 and all(n == [1] * len(n) for n in seen)
-        assert blas() == before
+        assert _blas() == before

@@ -48,7 +48,7 @@ from ..footprint.visibility import Projection, masks_and_facing, project_points
 from ..image_rbf import evaluate_series
 from ..noise import interpolation_noise_gains, ir_noise as estimate_ir_noise
 from ..numerics.temporal import kernel_R0, temporal_window
-from ..numerics.threads import blas_threads, map_beside, parallel_map
+from ..numerics.threads import map_beside, parallel_map
 from ..parameters import settings
 from ..timing.clock import ir_clock
 from ..timing.offset import MIN_MOTION_PX
@@ -291,8 +291,7 @@ def _footprint(dic, ir, calibration, p, only=None, beside=None):
     def pool_map(fn, items):
         if beside is None:
             return parallel_map(fn, items)
-        with blas_threads(1):  # the job's products beside the masks: one thread each
-            done, built = map_beside(lambda: beside(pr), fn, items)
+        done, built = map_beside(lambda: beside(pr), fn, items)  # BLAS on one thread per worker while it runs
         result.append(done)
         return built
 

@@ -264,12 +264,13 @@ def _probe_tensors(points, sf, t, p, s_x, rng, window, ops, sub):
         # (a regression in time) is GBs at paper scale: those one at a time
         blocks = worker_slices(len(draws)) if probe.stagewise else [slice(None)]
         jobs = [(i, draws[b]) for i in range(1 + (regressed and start < BIAS_PROBES)) for b in blocks]
+
         def tensors(job):
             return probe.tensors(kws[job[0]], job[1])
 
         done = parallel_map(tensors, jobs) if probe.stagewise else list(map(tensors, jobs))
-        for (i, _), tensors in zip(jobs, done):
-            samples[i] += tensors
+        for (i, _), got in zip(jobs, done):
+            samples[i] += got
     return base, samples, bases, regressed, kw["smoothing"]
 
 
