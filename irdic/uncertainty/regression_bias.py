@@ -335,8 +335,9 @@ def _null_scale(null, ok, nb):
 
 
 def _neighbours(psi, k=BIAS_NEIGHBOURS):
-    """``(have, S)``: the points with parameters and the sparse (n_have x n_have) sum over each one's ``k``
-    nearest (None, the neighbourhood of :func:`_window_sum` over all points, is not built)."""
+    """``(have, S, chain)``: the points with parameters, the sparse (n_have x n_have) sum over each one's ``k``
+    nearest, and that sum as differences along a path through the points where it is cheaper
+    (:func:`_chain_sums`; None where not). None stands for all points (:func:`_window_sum`), not built here."""
     from scipy import sparse
     from scipy.spatial import cKDTree
 
@@ -347,7 +348,51 @@ def _neighbours(psi, k=BIAS_NEIGHBOURS):
     # (a[:, nb] at once would hold T x N x k (x 3) values: GBs at paper scale)
     S = sparse.csr_matrix((np.ones(nb.size), (np.repeat(np.arange(have.size), k), nb.ravel())),
                           shape=(have.size, have.size))
-    return have, S
+    return have, S, _chain_sums(psi[have], S)
+
+
+def _chain_sums(psi, S):
+    """``(order, D)``: the points in a path ``order`` through the cloud and ``D`` whose row ``j`` is the
+    neighbourhood of point ``order[j]`` minus that of ``order[j - 1]`` (the first: its own); None where ``D``
+    is not at most half as large as ``S``.
+
+    Notes
+    -----
+    The sums ``S X`` are then ``cumsum(D X)`` along the path, exactly up to
+    rounding (each partial sum is a point's window sum, so the rounding does
+    not grow with the path's length beyond a random walk: 1e-14 of the
+    sums' scale at 13,104 points). Consecutive points of the path are one
+    spacing apart (rows of one spacing, each run in the opposite direction
+    of the one before), so two neighbourhoods of ``k`` points differ by about
+    ``4 sqrt(k / π)`` points: 56 against 512 (the wide neighbourhood at paper
+    scale, 4.4 x faster), 16 against 32 (no gain: the cumulative sum costs
+    more than it saves).
+    """
+    from scipy.spatial import cKDTree
+
+    n = psi.shape[0]
+    if n < 3:
+        return None
+    gap = cKDTree(psi).query(psi, k=2)[0][:, 1]
+    h = float(np.median(gap))
+    if not h > 0:
+        return None
+    # rows along the parameters' wider extent, one spacing high
+    along, across = (0, 1) if np.ptp(psi[:, 0]) >= np.ptp(psi[:, 1]) else (1, 0)
+    row = np.floor((psi[:, across] - psi[:, across].min()) / h).astype(np.int64)
+    order = np.lexsort((np.where(row % 2 == 0, psi[:, along], -psi[:, along]), row))
+    A = S[order]
+    D = (A - _shifted(A)).tocsr()
+    D.eliminate_zeros()
+    return (order, D) if 2 * D.nnz <= S.nnz else None
+
+
+def _shifted(A):
+    """``A`` (CSR) with its rows moved down by one, the first row empty."""
+    from scipy import sparse
+
+    indptr = np.concatenate([[0], A.indptr[:-1]])
+    return sparse.csr_matrix((A.data[:A.indptr[-2]], A.indices[:A.indptr[-2]], indptr), shape=A.shape)
 
 
 def _local_mean(a, ok, nb, count=None):
@@ -378,14 +423,20 @@ def _window_sum(v, nb):
     if nb is None:
         s = np.broadcast_to(v.sum(axis=1, keepdims=True), v.shape).astype(float)
     else:
-        have, S = nb
+        have, S, chain = nb
         s = np.zeros(v.shape)
         vh = np.moveaxis(v[:, have], 1, 0)
         X = vh.reshape(have.size, -1)
         Y = np.empty(X.shape)
+        # a value that is not finite would reach every later point of the path, not only its neighbours
+        chain = chain if chain is not None and np.isfinite(X).all() else None
 
         def part(cols):  # each column's sums on their own: blocks of columns on the stage's threads
-            Y[:, cols] = S @ X[:, cols]
+            if chain is None:
+                Y[:, cols] = S @ X[:, cols]
+            else:
+                order, D = chain
+                Y[order, cols] = np.cumsum(D @ X[:, cols], axis=0)
 
         parallel_map(part, worker_slices(X.shape[1]))
         s[:, have] = np.moveaxis(Y.reshape(vh.shape), 0, 1)

@@ -198,3 +198,27 @@ def test_window_sums_on_threads_and_the_mask_counted_once_equal_one_thread():
         two = [local_bias(d, var, psi, None, null, 6.0, {}, **kw) for kw in ({}, dict(z=2.0, share=0.5, pooled=True))]
     for a, b in zip(one, two):
         np.testing.assert_array_equal(a, b)
+
+
+def test_wide_window_sums_along_the_path_equal_the_direct_sums():
+    from irdic.uncertainty.regression_bias import _neighbours, _window_sum
+
+    rng = np.random.default_rng(6)
+    # a scattered strip with a hole and points without parameters
+    psi = rng.uniform(size=(3000, 2)) * [4.0, 1.0]
+    psi[np.hypot(psi[:, 0] - 2.0, psi[:, 1] - 0.5) < 0.3] = np.nan
+    psi[::41] = np.nan
+    nb = _neighbours(psi, 256)
+    assert nb[2] is not None and nb[2][1].nnz < 0.3 * nb[1].nnz  # the path's differences are the cheaper sums
+    direct = nb[:2] + (None,)
+    v = rng.normal(size=(4, psi.shape[0], 3)) + 5.0
+    got, want = _window_sum(v, nb), _window_sum(v, direct)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    assert not got[:, ::41].any()  # no parameters: no neighbourhood
+    # a value that is not finite spoils its neighbours' sums only, as the direct sums do
+    v[1, 5, 0] = np.nan
+    got, want = _window_sum(v, nb), _window_sum(v, direct)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    assert 0 < np.isnan(got[..., 0]).mean() < 0.3
+    # a small neighbourhood keeps the direct sums
+    assert _neighbours(psi, 32)[2] is None
