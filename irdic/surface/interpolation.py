@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import threading
 import warnings
 import time as _time
 
@@ -130,6 +131,8 @@ class SpatialInterpolant:
         self._global = None
         self._ls = None
         self._ls_at = None
+        # the regression's factor and rows are built on first use, maybe by two of a pool's workers at once
+        self._ls_lock = threading.RLock()
         self._local = None
         self._local_tiles = None
         self._g = None
@@ -342,9 +345,10 @@ class SpatialInterpolant:
     # ---- regression ------------------------------------------------------
 
     def _ls_factor(self):
-        if self._ls is None:
-            self._ls = ls_design(self.psi, self.k, self.h, self.c, self.R0)
-        return self._ls
+        with self._ls_lock:
+            if self._ls is None:
+                self._ls = ls_design(self.psi, self.k, self.h, self.c, self.R0)
+            return self._ls
 
     def _kernel_rows(self, q, kinds):
         """The regression's kernel columns at ``q`` (n, 2): value and, for ``kinds`` with 1 or 2, the
@@ -363,8 +367,9 @@ class SpatialInterpolant:
         coef = scipy.linalg.solve_triangular(Rm, Qm.T @ F, check_finite=False)
         if at_nodes and pts.shape[0] * (len(centres) + 3) * 8 * 3 <= _BLOCK_BYTES:
             # the rows at the points themselves serve every later evaluation there (noise probes, GCV trials)
-            if self._ls_at is None:
-                self._ls_at = dict(zip((0, 1, 2), self._ls_rows(pts, (0, 1, 2))))
+            with self._ls_lock:
+                if self._ls_at is None:
+                    self._ls_at = dict(zip((0, 1, 2), self._ls_rows(pts, (0, 1, 2))))
             return [self._ls_at[k] @ coef for k in kinds]
         out = [np.empty((pts.shape[0], F.shape[1])) for _ in kinds]
         # the blocks of all the stage's threads together hold _BLOCK_BYTES per kind (they run on its threads here,

@@ -880,3 +880,37 @@ def test_surface_geometry_in_blocks_of_times_equals_one_block():
                  (g.area_ratio, area), (g.degenerate, degenerate)):
         assert np.array_equal(x, y, equal_nan=True)
     assert g.degenerate[1, 3] and np.isnan(g.normal[1, 3]).all()
+
+
+def test_the_regressions_factor_is_built_once_when_two_threads_ask_at_once(monkeypatch):
+    import threading
+    import time
+
+    import irdic.surface.interpolation as interpolation
+
+    rng = np.random.default_rng(3)
+    psi = rng.uniform(0.0, 10.0, (300, 2))
+    sp = interpolation.SpatialInterpolant(psi, smoothing=3.0)
+    built = []
+    design = interpolation.ls_design
+
+    def slow_design(*args):
+        built.append(1)
+        time.sleep(0.2)  # both threads inside the lazy build at once, were it not guarded
+        return design(*args)
+
+    monkeypatch.setattr(interpolation, "ls_design", slow_design)
+    F = rng.normal(size=(300, 2))
+    out = [None, None]
+
+    def evaluate(i):
+        out[i] = sp.evaluate(F)
+
+    threads = [threading.Thread(target=evaluate, args=(i,)) for i in range(2)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert len(built) == 1 and out[0] is not None and out[1] is not None
+    for a, b in zip(out[0], out[1]):
+        np.testing.assert_array_equal(a, b)
