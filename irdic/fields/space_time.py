@@ -16,8 +16,9 @@ from ..footprint.fields import paper_value
 from ..gradient import material_rate, surface_gradient
 from ..logs import report
 from ..numerics.series import fill_series, smooth_series
-from ..numerics.temporal import RATE_MAX_FRACTION, rate_reference_weights
+from ..numerics.temporal import RATE_MAX_FRACTION, gcv_temporal, rate_reference_weights
 from ..uncertainty.model import paper_std, uncertainties
+from .smoothing import gradient_noise_var, guarded_time_smoothing
 from .spatial import regressed_gradient
 
 __all__ = ["space_time", "temperature_fields"]
@@ -58,8 +59,12 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     spatial = None
     ops = {} if ops is None else ops  # the spatial operators of the regressions and their probes, factorised once
     if p["temperature_smoothing_space"] is not None:
+        def noise_var(ks):  # the regressed gradient's noise, for the choice of the smoothing in time
+            return gradient_noise_var(points, sf.psi, geo.dual, ks, p, ops)
+
         def regress(th, ser, q=p):
-            return space_time(th, t, sf, geo, q, ser, rate.convective, visible, (total, loc), ops)
+            return space_time(th, t, sf, geo, q, ser, rate.convective, visible, (total, loc), ops,
+                              noise_var if ser is None else None)
         grad, total, loc, best, spatial, chosen_k = regress(theta, series)
         if "temperature_paper" in points:  # footprint temperatures: the value from the paper's, same spacings
             best, spatial = paper_value(points, series, lambda th, ser: regress(th, ser, {**p, **chosen_k}), spatial)
@@ -85,7 +90,7 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     return grad, total, loc, rate.convective, best, unc
 
 
-def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, ops=None):
+def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, ops=None, noise_var=None):
     """Gradient, rate (material, local) and value of the space-time regression of the point temperatures.
 
     Parameters
@@ -105,6 +110,10 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
         The paper's rate and local part, kept when there is no regression in time.
     ops : dict, optional
         Cache of the spatial operators (:func:`irdic.surface.shared_interpolant`).
+    noise_var : callable, optional
+        ``noise_var(ks)``: the noise variance (K²/mm² per component) of the gradient regressed with spacing
+        ``ks`` (:func:`~irdic.fields.smoothing.gradient_noise_var`); with it a ``"gcv"`` smoothing in time is
+        guarded (:func:`~irdic.fields.smoothing.guarded_time_smoothing`).
 
     Returns
     -------
@@ -142,7 +151,8 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     # the regressions in time below fill the same gaps: once, together
     th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
     tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)
-    fit = smooth_series(th_s, ts_in, t_eval, smoothing=p["temperature_smoothing"], **tkw)
+    fit = smooth_series(th_s, ts_in, t_eval, smoothing=_time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var),
+                        **tkw)
     rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw)
     chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing
     total = np.where(visible, rate_fit.rate, np.nan)
@@ -158,6 +168,18 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     bias_inputs = (theta, grad, (own_v := np.where(visible, own.value, np.nan)), value, total - rate_reference_weights(
         ts_in, t_eval, smoothing=rate_fit.smoothing) @ th_s, total - own_rate, smoothed - exact.value, own_v)
     return grad, total, total - convective, value, bias_inputs, chosen
+
+
+def _time_spacing(th_s, t, grad, psi, p, ks, noise_var):
+    """``temperature_smoothing``, a ``"gcv"`` one resolved where ``noise_var`` is given: GCV's choice on the
+    filled series ``th_s`` (as :func:`~irdic.numerics.series.smooth_series` makes it), kept where its bias does not
+    outweigh the noise it removes from the gradient ``grad`` (:func:`~irdic.fields.smoothing.guarded_time_smoothing`)."""
+    k = p["temperature_smoothing"]
+    if k != "gcv" or noise_var is None:
+        return k
+    live = np.isfinite(th_s).all(axis=0)
+    k = gcv_temporal(t, th_s[:, live] if live.any() else th_s, c=p["c_time"], R0=p["R0_time"])[0]
+    return guarded_time_smoothing(k, t, grad, psi, noise_var(ks), p)
 
 
 def _rate_series(th_s, ts_in, t_eval, p, fit, tkw):

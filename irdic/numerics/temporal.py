@@ -192,6 +192,10 @@ class TemporalInterpolant:
         """``(first, last)`` sample time in s."""
         return float(self.times[0]), float(self.times[-1])
 
+    def residual_ss(self, F):
+        """The regression's residual sum of squares over the columns of ``F`` (n_times, n); a regression only."""
+        return float(np.sum((F - self._Q @ (self._Q.T @ F)) ** 2))
+
     def in_span(self, t_eval):
         """Boolean array: which evaluation times lie within the span (False for NaN)."""
         te = float_array(t_eval, "t_eval")
@@ -355,7 +359,7 @@ def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=GC
         if p in seen or p > int(max_fraction * M) or ts.centre_index.size < 3:
             continue
         seen.add(p)
-        rss = float(np.sum((F - ts._Q @ (ts._Q.T @ F)) ** 2))
+        rss = ts.residual_ss(F)
         table.append((k, p, M * rss / F.shape[1] / (M - p) ** 2))
     if not table:
         log.warning("temporal GCV: %d times are too few for a regression; interpolating", M)

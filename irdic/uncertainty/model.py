@@ -297,6 +297,12 @@ def _rate_bias_flags(rate_biased, visible, notes):
     return rate_biased & visible
 
 
+def point_noise(a) -> float:
+    """The point temperatures' white noise (K) from ``points.zarr``'s attrs ``a`` (:func:`_ir_noise`); NaN where
+    they do not record it."""
+    return _ir_noise(a)[3][0]
+
+
 def _ir_noise(a):
     """Pixel noise (K) of points.zarr's attrs: temporal noise, quantisation step, their sum, and the
     point-level noise of temperature, pixel gradient and local rate (via the interpolation's noise gains)."""

@@ -299,3 +299,20 @@ def test_gcv_on_the_judged_columns_is_the_choice_of_smooth_series(n_series):
     dead[0] = 1.0
     with pytest.raises(DataError, match="NaN"):
         gcv_temporal(t, gcv_columns(dead, t))
+
+
+def test_bias_ratio_is_one_on_noise_and_large_where_the_regression_cannot_follow():
+    from irdic.numerics.temporal_risk import CP_LIMIT, bias_ratio
+
+    rng = np.random.default_rng(0)
+    t = np.arange(21) * 0.5
+    sigma = 0.05
+    # a smooth heating with white noise: the residual is the noise's (M - p) sigma² per series
+    smooth = 20.0 + 0.03 * t[:, None] ** 2 + rng.normal(0.0, sigma, (21, 400))
+    assert 0.9 < bias_ratio(t, smooth, 3.0, sigma**2) < 1.1
+    # a 1.4 mm band passing the points at 1.9 mm/s, sampled at 2 Hz: no regression with centres every 3 times
+    # follows it; its residual is bias, many times the noise's
+    x = np.linspace(0.0, 18.0, 400)
+    band = 20.0 + 2.0 * np.exp(-0.5 * ((1.9 * t[:, None] - x[None, :]) / 0.6) ** 2) + rng.normal(0.0, sigma, (21, 400))
+    assert bias_ratio(t, band, 3.0, sigma**2) > 5 * CP_LIMIT
+    assert np.isnan(bias_ratio(t, band, 3.0, 0.0))
