@@ -1,0 +1,44 @@
+"""The guard on the fields' regression in time (irdic.fields.smoothing.guarded_time_smoothing)."""
+
+import numpy as np
+
+from irdic.fields.smoothing import guarded_time_smoothing, parameter_dual
+from irdic.fields.spatial import regressed_gradient
+
+P = {"c_time": 1.0, "R0_time": 1.0, "c_space": 0.95, "R0_space": 1.0}
+
+
+def _grid(n=24):
+    g = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 2) * 0.5
+    return g.astype(float)
+
+
+def test_the_guard_keeps_a_regression_that_follows_the_signal_and_interpolates_where_it_cannot():
+    rng = np.random.default_rng(1)
+    psi = _grid()
+    t = np.arange(21) * 0.5
+    sigma = 0.01
+    # a gradient that changes slowly in time, with white noise of the stated variance
+    slow = np.broadcast_to(np.stack([1.0 + 0.02 * t, 0.5 - 0.01 * t, 0 * t], -1)[:, None], (21, psi.shape[0], 3))
+    noisy = slow + rng.normal(0.0, sigma, slow.shape)
+    assert guarded_time_smoothing(3.0, t, noisy, psi, sigma**2, P) == 3.0
+    # a band 0.6 mm wide passing every point at 1.9 mm/s: its gradient changes within two samples
+    band = np.zeros_like(noisy)
+    band[..., 0] = -2.0 * (1.9 * t[:, None] - psi[None, :, 0]) / 0.36 * np.exp(
+        -((1.9 * t[:, None] - psi[None, :, 0]) ** 2) / 0.36)
+    assert guarded_time_smoothing(3.0, t, band + rng.normal(0.0, sigma, band.shape), psi, sigma**2, P) == 1.0
+    # the rim's points are not judged: jumps there (mixed pixels at a moving outline) leave the choice alone
+    rim = noisy.copy()
+    edge = (psi.min(axis=1) < 0.5) | (psi.max(axis=1) > 11.0)
+    rim[:, edge] += rng.normal(0.0, 50 * sigma, (21, edge.sum(), 3))
+    assert guarded_time_smoothing(3.0, t, rim, psi, sigma**2, P) == 3.0
+    # interpolation already, or no noise known: nothing to guard
+    assert guarded_time_smoothing(1.0, t, band, psi, sigma**2, P) == 1.0
+    assert guarded_time_smoothing(3.0, t, band, psi, float("nan"), P) == 3.0
+
+
+def test_the_parameter_dual_gives_the_gradient_in_the_surface_parameters():
+    psi = _grid(12)
+    theta = np.broadcast_to(20.0 + 0.3 * psi[:, 0] - 0.2 * psi[:, 1], (2, psi.shape[0]))
+    grad = regressed_gradient(theta, psi, parameter_dual(psi.shape[0]), 3.0, c=0.95, R0=1.0)[0]
+    np.testing.assert_allclose(grad, np.broadcast_to([0.3, -0.2, 0.0], grad.shape), atol=1e-6)
