@@ -20,7 +20,7 @@ from ..numerics.temporal import RATE_MAX_FRACTION, gcv_temporal
 from ..numerics.temporal_risk import CP_LIMIT, bias_ratio
 from ..parameters import settings
 from ..surface import fit_surface
-from .spatial import JUDGED_MARGIN, regressed_gradient, space_gcv
+from .spatial import judged_points, regressed_gradient, space_gcv
 
 __all__ = ["GCV_STAGES", "SMOOTHING", "checked_settings", "resolve_gcv", "surface_kw", "guarded_time_smoothing",
            "gradient_noise_var", "parameter_dual"]
@@ -146,14 +146,11 @@ def guarded_time_smoothing(k, t, grad, psi, noise_var, p):
     at the edge of a moving specimen the mixed pixels change from stage to stage, which no noise model holds
     (the family's twisting members: 2.1-3.0 x with them, 0.4-0.7 without).
     """
-    from ..surface import edge_distance
-    from ..surface.parametrisation import median_spacing
-
     if not k > 1:
         return k
     have = np.isfinite(psi).all(axis=1)
     inner = np.zeros(have.shape, bool)
-    inner[have] = edge_distance(psi[have]) >= JUDGED_MARGIN * median_spacing(psi[have])
+    inner[have] = judged_points(psi[have])
     cols = inner & np.isfinite(grad).all(axis=(0, 2))
     if cols.sum() < 6:
         return k

@@ -14,7 +14,7 @@ import numpy as np
 from ..surface.parametrisation import median_spacing
 from ..threads import thread_budget
 
-__all__ = ["JUDGED_MARGIN", "regressed_gradient", "space_gcv", "space_gcv_filled"]
+__all__ = ["JUDGED_MARGIN", "judged_points", "regressed_gradient", "space_gcv", "space_gcv_filled"]
 
 log = logging.getLogger(__name__)
 
@@ -22,6 +22,14 @@ log = logging.getLogger(__name__)
 #: The temperature regression's spacing is judged on points more than this many point spacings inside the
 #: cloud's edge (:func:`space_gcv_filled`).
 JUDGED_MARGIN = 3.0
+
+
+def judged_points(p):
+    """Which points (surface parameters ``p``, (N, 2), all finite) lie more than :data:`JUDGED_MARGIN` point
+    spacings inside the cloud's edge: those the smoothing choices judge by."""
+    from ..surface import edge_distance
+
+    return edge_distance(p) >= JUDGED_MARGIN * median_spacing(p)
 
 
 def space_gcv_filled(filled, p, *, c, R0, separation=None):
@@ -32,13 +40,12 @@ def space_gcv_filled(filled, p, *, c, R0, separation=None):
     the values: the gradient is what this regression is for, and GCV's curve
     is flat where the gradient's error still halves. ``separation`` (mm): one IR pixel (see there).
     """
-    from ..surface import edge_distance
     from ..surface.regression import gradient_risk_spatial
 
     sample = filled[np.linspace(0, filled.shape[0] - 1, min(filled.shape[0], 8)).astype(int)].T
     # the rim's data carry more than noise (mixed edge pixels, extrapolation), which the least smoothed
     # pilot follows: judged inside it, all points fitted
-    judged = edge_distance(p) >= JUDGED_MARGIN * median_spacing(p)
+    judged = judged_points(p)
     k, _ = gradient_risk_spatial(p, sample, c=c, R0=R0, judged=judged if judged.sum() >= 6 else None,
                                  separation=separation)
     log.info("temperature_smoothing_space: the gradient's estimated risk chose %.1f point spacings", k)
