@@ -68,7 +68,7 @@ def pixel_pitch(points: xr.Dataset, psi) -> float | None:
     return float(np.median(d[use, 1] / dpx[use])) if use.any() else None
 
 
-def footprint_noise(rng, pixel, side, shape, extrapolated=None, plan=None):
+def footprint_noise(rng, pixel, side, shape, extrapolated=None, plan=None, amplified=False):
     """White pixel noise (unit variance) through the box mean of ``side`` px about each point's nearest
     pixel, scaled to unit variance: probes (``shape`` (b,) + pixel.shape[:-1]) with the spatial correlation
     of the footprint temperatures' noise (neighbouring points closer than ``side`` px share pixels).
@@ -90,7 +90,10 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None, plan=None):
     the demo tube (1 in 10 of its point values extrapolated, 7 x the variance
     of the others) 1.2-1.6 x (value) and 1.2-1.7 x (gradient) above the
     probes' at 12 point spacings. Their variance stays the caller's
-    (``points.temperature_footprint_noise_factor``).
+    (``points.temperature_footprint_noise_factor``), or, with ``amplified``,
+    is the extrapolation's: the parabola's weights over the samples' boxes
+    (a point L px outside the mask has 1.3 (L = 1) to 2.6 (L = 3) x an inside
+    point's noise, :func:`irdic.footprint.extrapolation.extrapolate`).
     """
     b = shape[0]
     T, N = pixel.shape[:2]
@@ -106,7 +109,9 @@ def footprint_noise(rng, pixel, side, shape, extrapolated=None, plan=None):
         n_in = int(inner.sum())
         out[:, k, inner] = box[:, :n_in]
         if lines is not None:
-            out[:, k, ext] = _extrapolated_noise(box[:, n_in:].reshape(b, -1, EXTRAP_SAMPLES), *lines[2:])
+            w, std = lines[2:]
+            out[:, k, ext] = _extrapolated_noise(box[:, n_in:].reshape(b, -1, EXTRAP_SAMPLES), w,
+                                                 1.0 if amplified else std)
     return out
 
 
@@ -179,9 +184,9 @@ def _combination_std(offsets, w, side):
 
 
 def _extrapolated_noise(box, w, std):
-    """Unit-variance noise of the extrapolated points from their samples' box noise ``box`` (b, n_ext, S):
-    the parabola weights ``w`` (n_ext, S) over their combination's std ``std`` (n_ext,),
-    :func:`_combination_std`."""
+    """Noise of the extrapolated points from their samples' box noise ``box`` (b, n_ext, S): the parabola
+    weights ``w`` (n_ext, S) over ``std`` (n_ext,): their combination's std (:func:`_combination_std`) for
+    unit variance, 1.0 for the extrapolation's own."""
     return np.einsum("bns,ns->bn", box, w) / std
 
 
@@ -199,8 +204,9 @@ def footprint_probes(points, window, sigma):
     ext = extrapolated(points) if window is None else window.extrapolated
     plan = {}  # each time's pixels, shared by the probe groups
     if "temperature_paper" not in points:
-        # the paper's temperatures alone: points closer than a pixel share its noise
-        return (lambda rng, b: footprint_noise(rng, pixel, 1, (b,), ext, plan)), None
+        # the paper's temperatures alone: points closer than a pixel share its noise, and an extrapolated
+        # value has the extrapolation's (no noise factor of the couple stage's for these)
+        return (lambda rng, b: footprint_noise(rng, pixel, 1, (b,), ext, plan, amplified=True)), None
     side = int(points.attrs.get("footprint_px", 1))
     if window is None:
         factor = points["temperature_footprint_noise_factor"].values if "temperature_footprint_noise_factor" in \

@@ -229,3 +229,38 @@ def test_footprint_noise_with_a_shared_plan_draws_what_it_draws_without(side):
     for a, b in zip(shared, alone):
         np.testing.assert_array_equal(a, b)
     assert np.all(shared[0][:, :, edge] != 0) and not np.array_equal(shared[0], shared[1])
+
+
+def test_probes_without_footprint_carry_the_extrapolations_amplified_noise():
+    """Points 3 px apart (no footprint): a value extrapolated from the mask edge is a parabola through the
+    pixels inside, whose noise it amplifies (1.3 at 1 px, 2.6 at 3 px outside); its probes carry that
+    amplification, within the Monte Carlo spread of the couple stage's (4 realisations of a twisted tube).
+    Normalised to the inside points' noise, as before, they put the extrapolated values' std at half the
+    real one, and the regressed gradient's noise at 1 / 1.4 of its own (a demo-scale member)."""
+    from irdic.coupling import couple
+    from irdic.footprint.fields import footprint_noise, footprint_probes
+    from irdic.synthetic import family
+
+    errs = []
+    for seed in range(4):
+        scene = family.build(family.recipe(202), "tiny", noise_seed=seed)
+        pts = couple(*scene.inputs())
+        errs.append(pts.temperature.values - scene.truth().sel(point=pts.point).temperature.values)
+    assert pts.attrs["footprint_px"] == 1 and "temperature_paper" not in pts
+    e = np.array(errs)
+    e = (e - e.mean(axis=0)) * np.sqrt(len(e) / (len(e) - 1))
+    status = pts.status.values
+    inside, ext = (status == 0) & np.isfinite(e).all(axis=0), (status == 1) & np.isfinite(e).all(axis=0)
+    assert inside.sum() > 1000 and ext.sum() > 300
+
+    def amplification(noise):  # the extrapolated values' rms noise over the inside points'
+        return float(np.sqrt(np.mean(noise[:, ext] ** 2) / np.mean(noise[:, inside] ** 2)))
+
+    real = amplification(e)
+    probes = amplification(np.array(footprint_probes(pts, None, 1.0)[0](np.random.default_rng(0), 16)))
+    pixel = pts.pixel.transpose("time", "point", "axis").values
+    ext_px = np.where(status == 1, -pts.edge_distance.values, np.nan)
+    unit = amplification(footprint_noise(np.random.default_rng(0), pixel, 1, (16,), ext_px))
+    assert real > 1.8, real
+    assert 0.7 < probes / real < 1.1, (probes, real)
+    assert unit / real < 0.6, (unit, real)
