@@ -137,7 +137,12 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     """
     kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
     chosen = {"temperature_smoothing": None, "temperature_smoothing_space": None}
-    grad, value, ks = regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], **kw)
+    # the regressed field also where a point has no temperature (its DIC point missing at a stage): its series in
+    # time then has the same time's neighbours' estimate there, not a fill in time (at 1 Hz a 2-stage gap's fill
+    # by the interpolant, a kernel one stage wide, left 0.09 K, and the rate beside it 10 x its noise)
+    grad, field, ks = regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], everywhere=True,
+                                         **kw)
+    value = np.where(np.isfinite(theta), field, np.nan)
     chosen["temperature_smoothing_space"] = ks
     total, loc = paper_rate
     if p["temperature_smoothing"] is None:
@@ -145,9 +150,9 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     # a chunk regresses its window's series (in space at each stage, then in time) and evaluates at its own times
     if series is not None:
         th_in, ts_in, t_eval, record = series.theta, series.t, t, series.record
-        _, th_s, _ = regressed_gradient(th_in, sf.psi, None, ks, **kw)
+        _, th_s, _ = regressed_gradient(th_in, sf.psi, None, ks, everywhere=True, **kw)
     else:
-        th_in, ts_in, t_eval, record, th_s = theta, t, None, t, value
+        th_in, ts_in, t_eval, record, th_s = theta, t, None, t, field
     # the regressions in time below fill the same gaps: once, together
     th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
     tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)

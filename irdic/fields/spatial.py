@@ -66,12 +66,14 @@ def space_gcv(theta, psi, *, c, R0, ops=None, separation=None):
     return space_gcv_filled(filled, psi[have], c=c, R0=R0, separation=separation)
 
 
-def regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
+def regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None, everywhere=False):
     """In-plane gradient and value from a spatial regression of the point temperatures of each time.
 
     Missing values of a time are filled from that time's visible points first;
     times with fewer than 6 visible points stay NaN. Returns ``(grad (T, N, 3)
-    K/mm, value (T, N) degC, the centre spacing factor used)``; ``dual`` None:
+    K/mm, value (T, N) degC, the centre spacing factor used)``, both NaN where
+    the input is, or with ``everywhere`` the value also at the points without
+    one (the regressed field there, from the time's other points); ``dual`` None:
     the values only (``grad`` None, no derivatives computed). ``dual`` (T_d, N, 2, 3) may hold
     fewer times than ``theta``: row ``m`` of ``theta`` then uses the dual basis
     of time ``m % T_d`` (noise probes stacked along time). ``ops``: a cache of
@@ -119,5 +121,6 @@ def regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None):
                 grad[tt[:, None], cols] = g
         grad[~visible] = np.nan
     val[times[:, None], cols] = v0.T
-    val[~visible] = np.nan
+    if not everywhere:
+        val[~visible] = np.nan
     return grad, val, k

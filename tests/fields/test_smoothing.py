@@ -42,3 +42,19 @@ def test_the_parameter_dual_gives_the_gradient_in_the_surface_parameters():
     theta = np.broadcast_to(20.0 + 0.3 * psi[:, 0] - 0.2 * psi[:, 1], (2, psi.shape[0]))
     grad = regressed_gradient(theta, psi, parameter_dual(psi.shape[0]), 3.0, c=0.95, R0=1.0)[0]
     np.testing.assert_allclose(grad, np.broadcast_to([0.3, -0.2, 0.0], grad.shape), atol=1e-6)
+
+
+def test_regressed_field_everywhere_holds_the_points_without_a_temperature():
+    """``everywhere``: the regressed value also at a point without a temperature (the field the time's other
+    points give there, close to the truth of a smooth field), the values elsewhere and the gradient as without."""
+    rng = np.random.default_rng(3)
+    psi = np.stack(np.meshgrid(np.arange(14.0), np.arange(12.0)), -1).reshape(-1, 2)
+    truth = 20 + 0.3 * psi[:, 0] - 0.02 * psi[:, 1] ** 2
+    theta = np.stack([truth + k + rng.normal(0, 0.01, truth.size) for k in range(3)])
+    theta[1, 50] = np.nan
+    dual = parameter_dual(psi.shape[0])
+    g0, v0, _ = regressed_gradient(theta, psi, dual, 3.0, c=0.95, R0=1.0)
+    g1, v1, _ = regressed_gradient(theta, psi, dual, 3.0, c=0.95, R0=1.0, everywhere=True)
+    assert np.isnan(v0[1, 50]) and abs(v1[1, 50] - (truth[50] + 1)) < 0.05
+    np.testing.assert_array_equal(np.where(np.isfinite(theta), v1, np.nan), v0)
+    np.testing.assert_array_equal(g1, g0)
