@@ -136,14 +136,11 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     regressed series, by a lighter regression in time (:func:`_rate_series`).
     """
     kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
-    chosen = {"temperature_smoothing": None, "temperature_smoothing_space": None}
-    # the regressed field also where a point has no temperature (its DIC point missing at a stage): its series in
-    # time then has the same time's neighbours' estimate there, not a fill in time (at 1 Hz a 2-stage gap's fill
-    # by the interpolant, a kernel one stage wide, left 0.09 K, and the rate beside it 10 x its noise)
+    # also where a point has no temperature: its series in time holds the time's field there (docs/method.md, 4)
     grad, field, ks = regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], everywhere=True,
                                          **kw)
     value = np.where(np.isfinite(theta), field, np.nan)
-    chosen["temperature_smoothing_space"] = ks
+    chosen = {"temperature_smoothing": None, "temperature_smoothing_space": ks}
     total, loc = paper_rate
     if p["temperature_smoothing"] is None:
         return grad, total, loc, value, (theta, grad, theta, value, theta), chosen
