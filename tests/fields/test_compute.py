@@ -376,3 +376,37 @@ def test_a_missing_dic_point_leaves_the_rate_beside_it_as_accurate_as_elsewhere(
 
     assert rel(beside) < 1.5 * rel(seen & ~beside), (rel(beside), rel(seen & ~beside))
     assert rel(seen) < 0.05, rel(seen)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["shell-edge", "cap-spot", 202, "thin-tube-band"])
+def test_family_members_monte_carlo_coverage_of_temperature_and_gradient(name, monkeypatch):
+    """Monte Carlo over three noise realisations of four kinds of scene (800 points of the family: a static
+    shell heated from its edge, a stretched sphere cap with a hot spot, a twisted tube heated smoothly, a
+    thin stretched tube with a 1.5 mm band): the denoised temperature's and the gradient's errors over their
+    std (interior points not flagged bias-dominated) have an RMS of 0.75-1.3 and 88-99 % lie within 2 std.
+    Measured: RMS 0.81-1.20, 90-97 %; the goal 0.8-1.25 / 92-98 % holds at the family's demo scale on these
+    (benchmarks/README.md). The rate is left out: its std is still too narrow on two of them (RMS 1.5)."""
+    from irdic.synthetic import family
+
+    monkeypatch.setitem(family.FAMILY_SCALES, "test", (800, None))
+    z2 = {"temperature": [], "temperature_gradient": []}
+    for seed in range(3):
+        scene = family.draw(name, "test", noise_seed=seed) if isinstance(name, int) else \
+            family.member(name, "test", noise_seed=seed)
+        dic, ir, cal = scene.inputs()
+        pts = couple(dic, ir, cal)
+        f = fields(pts, cal)
+        tr = scene.truth().sel(point=pts.point)
+        inner = pts.visible.values & (tr.patch_edge_distance.values >= 2.0)
+        inner[[0, -1]] = False
+        for v, true in (("temperature", "temperature"), ("temperature_gradient", "temperature_gradient")):
+            m = inner if f[v].ndim == 2 else np.repeat(inner[..., None], 3, axis=-1)
+            m = m & ~f[f"{v}_bias_dominated"].values
+            z = (f[v].values - tr[true].values)[m] / f[f"{v}_std"].values[m]
+            z2[v].append(z[np.isfinite(z)] ** 2)
+    for v, parts in z2.items():
+        zz = np.concatenate(parts)
+        assert zz.size > 5000, (v, zz.size)
+        rms, within2 = float(np.sqrt(zz.mean())), float(np.mean(zz <= 4.0))
+        assert 0.75 <= rms <= 1.3 and 0.88 <= within2 <= 0.99, (v, rms, within2)
