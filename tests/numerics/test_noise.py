@@ -70,3 +70,33 @@ def test_choose_smoothing_rule():
     assert c is None and "interpolation" in why
     assert choose_smoothing("auto", noise=0.003, gain=np.sqrt(2), signal=None, what="strain")[0] == "gcv"
     assert choose_smoothing("auto", noise=np.nan, gain=1.0, signal=1.0, what="x")[0] is None
+
+
+@pytest.mark.parametrize("sigma", [0.02, 0.05, 0.1])
+def test_ir_noise_of_an_export_rounded_to_two_decimals(sigma):
+    """White noise exported with 2 decimals (0.01 K steps): the temporal and spatial estimates are within 1.5 %
+    of ``sqrt(σ² + q²/12)``; the MAD of the same residuals, quantised by the rounding, is 10 % low at 0.02 K."""
+    from irdic.noise import ir_noise, mad_std
+
+    rng = np.random.default_rng(7)
+    frames = np.round(25.0 + rng.normal(0.0, sigma, (30, 60, 80)), 2)
+    est = ir_noise(frames, np.arange(30) * 0.1, np.ones((60, 80), bool))
+    want = np.hypot(sigma, 0.01 / np.sqrt(12))
+    assert abs(est.temporal / want - 1) < 0.015 and abs(est.spatial / want - 1) < 0.015, (est, want)
+    if sigma == 0.02:
+        r = (frames[:-2] - 2 * frames[1:-1] + frames[2:]) / np.sqrt(6)
+        assert mad_std(r) / want < 0.93
+
+
+def test_clipped_std_is_robust_and_handles_noise_below_the_rounding():
+    """Outliers (1 % dead pixels at 50 σ) leave :func:`clipped_std` within 1 % of σ; residuals mostly 0 (noise
+    below the export's step) give the plain standard deviation, not 0."""
+    from irdic.noise import clipped_std
+
+    rng = np.random.default_rng(2)
+    r = rng.normal(0.0, 0.05, 100_000)
+    r[:1000] = 2.5
+    assert abs(clipped_std(r) / 0.05 - 1) < 0.01
+    q = np.round(rng.normal(0.0, 0.002, 10_000), 2)
+    assert clipped_std(q) == pytest.approx(np.std(q)) and clipped_std(q) > 0
+    assert np.isnan(clipped_std([np.nan]))
