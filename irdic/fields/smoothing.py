@@ -82,11 +82,13 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
     if p["temperature_smoothing"] == "gcv":
         grad = None
         if p["temperature_smoothing_space"] not in (None, "gcv"):
-            # judged on the spatially regressed series, as the fields regress them (see irdic.fields.space_time.space_time);
-            # the gradient in the surface parameters (no surface yet) for the guard below
+            # judged on the spatially regressed series, as the fields regress them (the field also where a point has
+            # no temperature: irdic.fields.space_time.space_time); the gradient in the surface parameters (no
+            # surface yet) for the guard below
             dual = parameter_dual(psi.shape[0])
             ks = p["temperature_smoothing_space"]
-            grad, theta = regressed_gradient(theta, psi, dual, ks, c=p["c_space"], R0=p["R0_space"], ops=ops)[:2]
+            grad, theta = regressed_gradient(theta, psi, dual, ks, c=p["c_space"], R0=p["R0_space"], ops=ops,
+                                             everywhere=True)[:2]
             noise_var = gradient_noise_var(points.isel(time=w), psi, dual, ks, p, ops)
         # what smooth_series(theta, smoothing="gcv") would choose, at the cost of the series GCV judges; once
         # for both choices below
