@@ -43,13 +43,19 @@ history of its own, heat flowing in from a grip) is not rank-one: where the
 one-component model's residuals hold structure, models of two and three
 components (``X_k = a_k + sum_i b_ik P_i``) are fitted as well, and the
 distance between their estimates is part of the uncertainty
-(:func:`_model_order`).
+(:func:`_model_order`). The components beyond the first follow the
+pattern's change, which is weak: where they absorb nearly all of the
+motion's signal, the estimate rests on what the noise leaves of their
+fitted shape, so the refinement is repeated on the frames with their noise
+drawn again and must stay within its stated uncertainty
+(:func:`_check_stable`).
 
 When it cannot work: a static specimen (no motion: every offset fits the
-same), a uniform temperature (no pattern to carry), or motion too small for
-the noise (the uncertainty exceeds :data:`MAX_STD_FRAMES` IR frame periods):
+same), a uniform temperature (no pattern to carry), motion too small for
+the noise (the uncertainty exceeds :data:`MAX_STD_FRAMES` IR frame periods),
+or a pattern whose change of shape the motion mimics:
 :class:`~irdic.errors.DataError` naming the configuration key, with the
-motion found and the uncertainty it allows.
+motion found and the uncertainty it allows (:mod:`irdic.timing.checks`).
 """
 
 from __future__ import annotations
@@ -62,18 +68,18 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..errors import DataError
+from .checks import (MAX_STD_FRAMES, MIN_MOTION_JITTERS, MIN_MOTION_PX, check_fit, check_identified, check_inside,
+                     check_motion, check_sizes)
 from .nodes import Mesh, Nodes
 from .samples import Criterion, Sampler, leading, prepared
 from .score import Score, Uncertainty, secant, solve, uncertainty
 
 __all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_FRAMES", "WIDEN_SAMPLES", "MAX_SAMPLES",
-           "SMOOTHING_PX", "NODE_SPACING_PX", "GRADIENT_PX", "SPLINE_ORDER", "MIN_MOTION_PX", "MIN_MOTION_JITTERS"]
+           "SMOOTHING_PX", "NODE_SPACING_PX", "GRADIENT_PX", "SPLINE_ORDER", "MIN_MOTION_PX", "MIN_MOTION_JITTERS",
+           "STABLE_DRAWS"]
 
 log = logging.getLogger(__name__)
 
-#: an estimate whose standard uncertainty exceeds this many IR frame periods is refused: two standard
-#: uncertainties stay within 0.2 frame periods
-MAX_STD_FRAMES = 0.12
 #: frames used (evenly spread over the record)
 MAX_FRAMES = 600
 #: samples (nodes x frames) of the refinement: beyond the first the nodes are spread wider (up to twice), beyond
@@ -85,14 +91,6 @@ SMOOTHING_PX, NODE_SPACING_PX, GRADIENT_PX = 0.5, 1.0, 4.0
 SPLINE_ORDER = 5
 #: the search: smoothing (px), nodes and samples (nodes x frames) at most
 SEARCH_SMOOTHING_PX, SEARCH_NODES, SEARCH_SAMPLES = 1.5, 1500, 100_000
-#: an offset is estimated only where the points move at least this much in the image (px) ...
-MIN_MOTION_PX = 0.5
-#: ... and at least this many times their scatter from stage to stage (DIC noise)
-MIN_MOTION_JITTERS = 20.0
-#: the rank-one misfit at the estimate may exceed the frames' pixel noise by this factor at most ...
-FIT_RATIO = 1.5
-#: ... with this floor (K) under the noise (noise-free exports)
-FIT_FLOOR_K = 0.005
 #: the score from one frame period either side of the estimate must point back to within this many frame
 #: periods of it, or this many of its standard uncertainties
 BASIN_FRAMES, BASIN_STDS = 0.5, 4.0
@@ -105,6 +103,10 @@ MAX_RANK, STRUCTURE_RATIO, STRUCTURE_FRAMES = 3, 1.25, 0.03
 SLACK_FRAMES = 0.25
 #: frames (spread over the record) on which the fit and the basin are checked at most
 CHECK_FRAMES = 16
+#: the refinement is repeated from the estimate on the frames with this many fresh realisations of their pixel
+#: noise added; the RMS of its moves may reach this many of the white-noise part of its standard uncertainty plus
+#: this many frame periods (a refinement restarted without noise need not land on its own root exactly)
+STABLE_DRAWS, STABLE_STDS, STABLE_FRAMES = 3, 3.0, 0.05
 #: the refinement's weights are fitted again at the secant's root where it lies this many frame periods away
 REFIT_FRAMES = 0.1
 #: coarse candidates at most
@@ -216,12 +218,12 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     t_ir, t_dic = np.asarray(t_ir, float), np.asarray(t_dic, float)
     pos = prepared(np.asarray(positions, float), t_dic)
     period = float(np.median(np.diff(t_ir))) if t_ir.size > 1 else np.nan
-    _check_sizes(pos, t_dic, t_ir, parameter)
+    check_sizes(pos, t_dic, t_ir, parameter)
     motion, jitter = _motion(pos)
     if t_ir.size > max_frames:
         keep = np.linspace(0, t_ir.size - 1, max_frames).round().astype(int)
         frames, t_ir = frames[keep], t_ir[keep]
-    _check_motion(motion, jitter, parameter)
+    check_motion(motion, jitter, parameter)
     frames = np.asarray(frames, dtype=np.float32)
     mesh = Mesh(pos, t_dic)
     coarse = _nodes(mesh, SEARCH_SMOOTHING_PX, max(2.0, np.sqrt(mesh.area / SEARCH_NODES)))
@@ -232,18 +234,29 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     rank, shift = _model_order(fits, period)
     tau, score, parts, grid, crit = fits[rank]
     parts = dataclasses.replace(parts, model=shift)
-    _check_identified(parts, period, motion, parameter)
-    _check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
-    _check_fit(_misfit(fine, score.idx[_spread_out(score.idx.size, CHECK_FRAMES)], tau, rank), sigma, tau, period,
+    check_identified(parts, period, motion, parameter)
+    check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
+    check_fit(_misfit(fine, score.idx[_spread_out(score.idx.size, CHECK_FRAMES)], tau, rank), sigma, tau, period,
                parameter)
     _check_basin(score, tau, parts.std, period, parameter)
+    # a second or third component is fitted to the pattern's change, which is weak next to the pattern: its
+    # fitted shape, and the weights built on it, carry the noise (one component is fitted at full strength)
+    redrawn = _check_stable(score, tau, sigma, parts, period, motion, parameter) if rank > 1 else np.nan
     out = ClockOffset(tau, parts.std, period, motion, sigma, grid, crit, int(score.idx.size), int(fine.M), parts, rank)
-    log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames: noise %.3f, robust %.3f, "
-             "motion between DIC stages %.3f; %d frames x %d nodes %.2g px apart, %d pattern component%s, motion up "
-             "to %.3g px, pixel noise %.3g K)", tau, parts.std, tau / period, parts.std / period, parts.noise / period,
-             parts.robust / period, parts.interpolation / period, out.frames, out.points, spacing, rank,
-             "s" if rank > 1 else "", motion, sigma)
+    _log(out, spacing, redrawn)
     return out
+
+
+def _log(out: ClockOffset, spacing: float, redrawn: float):
+    """The estimate and the parts of its uncertainty, in IR frame periods, to the log."""
+    parts, period = out.parts, out.frame_period
+    log.info("IR clock offset from the data: %.5g s +- %.2g s (%.3f +- %.3f IR frames: noise %.3f, robust per tile "
+             "%.3f and per frame %.3f, motion between DIC stages %.3f, pattern model %.3f; %d frames x %d nodes %.2g "
+             "px apart, %d pattern component%s, motion up to %.3g px, pixel noise %.3g K; under redrawn pixel noise "
+             "the refinement moved by %.3f frames RMS, nan: one component, not redrawn)", out.offset, out.std,
+             out.offset / period, out.std / period, parts.noise / period, parts.robust / period,
+             parts.frames / period, parts.interpolation / period, parts.model / period, out.frames, out.points,
+             spacing, out.rank, "s" if out.rank > 1 else "", out.motion_px, out.noise, redrawn / period)
 
 
 def _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma):
@@ -312,15 +325,21 @@ def _spread_out(n: int, count: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(n, max(8, count))).round().astype(int))
 
 
-def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parameter: str, rank: int):
+def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parameter: str, rank: int,
+             rate: np.ndarray | None = None):
     """The root of the fixed-weight score from ``tau0``: the weights fitted at ``tau0``, refitted at the secant's
     root where it lies more than :data:`REFIT_FRAMES` frame periods away (weights fitted off the root lose
-    precision on a weak pattern); (tau, score, slope)."""
+    precision on a weak pattern); (tau, score, slope). ``rate``: the samples' rate of change on the frames
+    ``tau0`` places inside the record, where known (the secant's, from a refinement on the same frames)."""
     tau, score, slope = np.nan, None, np.nan
     idx = sampler.inside(tau0, tau0, SLACK_FRAMES * period)
     if idx.size >= 4:
         score = Score(sampler, idx, tau0, GRADIENT_PX, rank)
-        start, rate = secant(score, tau0, period)
+        if rate is None or rate.shape != (idx.size, sampler.M):
+            start, rate = secant(score, tau0, period)
+        else:
+            slope = float(np.sum(score.Y * rate))
+            start = tau0 - score(tau0) / slope if slope > 0 else np.nan
         if np.isfinite(start) and abs(start - tau0) > REFIT_FRAMES * period:
             again = sampler.inside(start, start, SLACK_FRAMES * period)
             if again.size >= 4:
@@ -360,52 +379,6 @@ def _motion(pos: np.ndarray) -> tuple[float, float]:
     return float(disp.max()), float(np.sqrt(np.mean(d2**2) / 6.0))
 
 
-def _check_sizes(pos, t_dic, t_ir, parameter):
-    if pos.shape[1] < 10 or t_dic.size < 2 or t_ir.size < 4:
-        raise DataError(f"{parameter}: auto needs at least 10 DIC points seen at half the DIC times or more, 2 DIC "
-                        f"times and 4 IR frames; found {pos.shape[1]} points, {t_dic.size} DIC times, "
-                        f"{t_ir.size} IR frames: set {parameter} to a number (s)")
-
-
-def _check_motion(motion, jitter, parameter):
-    if not motion >= max(MIN_MOTION_PX, MIN_MOTION_JITTERS * jitter):
-        raise DataError(
-            f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
-            f"{motion:.2g} px in the IR image over the record (their positions scatter by {jitter:.2g} px from "
-            f"stage to stage), less than {MIN_MOTION_PX:g} px or {MIN_MOTION_JITTERS:g} times that scatter: a static "
-            f"specimen carries no timing information. Set {parameter} to a number (s; docs/time-sync.md)")
-
-
-def _check_identified(parts, period, motion, parameter):
-    std = parts.std
-    if np.isfinite(std) and std <= MAX_STD_FRAMES * period:
-        return
-    if parts.model > max(parts.noise, parts.robust, parts.interpolation):
-        why = (f"the temperature pattern changes its shape on the material (heat flowing in from a grip, a "
-               f"travelling band): models of two and three pattern components "
-               + (f"put the offset {parts.model:.3g} s apart" if np.isfinite(parts.model) else "do not fit")
-               + ", so the motion cannot be told from the pattern's change")
-    else:
-        why = ("the offset shows where the image velocity changes (the motion starts, stops or turns) on a "
-               "temperature pattern; a static specimen, motion at a constant rate, a uniform temperature or too "
-               "little motion for the record's noise carry no timing information")
-    raise DataError(
-        f"{parameter}: auto cannot estimate the clock offset from the data: the DIC points move at most "
-        f"{motion:.3g} px in the IR image over the record, and the temperature pattern they carry fixes the "
-        f"offset only to {_fmt_std(std, period)}, more than {MAX_STD_FRAMES:g} IR frame period ({period:.4g} s): "
-        f"{why}. Set {parameter} to a number (s; docs/time-sync.md)")
-
-
-def _check_inside(tau, grid, crit, motion, parameter):
-    """The refined offset must lie inside the searched range (not at its end: the minimum may lie beyond)."""
-    tol = 0.02 * (grid[1] - grid[0])
-    if not grid[0] + tol < tau < grid[-1] - tol and np.ptp(crit) > 1e-12 * max(crit.max(), 1e-300):
-        raise DataError(
-            f"{parameter}: auto: the best offset lies at the end of the searched range {grid[0]:.4g}..{grid[-1]:.4g} s "
-            f"(the DIC points move at most {motion:.3g} px in the IR image): the clocks differ by more than a "
-            f"quarter of the record, or the data do not fix the offset; set {parameter} to a number (s)")
-
-
 def _frame_noise(frames: np.ndarray, max_frames: int = 20) -> float:
     """Pixel noise (K) of the frames whatever the offset: the robust spread of each pixel less the mean of its
     four neighbours (``sigma^2 (1 + 1/4)`` for white noise; a smooth pattern cancels, edges are few)."""
@@ -428,18 +401,6 @@ def _misfit(sampler: Sampler, idx: np.ndarray, tau: float, rank: int) -> float:
     n, m = X.shape
     dof = n * m - n - rank * (n + m - rank)
     return float(np.sqrt(np.sum(R * R / gain) / dof)) if dof > 0 else np.nan
-
-
-def _check_fit(misfit, noise, tau, period, parameter):
-    """At the estimate the rank-one model must explain the frames to their pixel noise: a larger misfit means a
-    wrong basin (an offset beyond the searched range) or a pattern that does not move with the material."""
-    if misfit > FIT_RATIO * np.hypot(noise, FIT_FLOOR_K):
-        raise DataError(
-            f"{parameter}: auto cannot estimate the clock offset from the data: at the best offset found "
-            f"({tau:.4g} s, {tau / period:.2f} IR frames) the frames do not follow the DIC motion (the specimen's "
-            f"temperature pattern misfits by {misfit:.3g} K against a pixel noise of {noise:.3g} K): the offset lies "
-            f"beyond the searched quarter of the record, or the pattern changes on the material. Set {parameter} "
-            f"to a number (s; docs/time-sync.md)")
 
 
 def _check_basin(score: Score, tau: float, std: float, period: float, parameter: str):
@@ -469,10 +430,37 @@ def _check_basin(score: Score, tau: float, std: float, period: float, parameter:
                 f"number (s; docs/time-sync.md)")
 
 
-def _fmt_std(std: float, period: float) -> str:
-    if not np.isfinite(std):
-        return "no precision at all (the criterion is flat)"
-    return f"+- {std:.3g} s ({std / period:.2f} IR frames)"
+def _check_stable(score: Score, tau: float, sigma: float, parts: Uncertainty, period: float, motion: float,
+                  parameter: str) -> float:
+    """The refinement repeated from the root ``tau`` of ``score`` on the frames with :data:`STABLE_DRAWS` fresh
+    realisations of their pixel noise (``sigma`` K, white; a fixed seed) added must move it by no more than the
+    white noise's part of the uncertainty allows (module constants :data:`STABLE_STDS`,
+    :data:`STABLE_FRAMES`); the RMS of its moves (s).
+
+    The stated uncertainty treats the estimate as linear in the pixel noise, with the pattern and the weights
+    fitted once. Where the model absorbs nearly all of the motion's signal (a pattern whose change of shape the
+    motion mimics: an edge profile that widens on a stretching specimen) the little that is left rests on the
+    fitted pattern, and noise moves the estimate by frames, not by its stated fraction of one. Each move here is
+    one draw of the estimate's scatter under the added noise, which for a linear estimator has the standard
+    deviation of the white-noise part.
+    """
+    moves = []
+    for draw in range(STABLE_DRAWS):
+        noisy = score.sampler.with_noise(sigma, np.random.default_rng([20261206, draw]))
+        try:
+            moves.append(_refined(noisy, tau, period, motion, parameter, score.rank, score.dX)[0] - tau)
+        except DataError:
+            moves.append(np.inf)
+    rms = float(np.sqrt(np.mean(np.square(moves))))
+    if rms <= STABLE_STDS * parts.noise + STABLE_FRAMES * period:
+        return rms
+    raise DataError(
+        f"{parameter}: auto cannot estimate the clock offset from the data: the estimate ({tau:.4g} s, "
+        f"{tau / period:.2f} IR frames, +- {parts.noise / period:.2g} frames from the pixel noise) moves by "
+        f"{rms / period:.2g} IR frames RMS when the frames' pixel noise ({sigma:.3g} K) is drawn again: the "
+        f"temperature pattern changes its shape on the material in step with the motion (an edge profile that "
+        f"widens while the specimen stretches), so the frames hardly tell the offset (the DIC points move at most "
+        f"{motion:.3g} px in the IR image). Set {parameter} to a number (s; docs/time-sync.md)")
 
 
 def _coarse(sampler, centre, period, parameter, rank):

@@ -12,6 +12,8 @@ components where the pattern changes its shape on the material).
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
@@ -49,6 +51,15 @@ class Sampler:
     @property
     def M(self) -> int:
         return self.nodes.M
+
+    def with_noise(self, sigma: float, rng: np.random.Generator) -> "Sampler":
+        """The same sampler on the frames with another realisation of white pixel noise of ``sigma`` K added
+        (the nodes' positions, which do not depend on the frames, shared with this one)."""
+        out = copy.copy(self)
+        out.raw = self.raw + rng.standard_normal(self.raw.shape, dtype=np.float32) * np.float32(sigma)
+        out.frames = (gaussian_filter(out.raw, (0, self.smoothing, self.smoothing), mode="nearest")
+                      if self.smoothing > 0 else out.raw)
+        return out
 
     def inside(self, tau_lo: float, tau_hi: float, slack: float = 0.0) -> np.ndarray:
         """Frames every offset in [tau_lo, tau_hi] places inside the DIC record (widened by ``slack`` s)."""

@@ -35,6 +35,9 @@ NEWTON_STEPS, NEWTON_TOL = 6, 0.02
 GAIN_FRAMES = 16
 #: tiles (px of the reference image) of the robust variance: residuals within a tile, over all frames, are summed
 TILE_PX = 16
+#: the variance from the residuals summed per frame counts where it exceeds the white-noise variance by more than
+#: this many standard deviations of its own estimate
+FRAME_SIGNIFICANCE = 3.0
 
 
 class Score:
@@ -58,6 +61,8 @@ class Score:
         The last offset evaluated and its samples (n, M).
     rate : numpy.ndarray
         After :func:`solve`: each sample's share of the slope, ``Y dX/dtau`` (n, M).
+    dX : numpy.ndarray
+        After :func:`solve`: the samples' rate of change ``dX/dtau`` (n, M, per s) it was given.
     """
 
     def __init__(self, sampler: Sampler, idx: np.ndarray, tau_w: float, bandwidth: float, rank: int = 1):
@@ -74,7 +79,7 @@ class Score:
         Y -= U @ (U.T @ Y)
         Y -= (Y @ V) @ V.T
         self.Y, self.V = Y, V
-        self.last, self.rate = (self.tau_w, X), None
+        self.last, self.rate, self.dX = (self.tau_w, X), None, None
 
     def samples(self, tau: float) -> np.ndarray:
         if self.last[0] != tau:
@@ -107,7 +112,7 @@ def solve(score: Score, start: float, rate: np.ndarray, period: float) -> tuple[
     """The root of ``score`` from ``start`` (s) and the score's slope (per s) from the samples' ``rate``:
     Newton steps with that slope until a step is below :data:`NEWTON_TOL` frame periods (the samples of the
     offset before it are :attr:`Score.last`)."""
-    score.rate = score.Y * rate
+    score.dX, score.rate = rate, score.Y * rate
     slope = float(np.sum(score.rate))
     if not slope > 0:
         return np.nan, slope
@@ -136,18 +141,25 @@ class Uncertainty:
     model : float
         Where the pattern changes its shape on the material: the change of the estimate between models of two
         and three pattern components (0 for a pattern that only scales).
+    frames : float
+        As ``robust``, the residuals summed per frame over all nodes instead (a misfit the whole frame shares:
+        a pattern whose change of shape the model does not follow, which the motion partly mimics); 0 where
+        not significantly above ``noise`` (:data:`FRAME_SIGNIFICANCE`).
     std : float
-        The standard uncertainty: the larger of the first two, the others in quadrature.
+        The standard uncertainty: the largest of ``noise``, ``robust`` and ``frames``, the others in
+        quadrature.
     """
 
     noise: float
     robust: float
     interpolation: float
     model: float = 0.0
+    frames: float = 0.0
 
     @property
     def std(self) -> float:
-        return float(np.sqrt(max(self.noise, self.robust) ** 2 + self.interpolation**2 + self.model**2))
+        return float(np.sqrt(max(self.noise, self.robust, self.frames) ** 2 + self.interpolation**2
+                             + self.model**2))
 
 
 def uncertainty(score: Score, tau: float, slope: float, sigma: float) -> Uncertainty:
@@ -165,7 +177,8 @@ def uncertainty(score: Score, tau: float, slope: float, sigma: float) -> Uncerta
     root, as last evaluated) per tile of :data:`TILE_PX` px of the reference
     image over all frames and adds the squares, each over ``1 - h`` with
     ``h`` the tile's share of the slope (the root absorbs that share of its
-    residual). The interpolation part is the root's
+    residual); the frames part the same per frame over all nodes. The
+    interpolation part is the root's
     shift, ``S_lower(tau) / S'`` (``S(tau) = 0``), when the nodes move by the
     spline two degrees lower (one for a quadratic or cubic).
     """
@@ -179,15 +192,28 @@ def uncertainty(score: Score, tau: float, slope: float, sigma: float) -> Uncerta
     noise = sigma * float(np.sqrt(gain * np.sum(power))) / slope
     # tiles of the reference image: a node's every frame in one tile (the rank-one fit's share of a node's
     # residual over the frames is orthogonal to its weights)
-    ref = sampler.nodes.reference
+    nodes = sampler.nodes
+    ref = nodes.reference
     cell = np.floor((ref - ref.min(axis=0)) / TILE_PX).astype(np.int64)
     tile = np.broadcast_to(cell[:, 1] * (cell[:, 0].max() + 1) + cell[:, 0], Y.shape).ravel()
-    sums = np.bincount(tile, (Y * score.residual()).ravel())
-    share = np.bincount(tile, score.rate.ravel(), sums.size) / slope
-    robust = float(np.sqrt(np.sum(sums**2 / np.clip(1.0 - share, 0.5, None)))) / slope
-    order = sampler.nodes.order
+    YR = Y * score.residual()
+    robust = _robust(np.bincount(tile, YR.ravel()), np.bincount(tile, score.rate.ravel()), slope)
+    # a variance from a few frames' sums scatters widely (one degree of freedom per frame): it counts where it
+    # exceeds the white-noise one by more than three of its own standard deviations
+    frames = _robust(YR.sum(axis=1), score.rate.sum(axis=1), slope)
+    if frames**2 <= noise**2 * (1.0 + FRAME_SIGNIFICANCE * np.sqrt(2.0 / max(np.count_nonzero(power), 1))):
+        frames = 0.0
+    here = score(tau)
     interpolation = 0.0
-    if order >= 2:
-        lower = sampler.nodes.with_order(order - 2 if order >= 4 else 1)
-        interpolation = abs(score(tau, nodes=lower) - score(tau)) / slope
-    return Uncertainty(noise, robust, interpolation)
+    if nodes.order >= 2:
+        lower = nodes.with_order(nodes.order - 2 if nodes.order >= 4 else 1)
+        interpolation = abs(score(tau, nodes=lower) - here) / slope
+    return Uncertainty(noise, robust, interpolation, frames=frames)
+
+
+def _robust(sums: np.ndarray, rates: np.ndarray, slope: float) -> float:
+    """The root's standard uncertainty (s) from the score's sums over groups of samples, each group's square over
+    ``1 - h`` (``h`` its share of the slope, from its ``rates``: the root absorbs that share of its residual; at
+    least 1/2)."""
+    share = rates / slope
+    return float(np.sqrt(np.sum(sums**2 / np.clip(1.0 - share, 0.5, None)))) / slope
