@@ -202,8 +202,10 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     DataError
         Not identifiable: too few points or frames, a static specimen or too
         little motion for the noise (uncertainty above :data:`MAX_STD_FRAMES`
-        frame periods), the best candidate at the end of the range, or frames
-        that do not follow the motion at the best offset.
+        frame periods), the best candidate at the end of the range, frames
+        that do not follow the motion at the best offset, or (two or three
+        pattern components) an estimate that moves further than its
+        uncertainty allows when the pixel noise is drawn again.
 
     Notes
     -----
