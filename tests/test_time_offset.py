@@ -373,6 +373,16 @@ def test_an_unstable_estimate_is_refused_with_the_reason(monkeypatch):
     assert "drawn again" in str(err.value) and "widens while the specimen stretches" in str(err.value)
 
 
+def test_a_misfit_every_frame_shares_widens_the_uncertainty():
+    """With the widening at 1.3 x one pattern component fits each frame but for a misfit the whole frame shares,
+    differently from frame to frame; summed per tile it cancels (before: -4.80 +- 0.069 frames, true 0).
+    Summed per frame it is the largest part of the uncertainty (about one frame period): refused, saying why."""
+    dic, ir, cal = _stretched_plate(1.3, 404)
+    with pytest.raises(DataError, match=r"fixes the offset only to \+- [0-9.]+ s \(1\.[0-9]+ IR frames\)") as err:
+        ir_clock(dic, ir, cal, "s07")
+    assert "each frame misfits the pattern model as a whole" in str(err.value)
+
+
 def test_the_same_plate_without_the_widening_is_estimated():
     """The control: the same plate and motion with a profile that only scales (no widening) is estimated,
     within 0.2 frame and 3 std of the truth (0) on two noise seeds."""
