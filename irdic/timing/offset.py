@@ -203,9 +203,8 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         Not identifiable: too few points or frames, a static specimen or too
         little motion for the noise (uncertainty above :data:`MAX_STD_FRAMES`
         frame periods), the best candidate at the end of the range, frames
-        that do not follow the motion at the best offset, or (two or three
-        pattern components) an estimate that moves further than its
-        uncertainty allows when the pixel noise is drawn again.
+        that do not follow the motion at the best offset, or an estimate
+        that does not survive a redraw of the noise (:func:`_check_stable`).
 
     Notes
     -----
