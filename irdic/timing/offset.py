@@ -76,7 +76,7 @@ from .score import Score, Uncertainty, secant, solve, uncertainty
 
 __all__ = ["ClockOffset", "estimate_offset", "crop_box", "MAX_STD_FRAMES", "MAX_FRAMES", "WIDEN_SAMPLES", "MAX_SAMPLES",
            "SMOOTHING_PX", "NODE_SPACING_PX", "GRADIENT_PX", "SPLINE_ORDER", "MIN_MOTION_PX", "MIN_MOTION_JITTERS",
-           "STABLE_DRAWS"]
+           "STABLE_DRAWS", "STABLE_STDS", "STABLE_FRAMES"]
 
 log = logging.getLogger(__name__)
 

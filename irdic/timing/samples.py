@@ -41,8 +41,7 @@ class Sampler:
     def __init__(self, frames: np.ndarray, t_ir: np.ndarray, nodes: Nodes, smoothing: float):
         self.raw = np.asarray(frames, dtype=np.float32)  # as stored: half the memory; sums are float64
         self.smoothing = float(smoothing)
-        self.frames = (gaussian_filter(self.raw, (0, self.smoothing, self.smoothing), mode="nearest")
-                       if self.smoothing > 0 else self.raw)
+        self.frames = self._smoothed(self.raw)
         self.t_ir, self.nodes = np.asarray(t_ir, float), nodes
         self.t0, self.t1 = float(nodes.t_dic[0]), float(nodes.t_dic[-1])
         _, self.h, self.w = self.frames.shape
@@ -57,9 +56,12 @@ class Sampler:
         (the nodes' positions, which do not depend on the frames, shared with this one)."""
         out = copy.copy(self)
         out.raw = self.raw + rng.standard_normal(self.raw.shape, dtype=np.float32) * np.float32(sigma)
-        out.frames = (gaussian_filter(out.raw, (0, self.smoothing, self.smoothing), mode="nearest")
-                      if self.smoothing > 0 else out.raw)
+        out.frames = self._smoothed(out.raw)
         return out
+
+    def _smoothed(self, raw: np.ndarray) -> np.ndarray:
+        """``raw`` (F, h, w) smoothed in each frame by the Gaussian of :attr:`smoothing` px (as is where 0)."""
+        return gaussian_filter(raw, (0, self.smoothing, self.smoothing), mode="nearest") if self.smoothing > 0 else raw
 
     def inside(self, tau_lo: float, tau_hi: float, slack: float = 0.0) -> np.ndarray:
         """Frames every offset in [tau_lo, tau_hi] places inside the DIC record (widened by ``slack`` s)."""

@@ -203,11 +203,10 @@ def uncertainty(score: Score, tau: float, slope: float, sigma: float) -> Uncerta
     frames = _robust(YR.sum(axis=1), score.rate.sum(axis=1), slope)
     if frames**2 <= noise**2 * (1.0 + FRAME_SIGNIFICANCE * np.sqrt(2.0 / max(np.count_nonzero(power), 1))):
         frames = 0.0
-    here = score(tau)
     interpolation = 0.0
     if nodes.order >= 2:
         lower = nodes.with_order(nodes.order - 2 if nodes.order >= 4 else 1)
-        interpolation = abs(score(tau, nodes=lower) - here) / slope
+        interpolation = abs(score(tau, nodes=lower) - score(tau)) / slope
     return Uncertainty(noise, robust, interpolation, frames=frames)
 
 
