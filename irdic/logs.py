@@ -244,8 +244,9 @@ class StageProgress:
     share of the time since its last report (at the same speed, at most 90 % of
     the part): a part that reports only its end still moves the ETA on. A
     running part that has reported 20 % of itself or more since its first
-    report gives its own rest at its own pace instead; the parts after it
-    come at ``s``. A part that ends in less than half the time expected (it
+    step (its first report of progress; the one-time set-up before it, caches
+    and factors, is not repeated) gives its own rest at its own pace instead;
+    the parts after it come at ``s``. A part that ends in less than half the time expected (it
     stopped early) takes the weight of the time it took. A part run beside
     the others takes one of the ``n`` threads while it runs: it counts as
     ``Δt s / n`` done after ``Δt`` (at most 90 % of it), and ``s`` is the work
@@ -354,8 +355,10 @@ class StageProgress:
             if fraction >= 1.0:
                 self._shrink_if_short(part, now)
             self.done[part] = max(self.done[part], min(1.0, float(fraction)))
-            # its own pace counts from its first report (before it, a part may prepare for a while)
-            self._began.setdefault(part, (now, self.done[part]))
+            # its own pace counts from its first step (its first report of progress): before it a part prepares
+            # (reads, builds its caches and factors) for a while that its later steps do not repeat
+            if self.done[part] > 0.0:
+                self._began.setdefault(part, (now, self.done[part]))
             self._running = (part, now) if self.done[part] < 1.0 else None
             w = sum(self.weights[k] * self.done[k] for k in self.weights)
             if w > 0:
@@ -424,7 +427,7 @@ class StageProgress:
 #: time it took
 SHORT_PART = 0.5
 
-#: a running part that has reported this share of itself done since its first report gives the ETA of its own
+#: a running part that has reported this share of itself done since its first step gives the ETA of its own
 #: rest from its own pace since then
 OWN_RATE_SHARE = 0.2
 

@@ -137,6 +137,21 @@ def test_stage_progress_running_part_at_its_own_pace():
         assert eta == pytest.approx(0.7 * 40.0 + 5.0 / (16.0 / 22.0), rel=0.01)
 
 
+def test_stage_progress_own_pace_counts_from_the_first_step():
+    """The interpolation prepares for 6 s (its caches and factors) before its first step, then does a tenth of
+    itself per second: at 0.4 (more than a fifth done since that step) its ETA is its rest at that pace (6 s),
+    not at the pace since its start with the preparation in it (13.5 s)."""
+    from irdic.logs import report
+
+    with _masks_done({"masks": 10.0, "interpolation": 20.0}, "irdic.test_first_step") as (sp, now):
+        report("interpolation", 0.0)
+        for k in range(1, 5):
+            now[0] = 15.0 + k
+            report("interpolation", k / 10)
+        _, eta = sp._state(now[0])
+        assert eta == pytest.approx(6.0, rel=0.01)
+
+
 def test_stage_progress_part_beside_the_others():
     """The IR clock (4 s of one core) runs on one of 2 threads beside the masks (10 s of one core, all parallel):
     the masks go at half speed until the clock ends at 4 s, then on both threads to 7 s, the interpolation
@@ -213,27 +228,33 @@ def test_stage_progress_reweighs_the_parts_not_yet_begun():
 
 
 def test_couple_cost_model_counts_the_specimen_pixels_and_the_masks_built():
-    """The IR clock and the interpolation cost per pixel as well as per point: a specimen with four times the
-    pixels costs more there, the other parts the same; the masks cost per mask built (the default: one per DIC
-    time), the clock per DIC time of the whole record; the pixels are the area of the points' convex hull
-    at their first time seen (a 30 x 20 px rectangle: 600)."""
-    from irdic.coupling.compute import PIXELS_PER_POINT, STAGE_COSTS, specimen_pixels, stage_costs
+    """The IR clock costs per pixel and the interpolation per pixel of the outline as well as per point: a
+    specimen with four times the pixels costs more in the clock, one with twice the outline more in the
+    interpolation (by its edge windows), the other parts the same; the outline defaults to a square's; the
+    masks cost per mask built (the default: one per DIC time), the clock per DIC time of the whole record;
+    the pixels and the outline are the area and perimeter of the points' convex hull at their first time seen
+    (a 30 x 20 px rectangle: 600 and 100)."""
+    from irdic.coupling.compute import PIXEL_COSTS, PIXELS_PER_POINT, STAGE_COSTS, specimen_extent, stage_costs
 
-    few, many = stage_costs(300, 13104, 300, 12641), stage_costs(300, 13104, 300, 4 * 12641)
-    assert many["clock"] > 1.5 * few["clock"] and many["interpolation"] > 1.5 * few["interpolation"]
+    few, many = stage_costs(300, 13104, 300, 12641, outline=490), stage_costs(300, 13104, 300, 4 * 12641, outline=490)
+    assert many["clock"] > 1.5 * few["clock"] and many["interpolation"] == few["interpolation"]
     assert all(many[k] == few[k] for k in ("setup", "masks", "rest", "write"))
+    longer = stage_costs(300, 13104, 300, 12641, outline=980)
+    assert longer["interpolation"] - few["interpolation"] == pytest.approx(300 * 490 * PIXEL_COSTS["interpolation"])
+    assert all(longer[k] == few[k] for k in few if k != "interpolation")
+    assert stage_costs(300, 13104, 300, 12641) == stage_costs(300, 13104, 300, 12641, outline=4 * np.sqrt(12641))
     assert stage_costs(300, 13104, 300) == stage_costs(300, 13104, 300, PIXELS_PER_POINT * 13104)
     reused = stage_costs(300, 13104, 300, 12641, n_masks=30)
     assert few["masks"] - reused["masks"] == pytest.approx(270 * 13104 * STAGE_COSTS["masks"])
     assert reused["clock"] == few["clock"]
-    assert stage_costs(300, 13104, 300, 12641, n_masks=300) == few
-    chunk = stage_costs(30, 13104, 300, 12641, n_record=300)
+    assert stage_costs(300, 13104, 300, 12641, outline=490, n_masks=300) == few
+    chunk = stage_costs(30, 13104, 300, 12641, outline=490, n_record=300)
     assert chunk["clock"] == few["clock"] and chunk["interpolation"] == pytest.approx(few["interpolation"] / 10)
     u, v = np.meshgrid(np.linspace(10, 40, 7), np.linspace(5, 25, 5))
     local = np.stack([np.full((35, 2), np.nan), np.column_stack([u.ravel(), v.ravel()])])
     seen = np.ones((2, 35), bool)
-    assert specimen_pixels(local, seen) == pytest.approx(600.0)
-    assert specimen_pixels(local[:, :2], seen[:, :2]) == 0.0
+    assert specimen_extent(local, seen) == pytest.approx((600.0, 100.0))
+    assert specimen_extent(local[:, :2], seen[:, :2]) == (0.0, 0.0)
 
 
 def test_couple_cost_model_spares_the_clock_of_a_still_specimen():

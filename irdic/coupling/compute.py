@@ -151,17 +151,19 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 #: :data:`~irdic.footprint.visibility.MASK_REUSE_PX`) plus :data:`MASK_PLAN_COST`; per DIC time of the whole
 #: record and point plus per IR frame (at most :data:`irdic.timing.offset.MAX_FRAMES`) and specimen pixel (the
 #: IR clock, which reads the whole record in every time chunk); per DIC time and point plus per DIC time and
-#: specimen pixel (the interpolation; :data:`PIXEL_COSTS`). Fitted on three tubes (benchmarks/README.md), the
-#: masks, clock and set-up rescaled to the interpolation on the sweep tube since the edge tiles' evaluation
-#: and factorisations got lighter (and the interpolation x 0.92 since its pieces shrink towards the end):
-#: their ratios are what the ETA rests on; the clock x 0.48 since it runs beside the masks (the pool's phase
-#: on the sweep tube grew by 5.6 s with it, :data:`STAGE_SHARES`). ``write`` is the stage's store,
-#: written after :func:`couple` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 5.5e-7, "masks": 8.8e-6, "clock": 9.7e-7, "interpolation": 4.4e-6, "rest": 3e-8,
+#: pixel of the specimen's outline (the interpolation: its edge windows; :data:`PIXEL_COSTS`). The masks and
+#: the clock fitted on three tubes (benchmarks/README.md), the clock x 0.48 since it runs beside the masks (the
+#: pool's phase on the sweep tube grew by 5.6 s with it, :data:`STAGE_SHARES`); the set-up and the
+#: interpolation on the benchmarks' tube at 6,552, 13,104 and 26,180 points (14,300 px, outline 490 px) and the
+#: sweep tube (60,000 px, outline 1,000 px): their ratios are what the ETA rests on. ``write`` is the stage's
+#: store, written after :func:`couple` returns (never reported: the ETA includes it)
+STAGE_COSTS = {"setup": 3.5e-7, "masks": 8.8e-6, "clock": 9.7e-7, "interpolation": 7.2e-6, "rest": 3e-8,
                "write": 3e-7}
 #: seconds of one core per IR frame and specimen pixel (the IR clock: its frames smoothed and sampled on nodes
-#: 1-2 px apart) and per DIC time and specimen pixel (the interpolation: edge tiles and windows per pixel)
-PIXEL_COSTS = {"clock": 4.3e-7, "interpolation": 2.4e-6}
+#: 1-2 px apart) and per DIC time and pixel of the specimen's outline (the interpolation's edge windows, whose
+#: cost follows the outline, not the area: the sweep tube's interpolation at 4.2 x the benchmarks' tube's area
+#: took 1.5 x its time)
+PIXEL_COSTS = {"clock": 4.3e-7, "interpolation": 8.7e-5}
 #: seconds of one core per DIC time of the whole record and point of the masks' plan (the positions filled in
 #: time, the masks each time reuses), before the first mask
 MASK_PLAN_COST = 3.2e-7
@@ -178,22 +180,26 @@ STAGE_SHARES = {"setup": 0.0, "masks": 0.95, "clock": 1.0, "interpolation": 0.9,
 
 
 def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None = None, *,
-                n_masks: int | None = None, n_record: int | None = None, still: bool = False) -> dict:
+                outline: float | None = None, n_masks: int | None = None, n_record: int | None = None,
+                still: bool = False) -> dict:
     """Expected seconds of one core of the stage's parts (:data:`STAGE_COSTS`, :data:`PIXEL_COSTS`).
 
     ``n_t`` DIC times (of the chunk), ``n_points`` points, ``n_frames`` IR
-    frames and ``n_pixels`` specimen pixels (default :data:`PIXELS_PER_POINT`
-    per point); ``n_masks`` masks built (default one per DIC time: known once
-    their reuse is planned) and ``n_record`` DIC times of the whole record
-    (the IR clock's and the masks' plan; default ``n_t``); ``still``: the
-    points stay where the IR clock refuses them (:data:`STILL_CLOCK_SHARE`).
+    frames, ``n_pixels`` specimen pixels (default :data:`PIXELS_PER_POINT`
+    per point) and ``outline`` pixels of its outline (default that of a
+    square of ``n_pixels``); ``n_masks`` masks built (default one per DIC
+    time: known once their reuse is planned) and ``n_record`` DIC times of the
+    whole record (the IR clock's and the masks' plan; default ``n_t``);
+    ``still``: the points stay where the IR clock refuses them
+    (:data:`STILL_CLOCK_SHARE`).
     """
     from ..timing.offset import MAX_FRAMES
 
     px = PIXELS_PER_POINT * float(n_points) if n_pixels is None else float(n_pixels)
+    edge = 4.0 * np.sqrt(px) if outline is None else float(outline)
     record = float(n_t if n_record is None else n_record) * n_points
     size = {"masks": float(n_t if n_masks is None else n_masks) * n_points, "clock": record}
-    per_pixel = {"clock": float(min(n_frames, MAX_FRAMES)) * px, "interpolation": float(n_t) * px}
+    per_pixel = {"clock": float(min(n_frames, MAX_FRAMES)) * px, "interpolation": float(n_t) * edge}
     out = {k: c * size.get(k, float(n_t) * n_points) + PIXEL_COSTS.get(k, 0.0) * per_pixel.get(k, 0.0)
            for k, c in STAGE_COSTS.items()}
     out["masks"] += MASK_PLAN_COST * record
@@ -211,19 +217,21 @@ def _motion_px(local) -> float:
     return float(d.max()) if d.size else 0.0
 
 
-def specimen_pixels(local, seen) -> float:
-    """Pixels the specimen covers in the IR image: the area (px²) of the convex hull of the points seen at
-    their first time with at least 3 (``local`` (T, M, 2) px, ``seen`` (T, M)); 0 with none."""
+def specimen_extent(local, seen) -> tuple[float, float]:
+    """Pixels the specimen covers in the IR image and those of its outline: the area (px²) and perimeter (px)
+    of the convex hull of the points seen at their first time with at least 3 (``local`` (T, M, 2) px, ``seen``
+    (T, M)); zeros with none."""
     from scipy.spatial import ConvexHull, QhullError
 
     for q, ok in zip(local, seen):
         pts = q[ok & np.isfinite(q).all(axis=1)]
         if pts.shape[0] >= 3:
             try:
-                return float(ConvexHull(pts).volume)
+                hull = ConvexHull(pts)
             except QhullError:  # on a line: no area
-                return 0.0
-    return 0.0
+                return 0.0, 0.0
+            return float(hull.volume), float(hull.area)  # in 2-D the hull's "area" is its perimeter
+    return 0.0, 0.0
 
 
 def _chunk_times(dic, chunk) -> slice:
@@ -276,12 +284,12 @@ def _footprint(dic, ir, calibration, p, only=None, beside=None):
     # the clock and the interpolation cost per specimen pixel too, and the masks per mask built: known now that
     # the points are projected, and once the masks' reuse is planned
     n_t = pr.x.shape[0] if only is None else only.stop - only.start
-    pixels = specimen_pixels(pr.local, pr.in_frame)
+    pixels, outline = specimen_extent(pr.local, pr.in_frame)
     still = _motion_px(pr.local) < MIN_MOTION_PX
 
     def planned(n_masks):
-        reweigh(stage_costs(n_t, pr.x.shape[1], ir.sizes["time"], pixels, n_masks=n_masks, n_record=pr.x.shape[0],
-                            still=still))
+        reweigh(stage_costs(n_t, pr.x.shape[1], ir.sizes["time"], pixels, outline=outline, n_masks=n_masks,
+                            n_record=pr.x.shape[0], still=still))
 
     planned(None)
     report("setup", 1.0)

@@ -29,7 +29,7 @@ import numpy as np
 import xarray as xr
 
 from ..chunks import chunk_slice, window
-from ..logs import StageProgress, report
+from ..logs import StageProgress, report, reweigh
 from ..threads import thread_budget
 from ..footprint.fields import footprint_temperatures, window_extras
 from ..noise import auto_smoothing
@@ -105,9 +105,10 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
     p = checked_settings(points, params)
     n_t = points.sizes["time"] if chunk is None else chunk_slice(points.sizes["time"], *chunk).stop - \
         chunk_slice(points.sizes["time"], *chunk).start
-    with StageProgress("fields", stage_costs(n_t, points.sizes["point"]), threads=thread_budget(),
+    sizes = dict(n_t=n_t, n_points=points.sizes["point"], n_record=points.sizes["time"])
+    with StageProgress("fields", stage_costs(**sizes, gcv=_chooses(p)), threads=thread_budget(),
                        shares=STAGE_SHARES, logger=log):
-        ds, unc = _fields(points, calibration, chunk, p)
+        ds, unc = _fields(points, calibration, chunk, p, sizes)
         out = with_uncertainty(ds, unc)
         report("rest", 1.0)
     return out
@@ -115,12 +116,22 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
 
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
 #: DIC time and point of each part with the default settings (regressions, their noise probes and bias
-#: estimates), measured on the moving tube of the benchmarks (the fill and regression rescaled on the sweep
-#: tube since their tiles' factorisations run on every thread; the set-up x 1.84 from six runs' set-up on it,
-#: 1.7-2.9 s against the 1.2 s modelled); the ETA rests on their ratios. ``write`` is the
-#: stage's store, written after :func:`fields` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 7.0e-7, "fill": 2.0e-6, "surface": 9.3e-6, "regression": 3.2e-6, "uncertainty": 1.64e-5,
-               "rest": 9e-7, "write": 7.5e-7}
+#: estimates); the ETA rests on their ratios. Fitted on the moving tubes of the benchmarks at 6,552, 13,104 (three
+#: tubes) and 26,180 points, 300 DIC times, 2 threads (benchmarks/README.md). ``write`` is the stage's store,
+#: written after :func:`fields` returns (never reported: the ETA includes it)
+STAGE_COSTS = {"setup": 4.1e-7, "fill": 1.9e-6, "surface": 4.5e-6, "regression": 1.9e-6, "uncertainty": 1.0e-5,
+               "rest": 2.2e-7, "write": 6.6e-7}
+#: parts whose cost per point grows with the number of points, as ``(n_points / GROWTH_POINTS) ** g``: the fill's
+#: local tiles overlap more where the points are denser next to the kernel, and the bias estimates' reference
+#: regressions have centres in proportion to the points (their cost per point grows with them); the exponents
+#: from the fitted tubes (the fill 2.5 / 6.0 / 14.1 s at 6,552 / 13,104 / 26,180 points, the uncertainty 12.8 /
+#: 23.5 / 57.0 s)
+GROWTH = {"fill": 0.25, "uncertainty": 0.2}
+GROWTH_POINTS = 13104
+#: seconds of one core per stage and point that the choice of the smoothing judges (part of the surface part:
+#: the GCV and gradient-risk trials run on the record's first GCV_STAGES stages and on at most
+#: irdic.surface.regression.GCV_MAX_POINTS points; 5.7 s of wall time on 2 threads on every fitted tube)
+GCV_COST = 1.0e-5
 #: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads; the surface's and
 #: the uncertainty's from their wall times on the sweep tube since the smoothing's candidates and the noise
 #: probes run on the threads: x 0.835 and x 0.864)
@@ -128,12 +139,26 @@ STAGE_SHARES = {"setup": 0.4, "fill": 0.38, "surface": 0.89, "regression": 0.34,
                 "write": 0.0}
 
 
-def stage_costs(n_t: int, n_points: int) -> dict:
-    """Expected seconds of one core of the stage's parts for ``n_t`` DIC times and ``n_points`` points."""
-    return {k: c * float(n_t) * n_points for k, c in STAGE_COSTS.items()}
+def stage_costs(n_t: int, n_points: int, *, n_record: int | None = None, gcv: bool = True) -> dict:
+    """Expected seconds of one core of the stage's parts for ``n_t`` DIC times (of the chunk) and ``n_points``
+    points; ``n_record`` DIC times of the whole record (default ``n_t``), ``gcv``: a smoothing is chosen by GCV
+    (:data:`GCV_COST`, in every chunk)."""
+    from ..surface.regression import GCV_MAX_POINTS
+
+    out = {k: c * float(n_t) * n_points * (n_points / GROWTH_POINTS) ** GROWTH.get(k, 0.0)
+           for k, c in STAGE_COSTS.items()}
+    if gcv:
+        record = n_t if n_record is None else n_record
+        out["surface"] += GCV_COST * float(min(record, GCV_STAGES)) * min(n_points, GCV_MAX_POINTS)
+    return out
 
 
-def _fields(points, calibration, chunk, p):
+def _chooses(p) -> bool:
+    """Whether a smoothing of the settings ``p`` is chosen from the data (GCV, or "auto" that may choose it)."""
+    return any(p.get(k) in ("gcv", "auto") for k in SMOOTHING)
+
+
+def _fields(points, calibration, chunk, p, sizes):
     """:func:`fields` without its progress lines: the dataset and the uncertainties."""
     started = _time.perf_counter()
     t = points["time"].values.astype(float)
@@ -142,6 +167,7 @@ def _fields(points, calibration, chunk, p):
     # the whole record (before chunking), so every chunk makes the same choice
     chosen, noise_attrs = auto_smoothing(points, x, {k: p[k] for k in SMOOTHING if k != "surface_smoothing_time"})
     p.update(chosen)
+    reweigh(stage_costs(**sizes, gcv=_chooses(p)))  # "auto" resolved: whether GCV runs
     points = footprint_temperatures(points) if p["temperature_smoothing_space"] is not None else points
     configured = p["temperature_smoothing"]
     report("setup", 1.0)
