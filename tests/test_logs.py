@@ -231,21 +231,25 @@ def test_couple_cost_model_counts_the_specimen_pixels_and_the_masks_built():
     """The IR clock costs per pixel and the interpolation per pixel of the outline as well as per point: a
     specimen with four times the pixels costs more in the clock, one with twice the outline more in the
     interpolation (by its edge windows), the other parts the same; the outline defaults to a square's; the
-    masks cost per mask built (the default: one per DIC time), the clock per DIC time of the whole record;
+    masks, and the interpolation's edge windows, cost per mask built (the default: one per DIC time), the
+    clock per DIC time of the whole record;
     the pixels and the outline are the area and perimeter of the points' convex hull at their first time seen
     (a 30 x 20 px rectangle: 600 and 100)."""
-    from irdic.coupling.compute import PIXEL_COSTS, PIXELS_PER_POINT, STAGE_COSTS, specimen_extent, stage_costs
+    from irdic.coupling.compute import (MASK_OUTLINE_COST, PIXEL_COSTS, PIXELS_PER_POINT, STAGE_COSTS, specimen_extent,
+                                        stage_costs)
 
     few, many = stage_costs(300, 13104, 300, 12641, outline=490), stage_costs(300, 13104, 300, 4 * 12641, outline=490)
     assert many["clock"] > 1.5 * few["clock"] and many["interpolation"] == few["interpolation"]
     assert all(many[k] == few[k] for k in ("setup", "masks", "rest", "write"))
     longer = stage_costs(300, 13104, 300, 12641, outline=980)
-    assert longer["interpolation"] - few["interpolation"] == pytest.approx(300 * 490 * PIXEL_COSTS["interpolation"])
+    assert longer["interpolation"] - few["interpolation"] == pytest.approx(
+        300 * 490 * (PIXEL_COSTS["interpolation"] + MASK_OUTLINE_COST))
     assert all(longer[k] == few[k] for k in few if k != "interpolation")
     assert stage_costs(300, 13104, 300, 12641) == stage_costs(300, 13104, 300, 12641, outline=4 * np.sqrt(12641))
     assert stage_costs(300, 13104, 300) == stage_costs(300, 13104, 300, PIXELS_PER_POINT * 13104)
-    reused = stage_costs(300, 13104, 300, 12641, n_masks=30)
+    reused = stage_costs(300, 13104, 300, 12641, outline=490, n_masks=30)
     assert few["masks"] - reused["masks"] == pytest.approx(270 * 13104 * STAGE_COSTS["masks"])
+    assert few["interpolation"] - reused["interpolation"] == pytest.approx(270 * 490 * MASK_OUTLINE_COST)
     assert reused["clock"] == few["clock"]
     assert stage_costs(300, 13104, 300, 12641, outline=490, n_masks=300) == few
     chunk = stage_costs(30, 13104, 300, 12641, outline=490, n_record=300)
@@ -255,6 +259,32 @@ def test_couple_cost_model_counts_the_specimen_pixels_and_the_masks_built():
     seen = np.ones((2, 35), bool)
     assert specimen_extent(local, seen) == pytest.approx((600.0, 100.0))
     assert specimen_extent(local[:, :2], seen[:, :2]) == (0.0, 0.0)
+
+
+def test_fields_cost_model_places_the_choice_of_the_smoothing_where_it_runs():
+    """The choice of the smoothing (GCV, the gradient's risk) costs per stage judged (at most GCV_STAGES), per
+    point of its patch (at most GCV_MAX_POINTS) and per point of the record: a record longer than GCV_STAGES,
+    or a time chunk, makes all of it before the surface is fitted (the surface part); a shorter whole record
+    makes the surface's in its fit and the temperature's in the regression part; with every smoothing
+    configured, none."""
+    from irdic.fields.compute import GCV_COST, GCV_SURFACE_SHARE, stage_costs
+    from irdic.fields.smoothing import GCV_STAGES
+    from irdic.surface.regression import GCV_MAX_POINTS
+
+    plain = stage_costs(300, 13104, gcv=False)
+    choice = GCV_STAGES * (GCV_COST[0] * GCV_MAX_POINTS + GCV_COST[1] * 13104)
+    long = stage_costs(300, 13104)
+    assert long["surface"] - plain["surface"] == pytest.approx(choice)
+    assert all(long[k] == plain[k] for k in plain if k != "surface")
+    short, short_plain = stage_costs(200, 13104), stage_costs(200, 13104, gcv=False)
+    assert short["surface"] - short_plain["surface"] == pytest.approx(GCV_SURFACE_SHARE * choice * 200 / GCV_STAGES)
+    assert short["regression"] - short_plain["regression"] == pytest.approx(
+        (1 - GCV_SURFACE_SHARE) * choice * 200 / GCV_STAGES)
+    chunk = stage_costs(50, 13104, n_record=200, chunked=True)
+    assert chunk["surface"] - stage_costs(50, 13104, gcv=False)["surface"] == pytest.approx(choice * 200 / GCV_STAGES)
+    few = stage_costs(300, 2000)
+    assert few["surface"] - stage_costs(300, 2000, gcv=False)["surface"] == pytest.approx(
+        GCV_STAGES * (GCV_COST[0] + GCV_COST[1]) * 2000)
 
 
 def test_couple_cost_model_spares_the_clock_of_a_still_specimen():

@@ -105,7 +105,7 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
     p = checked_settings(points, params)
     n_t = points.sizes["time"] if chunk is None else chunk_slice(points.sizes["time"], *chunk).stop - \
         chunk_slice(points.sizes["time"], *chunk).start
-    sizes = dict(n_t=n_t, n_points=points.sizes["point"], n_record=points.sizes["time"])
+    sizes = dict(n_t=n_t, n_points=points.sizes["point"], n_record=points.sizes["time"], chunked=chunk is not None)
     with StageProgress("fields", stage_costs(**sizes, gcv=_chooses(p)), threads=thread_budget(),
                        shares=STAGE_SHARES, logger=log):
         ds, unc = _fields(points, calibration, chunk, p, sizes)
@@ -117,9 +117,10 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
 #: DIC time and point of each part with the default settings (regressions, their noise probes and bias
 #: estimates); the ETA rests on their ratios. Fitted on the moving tubes of the benchmarks at 6,552, 13,104 (three
-#: tubes) and 26,180 points, 300 DIC times, 2 threads (benchmarks/README.md). ``write`` is the stage's store,
-#: written after :func:`fields` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 4.1e-7, "fill": 1.9e-6, "surface": 4.5e-6, "regression": 1.9e-6, "uncertainty": 1.0e-5,
+#: tubes) and 26,180 points, 300 DIC times, 2 threads (benchmarks/README.md); the surface's the fit alone (the
+#: choice of the smoothing: :data:`GCV_COST`). ``write`` is the stage's store, written after :func:`fields`
+#: returns (never reported: the ETA includes it)
+STAGE_COSTS = {"setup": 4.1e-7, "fill": 1.9e-6, "surface": 2.4e-6, "regression": 1.9e-6, "uncertainty": 1.0e-5,
                "rest": 2.2e-7, "write": 6.6e-7}
 #: parts whose cost per point grows with the number of points, as ``(n_points / GROWTH_POINTS) ** g``: the fill's
 #: local tiles overlap more where the points are denser next to the kernel, and the bias estimates' reference
@@ -128,10 +129,16 @@ STAGE_COSTS = {"setup": 4.1e-7, "fill": 1.9e-6, "surface": 4.5e-6, "regression":
 #: 23.5 / 57.0 s)
 GROWTH = {"fill": 0.25, "uncertainty": 0.2}
 GROWTH_POINTS = 13104
-#: seconds of one core per stage and point that the choice of the smoothing judges (part of the surface part:
-#: the GCV and gradient-risk trials run on the record's first GCV_STAGES stages and on at most
-#: irdic.surface.regression.GCV_MAX_POINTS points; 5.7 s of wall time on 2 threads on every fitted tube)
-GCV_COST = 1.0e-5
+#: seconds of one core per stage judged of the choice of the smoothing (GCV, the gradient's risk; on the record's
+#: first GCV_STAGES stages): per stage and point of the patch judged (at most
+#: irdic.surface.regression.GCV_MAX_POINTS) and per stage and point of the record (the candidates' fills and
+#: regressions of every point); 8, 10-12 and 15 s of wall time on 2 threads at 6,552, 13,104 and 26,180 points.
+#: A record longer than GCV_STAGES, or a time chunk, chooses all of it before the surface is fitted (the
+#: surface part); a shorter whole record chooses the surface's in its fit and the temperature's (all but
+#: :data:`GCV_SURFACE_SHARE`) in the regression part
+GCV_COST = (1.0e-5, 2.5e-6)
+#: the surface's share of the choice (the static half-shell of 9,875 points: its GCV 2 s, the temperature's 6 s)
+GCV_SURFACE_SHARE = 0.25
 #: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads; the surface's and
 #: the uncertainty's from their wall times on the sweep tube since the smoothing's candidates and the noise
 #: probes run on the threads: x 0.835 and x 0.864)
@@ -139,17 +146,21 @@ STAGE_SHARES = {"setup": 0.4, "fill": 0.38, "surface": 0.89, "regression": 0.34,
                 "write": 0.0}
 
 
-def stage_costs(n_t: int, n_points: int, *, n_record: int | None = None, gcv: bool = True) -> dict:
+def stage_costs(n_t: int, n_points: int, *, n_record: int | None = None, gcv: bool = True,
+                chunked: bool = False) -> dict:
     """Expected seconds of one core of the stage's parts for ``n_t`` DIC times (of the chunk) and ``n_points``
     points; ``n_record`` DIC times of the whole record (default ``n_t``), ``gcv``: a smoothing is chosen by GCV
-    (:data:`GCV_COST`, in every chunk)."""
+    (:data:`GCV_COST`, in every chunk), ``chunked``: a time chunk's run."""
     from ..surface.regression import GCV_MAX_POINTS
 
     out = {k: c * float(n_t) * n_points * (n_points / GROWTH_POINTS) ** GROWTH.get(k, 0.0)
            for k, c in STAGE_COSTS.items()}
     if gcv:
         record = n_t if n_record is None else n_record
-        out["surface"] += GCV_COST * float(min(record, GCV_STAGES)) * min(n_points, GCV_MAX_POINTS)
+        choice = float(min(record, GCV_STAGES)) * (GCV_COST[0] * min(n_points, GCV_MAX_POINTS) + GCV_COST[1] * n_points)
+        before = chunked or record > GCV_STAGES  # all chosen before the surface is fitted (_surface)
+        out["surface"] += choice if before else GCV_SURFACE_SHARE * choice
+        out["regression"] += 0.0 if before else (1.0 - GCV_SURFACE_SHARE) * choice
     return out
 
 
