@@ -245,10 +245,11 @@ class StageProgress:
     the part): a part that reports only its end still moves the ETA on. A
     running part that has reported 20 % of itself or more since its first
     step (its first report of progress; the one-time set-up before it, caches
-    and factors, is not repeated) gives its own rest at its own pace instead;
-    the parts after it come at ``s``. A part that ends in less than half the time expected (it
-    stopped early) takes the weight of the time it took. A part run beside
-    the others takes one of the ``n`` threads while it runs: it counts as
+    and factors, is not repeated) gives its own rest at its own pace
+    instead; the parts after it come at ``s``. A part that ends in less than
+    half the time expected (it stopped early) takes the weight of the time it
+    took. A part run beside the others takes one of the ``n`` threads while
+    it runs: it counts as
     ``Δt s / n`` done after ``Δt`` (at most 90 % of it), and ``s`` is the work
     reported done over the elapsed time less ``Δt / n``. The ETA is right as
     far as the model's ratios of the parts are, whatever the machine's speed.

@@ -116,10 +116,10 @@ def fields(points: xr.Dataset, calibration: xr.Dataset, *, chunk: tuple[int, int
 
 #: The cost model of the stage's progress lines (:class:`irdic.logs.StageProgress`): seconds of one core per
 #: DIC time and point of each part with the default settings (regressions, their noise probes and bias
-#: estimates); the ETA rests on their ratios. Fitted on the moving tubes of the benchmarks at 6,552, 13,104 (three
-#: tubes) and 26,180 points, 300 DIC times, 2 threads (benchmarks/README.md); the surface's the fit alone (the
-#: choice of the smoothing: :data:`GCV_COST`). ``write`` is the stage's store, written after :func:`fields`
-#: returns (never reported: the ETA includes it)
+#: estimates); the ETA rests on their ratios. Fitted on the benchmarks' moving tube at 6,552, 13,104 and 26,180
+#: points and the sweep tube's still and 2 px/frame rows (13,104 points), 300 DIC times, 2 threads
+#: (benchmarks/README.md); the surface's the fit alone (the choice of the smoothing: :data:`GCV_COST`).
+#: ``write`` is the stage's store, written after :func:`fields` returns (never reported: the ETA includes it)
 STAGE_COSTS = {"setup": 4.1e-7, "fill": 1.9e-6, "surface": 2.4e-6, "regression": 1.9e-6, "uncertainty": 1.0e-5,
                "rest": 2.2e-7, "write": 6.6e-7}
 #: parts whose cost per point grows with the number of points, as ``(n_points / GROWTH_POINTS) ** g``: the fill's
