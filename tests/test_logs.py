@@ -232,9 +232,8 @@ def test_couple_cost_model_counts_the_specimen_pixels_and_the_masks_built():
     specimen with four times the pixels costs more in the clock, one with twice the outline more in the
     interpolation (by its edge windows), the other parts the same; the outline defaults to a square's; the
     masks, and the interpolation's edge windows, cost per mask built (the default: one per DIC time), the
-    clock per DIC time of the whole record;
-    the pixels and the outline are the area and perimeter of the points' convex hull at their first time seen
-    (a 30 x 20 px rectangle: 600 and 100)."""
+    clock per DIC time of the whole record; the pixels and the outline are the area and perimeter of the
+    points' convex hull at their first time seen (a 30 x 20 px rectangle: 600 and 100)."""
     from irdic.coupling.compute import (MASK_OUTLINE_COST, PIXEL_COSTS, PIXELS_PER_POINT, STAGE_COSTS, specimen_extent,
                                         stage_costs)
 
@@ -266,8 +265,8 @@ def test_fields_cost_model_places_the_choice_of_the_smoothing_where_it_runs():
     point of its patch (at most GCV_MAX_POINTS) and per point of the record: a record longer than GCV_STAGES,
     or a time chunk, makes all of it before the surface is fitted (the surface part); a shorter whole record
     makes the surface's in its fit and the temperature's in the regression part; with every smoothing
-    configured, none."""
-    from irdic.fields.compute import GCV_COST, GCV_SURFACE_SHARE, stage_costs
+    configured (a number or null), none."""
+    from irdic.fields.compute import GCV_COST, GCV_SURFACE_SHARE, _chooses, stage_costs
     from irdic.fields.smoothing import GCV_STAGES
     from irdic.surface.regression import GCV_MAX_POINTS
 
@@ -285,6 +284,11 @@ def test_fields_cost_model_places_the_choice_of_the_smoothing_where_it_runs():
     few = stage_costs(300, 2000)
     assert few["surface"] - stage_costs(300, 2000, gcv=False)["surface"] == pytest.approx(
         GCV_STAGES * (GCV_COST[0] + GCV_COST[1]) * 2000)
+    configured = {"surface_smoothing": 8.0, "surface_smoothing_time": None, "temperature_smoothing": None,
+                  "temperature_smoothing_space": 12.0}
+    assert not _chooses(configured)
+    assert _chooses({**configured, "temperature_smoothing": "auto"})
+    assert _chooses({**configured, "surface_smoothing": "gcv"})
 
 
 def test_couple_cost_model_spares_the_clock_of_a_still_specimen():
