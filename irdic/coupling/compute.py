@@ -202,12 +202,13 @@ def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None =
     px = PIXELS_PER_POINT * float(n_points) if n_pixels is None else float(n_pixels)
     edge = 4.0 * np.sqrt(px) if outline is None else float(outline)
     record = float(n_t if n_record is None else n_record) * n_points
-    size = {"masks": float(n_t if n_masks is None else n_masks) * n_points, "clock": record}
+    masks = float(n_t if n_masks is None else n_masks)
+    size = {"masks": masks * n_points, "clock": record}
     per_pixel = {"clock": float(min(n_frames, MAX_FRAMES)) * px, "interpolation": float(n_t) * edge}
     out = {k: c * size.get(k, float(n_t) * n_points) + PIXEL_COSTS.get(k, 0.0) * per_pixel.get(k, 0.0)
            for k, c in STAGE_COSTS.items()}
     out["masks"] += MASK_PLAN_COST * record
-    out["interpolation"] += MASK_OUTLINE_COST * float(n_t if n_masks is None else n_masks) * edge
+    out["interpolation"] += MASK_OUTLINE_COST * masks * edge
     if still:
         out["clock"] *= STILL_CLOCK_SHARE
     return out

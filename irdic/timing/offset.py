@@ -327,16 +327,18 @@ def _spread_out(n: int, count: int) -> np.ndarray:
 
 
 def _refined(sampler: Sampler, tau0: float, period: float, motion: float, parameter: str, rank: int,
-             rate: np.ndarray | None = None):
+             known: tuple[np.ndarray, np.ndarray] | None = None):
     """The root of the fixed-weight score from ``tau0``: the weights fitted at ``tau0``, refitted at the secant's
     root where it lies more than :data:`REFIT_FRAMES` frame periods away (weights fitted off the root lose
-    precision on a weak pattern); (tau, score, slope). ``rate``: the samples' rate of change on the frames
-    ``tau0`` places inside the record, where known (the secant's, from a refinement on the same frames)."""
+    precision on a weak pattern); (tau, score, slope). ``known``: frames and the samples' rate of change on them
+    (the secant's, from a refinement on the same frames), used where they are the frames ``tau0`` places inside
+    the record."""
     tau, score, slope = np.nan, None, np.nan
     idx = sampler.inside(tau0, tau0, SLACK_FRAMES * period)
     if idx.size >= 4:
         score = Score(sampler, idx, tau0, GRADIENT_PX, rank)
-        if rate is None or rate.shape != (idx.size, sampler.M):
+        rate = known[1] if known is not None and np.array_equal(known[0], idx) else None
+        if rate is None:
             start, rate = secant(score, tau0, period)
         else:
             slope = float(np.sum(score.Y * rate))
@@ -449,7 +451,7 @@ def _check_stable(score: Score, tau: float, sigma: float, parts: Uncertainty, pe
     for draw in range(STABLE_DRAWS):
         noisy = score.sampler.with_noise(sigma, np.random.default_rng([20261206, draw]))
         try:
-            moves.append(_refined(noisy, tau, period, motion, parameter, score.rank, score.dX)[0] - tau)
+            moves.append(_refined(noisy, tau, period, motion, parameter, score.rank, (score.idx, score.dX))[0] - tau)
         except DataError:
             moves.append(np.inf)
     rms = float(np.sqrt(np.mean(np.square(moves))))
