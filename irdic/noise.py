@@ -5,8 +5,9 @@ IR frames
     each specimen pixel, with weights of unit sum of squares, so that white
     noise of standard deviation σ gives residuals of standard deviation σ
     while a field linear in time gives none. Spatial noise: the same with a
-    five-point Laplacian. σ is the MAD of the residuals times 1.4826, so
-    that edge pixels, hot spots and the odd dead pixel do not inflate it.
+    five-point Laplacian (:func:`spatial_noise`). σ is the residuals' standard
+    deviation within 4 robust ones (:func:`clipped_std`), so that edge pixels,
+    hot spots and the odd dead pixel do not inflate it.
     Quantisation: the export's step, the smallest non-zero difference of the
     values when every value is a multiple of it.
 
@@ -36,8 +37,9 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-__all__ = ["IRNoise", "NoiseGains", "interpolation_noise_gains", "ir_noise", "quantisation_step", "dic_noise", "choose_smoothing", "mad_std",
-           "clipped_std", "CLIP_SIGMAS", "NOISE_TO_SIGNAL", "STRAIN_NOISE_FLOOR", "auto_smoothing"]
+__all__ = ["IRNoise", "NoiseGains", "interpolation_noise_gains", "ir_noise", "quantisation_step", "spatial_noise",
+           "dic_noise", "choose_smoothing", "mad_std", "clipped_std", "CLIP_SIGMAS", "NOISE_TO_SIGNAL",
+           "STRAIN_NOISE_FLOOR", "auto_smoothing"]
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +175,6 @@ def ir_noise(frames, times, mask) -> IRNoise:
     mask = np.asarray(mask, dtype=bool)
     t = np.asarray(times, dtype=float)
     n = t.size
-    inner = ndimage.binary_erosion(mask, structure=ndimage.generate_binary_structure(2, 1))
     npx = int(mask.sum())
     if npx == 0:
         return IRNoise(np.nan, np.nan, 0.0, 0)
@@ -195,15 +196,48 @@ def ir_noise(frames, times, mask) -> IRNoise:
         f = data[[pos[s], pos[s + 1], pos[s + 2]]][:, m]
         tr.append(w @ f)
     temporal = clipped_std(np.concatenate(tr)) if tr else float("nan")
-    mi = inner[box]
-    sp = []
-    if mi.any():
-        for f in data:
-            lap = 4 * f[1:-1, 1:-1] - f[:-2, 1:-1] - f[2:, 1:-1] - f[1:-1, :-2] - f[1:-1, 2:]
-            sp.append(lap[mi[1:-1, 1:-1]] / np.sqrt(20.0))
-    spatial = clipped_std(np.concatenate(sp)) if sp else float("nan")
+    spatial = spatial_noise(data, m)
     q = quantisation_step(data[:, m])
     return IRNoise(temporal, spatial, q, npx)
+
+
+def spatial_noise(frames, mask=None) -> float:
+    """Pixel noise (K) of IR frames from their five-point Laplacian: white noise whatever the pattern.
+
+    Parameters
+    ----------
+    frames : array_like, shape (n_frames, n_v, n_u)
+        Temperatures (K or °C); NaN pixels are left out.
+    mask : ndarray of bool, shape (n_v, n_u), optional
+        The pixels to judge (the specimen's); a pixel counts where its four
+        neighbours are on the mask too. Default: every pixel off the frame's
+        border (a smooth background cancels as the specimen does, its edges
+        are few and :func:`clipped_std` leaves them out).
+
+    Returns
+    -------
+    float
+        The standard deviation of ``(4 f - f_N - f_S - f_E - f_W) / sqrt(20)``
+        by :func:`clipped_std`; NaN where no pixel counts.
+
+    Notes
+    -----
+    For white noise of standard deviation σ the residual has standard
+    deviation σ (``(16 + 4) σ² / 20``), and a field linear in the pixel
+    coordinates gives none; the export's rounding adds its ``q² / 12``.
+    """
+    f = np.asarray(frames, dtype=np.float64)
+    if f.ndim != 3 or f.shape[1] < 3 or f.shape[2] < 3:
+        return float("nan")
+    if mask is None:
+        inner = np.ones(f.shape[1:], dtype=bool)
+    else:
+        inner = ndimage.binary_erosion(np.asarray(mask, dtype=bool), structure=ndimage.generate_binary_structure(2, 1))
+    mi = inner[1:-1, 1:-1]
+    if not mi.any():
+        return float("nan")
+    lap = 4 * f[:, 1:-1, 1:-1] - f[:, :-2, 1:-1] - f[:, 2:, 1:-1] - f[:, 1:-1, :-2] - f[:, 1:-1, 2:]
+    return clipped_std(lap[:, mi] / np.sqrt(20.0))
 
 
 def dic_noise(x, *, k: int = 20, max_stages: int = 6) -> float:

@@ -68,6 +68,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..errors import DataError
+from ..noise import spatial_noise
 from .checks import (MAX_STD_FRAMES, MIN_MOTION_JITTERS, MIN_MOTION_PX, check_fit, check_identified, check_inside,
                      check_motion, check_sizes)
 from .nodes import Mesh, Nodes
@@ -82,6 +83,8 @@ log = logging.getLogger(__name__)
 
 #: frames used (evenly spread over the record)
 MAX_FRAMES = 600
+#: frames (evenly spread) the pixel noise is estimated on (irdic.noise.spatial_noise)
+NOISE_FRAMES = 20
 #: samples (nodes x frames) of the refinement: beyond the first the nodes are spread wider (up to twice), beyond
 #: the second frames are left out
 WIDEN_SAMPLES, MAX_SAMPLES = 1_000_000, 4_000_000
@@ -230,7 +233,8 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     coarse = _nodes(mesh, SEARCH_SMOOTHING_PX, max(2.0, np.sqrt(mesh.area / SEARCH_NODES)))
     some = _spread_out(t_ir.size, SEARCH_SAMPLES // coarse.M)
     search = Sampler(frames[some], t_ir[some], coarse, SEARCH_SMOOTHING_PX)
-    sigma = _frame_noise(frames)
+    # the pixel noise whatever the offset: up to 20 frames spread over the record
+    sigma = spatial_noise(frames[_spread_out(frames.shape[0], NOISE_FRAMES)])
     fits, fine, spacing = _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma)
     rank, shift = _model_order(fits, period)
     tau, score, parts, grid, crit = fits[rank]
@@ -380,15 +384,6 @@ def _motion(pos: np.ndarray) -> tuple[float, float]:
         return float(disp.max()), 0.0
     d2 = pos[2:] - 2 * pos[1:-1] + pos[:-2]
     return float(disp.max()), float(np.sqrt(np.mean(d2**2) / 6.0))
-
-
-def _frame_noise(frames: np.ndarray, max_frames: int = 20) -> float:
-    """Pixel noise (K) of the frames whatever the offset: the robust spread of each pixel less the mean of its
-    four neighbours (``sigma^2 (1 + 1/4)`` for white noise; a smooth pattern cancels, edges are few)."""
-    f = frames[np.unique(np.linspace(0, frames.shape[0] - 1, min(max_frames, frames.shape[0])).round().astype(int))]
-    f = f.astype(np.float64)
-    r = f[:, 1:-1, 1:-1] - 0.25 * (f[:, :-2, 1:-1] + f[:, 2:, 1:-1] + f[:, 1:-1, :-2] + f[:, 1:-1, 2:])
-    return float(1.4826 * np.median(np.abs(r)) / np.sqrt(1.25)) if r.size else np.nan
 
 
 def _misfit(sampler: Sampler, idx: np.ndarray, tau: float, rank: int) -> float:

@@ -100,3 +100,23 @@ def test_clipped_std_is_robust_and_handles_noise_below_the_rounding():
     q = np.round(rng.normal(0.0, 0.002, 10_000), 2)
     assert clipped_std(q) == pytest.approx(np.std(q)) and clipped_std(q) > 0
     assert np.isnan(clipped_std([np.nan]))
+
+
+@pytest.mark.parametrize("sigma", [0.02, 0.05, 0.1])
+def test_spatial_noise_of_whole_frames(sigma):
+    """The IR clock's pixel noise: whole frames (specimen, a 5 K colder background, its edge, a dead column),
+    2-decimal exports: within 3 % of ``sqrt(σ² + q²/12)``; with the specimen's mask it is ir_noise's spatial
+    estimate, to the last bit."""
+    from irdic.noise import spatial_noise
+
+    f, t, mask = _frames(sigma, decimals=2, seed=4)
+    rng = np.random.default_rng(5)
+    # the camera's noise is on the background too
+    f = np.where(mask, f, np.round(20.0 + rng.normal(0.0, sigma, f.shape), 2)).astype(np.float64)
+    f[:, :, 20] = 80.0  # a dead column on the specimen
+    want = np.hypot(sigma, 0.01 / np.sqrt(12))
+    got = spatial_noise(f)
+    assert abs(got / want - 1) < 0.03, (got, want)
+    # ir_noise reads three frames of three
+    assert spatial_noise(f[:3], mask) == ir_noise(f[:3], t[:3], mask).spatial
+    assert np.isnan(spatial_noise(f, np.zeros_like(mask))) and np.isnan(spatial_noise(f[:, :2]))
