@@ -120,3 +120,30 @@ def test_spatial_noise_of_whole_frames(sigma):
     # ir_noise reads three frames of three
     assert spatial_noise(f[:3], mask) == ir_noise(f[:3], t[:3], mask).spatial
     assert np.isnan(spatial_noise(f, np.zeros_like(mask))) and np.isnan(spatial_noise(f[:, :2]))
+
+
+def _moving_stripes(sigma, seed=3):
+    """Hot and cold stripes 12 px apart (2.5 K amplitude) travelling 0.5 px per frame across a 60 x 80 px
+    specimen, white noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(60) * 0.1
+    v, u = np.mgrid[0:60, 0:80]
+    f = 25.0 + 2.5 * np.sin(2 * np.pi * (u - 5.0 * t[:, None, None]) / 12.0) + rng.normal(0.0, sigma, (t.size, 60, 80))
+    return f, t, np.ones((60, 80), bool)
+
+
+@pytest.mark.parametrize("sigma", [0.02, 0.05])
+def test_ir_noise_temporal_under_a_moving_pattern(sigma):
+    """A pattern moving across the pixels is no noise: the fourth divided difference reads the noise within 3 %
+    where the second (the estimate before) read 1.4-2.7 x it; on unequal frame spacings as well."""
+    from irdic.noise import temporal_residual
+
+    f, t, mask = _moving_stripes(sigma)
+    assert ir_noise(f, t, mask).temporal == pytest.approx(sigma, rel=0.03)
+    second = np.concatenate([temporal_residual(f[s:s + 3][:, mask], t[s:s + 3]) for s in range(0, 57, 3)])
+    assert np.std(second) > 1.3 * sigma
+    jittered = t + 0.02 * np.sin(np.arange(t.size))
+    # a cubic in time leaves nothing; the weights have unit norm
+    cubic = 1.0 + jittered[:5] ** 3
+    assert abs(temporal_residual(cubic, jittered[:5])) < 1e-9
+    assert temporal_residual(np.eye(5), jittered[:5]) @ temporal_residual(np.eye(5), jittered[:5]) == pytest.approx(1.0)
