@@ -40,7 +40,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 __all__ = ["IRNoise", "NoiseGains", "interpolation_noise_gains", "ir_noise", "quantisation_step", "spatial_noise",
-           "temporal_residual", "TEMPORAL_ORDER", "dic_noise", "choose_smoothing", "mad_std", "clipped_std",
+           "noise_levels", "temporal_residual", "TEMPORAL_ORDER", "dic_noise", "choose_smoothing", "mad_std", "clipped_std",
            "CLIP_SIGMAS", "NOISE_TO_SIGNAL", "STRAIN_NOISE_FLOOR", "auto_smoothing"]
 
 log = logging.getLogger(__name__)
@@ -224,6 +224,20 @@ def ir_noise(frames, times, mask) -> IRNoise:
     return IRNoise(temporal, spatial, q, npx)
 
 
+def noise_levels(attrs) -> tuple[float, float, float]:
+    """``(σ_n, q, σ)`` (K) of a ``points.zarr``'s attrs: the pixels' own noise, the export step and the noise the
+    exported values carry, ``σ² = σ_n² + q²/12``.
+
+    ``σ`` is the frame-to-frame estimate (:func:`ir_noise`: ``ir_noise_temporal_k``, else ``ir_noise_k``), whose
+    residuals hold the rounding as the data do; ``σ_n = sqrt(max(σ² - q²/12, 0))``. NaN where the attrs hold
+    no estimate.
+    """
+    a = attrs
+    q = float(a.get("ir_quantisation_k", 0.0) or 0.0)
+    sigma = float(a.get("ir_noise_temporal_k", a.get("ir_noise_k", np.nan)))
+    return float(np.sqrt(max(sigma ** 2 - q ** 2 / 12.0, 0.0))) if np.isfinite(sigma) else np.nan, q, sigma
+
+
 def spatial_noise(frames, mask=None) -> float:
     """Pixel noise (K) of IR frames from their five-point Laplacian: white noise whatever the pattern.
 
@@ -387,9 +401,10 @@ def auto_smoothing(points, x, options: dict) -> tuple[dict, dict]:
 
     Notes
     -----
-    Effective IR noise ``σ = sqrt(σ_n² + q²/12)`` (``σ_n``: the frame-to-frame
-    noise, ``q``: export step; the
-    rounding error is noise to a derivative even on noise-free data). Gains
+    Effective IR noise ``σ = sqrt(σ_n² + q²/12)`` (``σ_n``: the pixels' own
+    noise, ``q``: export step; the rounding error is noise to a derivative
+    even on noise-free data): the frame-to-frame estimate itself
+    (:func:`noise_levels`). Gains
     of exact interpolation: ``sqrt(2)/Δt`` for the rate (``Δt``: frame
     spacing), ``sqrt(2)`` px⁻¹ for the pixel gradient, ``sqrt(2)/h`` for the
     strain (``h``: median DIC point spacing); signals: RMS of the local rate
@@ -397,11 +412,9 @@ def auto_smoothing(points, x, options: dict) -> tuple[dict, dict]:
     :data:`STRAIN_NOISE_FLOOR`.
     """
     a = points.attrs
-    q = float(a.get("ir_quantisation_k", 0.0) or 0.0)
-    sig_t = float(a.get("ir_noise_temporal_k", a.get("ir_noise_k", np.nan)))
     # the spatial residual also holds the field's own curvature (on noise-free renderings of the tube
-    # it reads 2 mK), so both rules use the frame-to-frame noise
-    eff_t = eff_s = np.hypot(sig_t, q / np.sqrt(12))
+    # it reads 2 mK), so both rules use the frame-to-frame noise, the export's rounding in it
+    eff_t = eff_s = noise_levels(a)[2]
     span, frames = a.get("ir_time_span_s"), a.get("ir_frames")
     dt = (float(span[1]) - float(span[0])) / (int(frames) - 1) if span is not None and frames and int(frames) > 1 else np.nan
     rate = np.asarray(points["temperature_local_rate"].values, dtype=float)

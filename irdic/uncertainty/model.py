@@ -6,11 +6,13 @@ rate) or, to first order, of the DIC coordinates (strain). The noise levels
 estimated from the data (``points.zarr`` and :func:`irdic.noise.auto_smoothing`)
 are propagated through those same operators:
 
-- IR: white pixel noise ``σ = sqrt(σ_n² + q²/12)`` (``σ_n``: frame-to-frame
-  noise, ``q``: export step) gives the point temperature, each pixel-gradient
-  component and the local rate the standard deviations ``σ g`` with the
-  interpolation's noise gains ``g`` (measured once by the couple stage on a
-  probe, :func:`irdic.noise.interpolation_noise_gains`).
+- IR: white pixel noise ``σ = sqrt(σ_n² + q²/12)`` (``σ_n``: the pixels' own
+  noise, ``q``: export step; ``σ`` is the frame-to-frame estimate, which holds
+  the rounding as the data do, :func:`~irdic.noise.noise_levels`) gives the
+  point temperature, each pixel-gradient component and the local rate the
+  standard deviations ``σ g`` with the interpolation's noise gains ``g``
+  (measured once by the couple stage on a probe,
+  :func:`irdic.noise.interpolation_noise_gains`).
 - The paper's relations are linear maps of those per point: the gradient
   ``L g_pix`` (``L``: 3 x 2, ``surface_gradient`` of the unit vectors) has
   component variances ``σ_g² Σ_j L_ij²``; the rate ``∂Θ/∂t + c · g_pix``
@@ -76,6 +78,7 @@ import numpy as np
 
 from ..gradient import material_rate, surface_gradient
 from ..logs import report
+from ..noise import noise_levels
 from ..numerics.temporal import TemporalInterpolant, rate_reference_weights, temporal_window
 from ..numerics.memory import release
 from ..numerics.threads import parallel_map, worker_slices
@@ -306,11 +309,11 @@ def point_noise(a) -> float:
 
 
 def _ir_noise(a):
-    """Pixel noise (K) of points.zarr's attrs: temporal noise, quantisation step, their sum, and the
-    point-level noise of temperature, pixel gradient and local rate (via the interpolation's noise gains)."""
-    sig_n = float(a.get("ir_noise_temporal_k", a.get("ir_noise_k", np.nan)))
-    q = float(a.get("ir_quantisation_k", 0.0) or 0.0)
-    sigma = float(np.hypot(sig_n, q / np.sqrt(12)))
+    """Pixel noise (K) of points.zarr's attrs: the pixels' own noise, the export step, the noise the exported values
+    carry (:func:`~irdic.noise.noise_levels`), and the point-level noise of temperature, pixel gradient and local
+    rate (via the interpolation's noise gains)."""
+    # the estimate holds the export's rounding as the data do (irdic.noise.noise_levels): not added once more
+    sig_n, q, sigma = noise_levels(a)
     gains = (sigma * float(a.get(f"ir_noise_gain_{g}", np.nan))
              for g in ("temperature", "gradient_per_px", "rate_per_s"))
     return sig_n, q, sigma, tuple(gains)

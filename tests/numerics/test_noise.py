@@ -147,3 +147,23 @@ def test_ir_noise_temporal_under_a_moving_pattern(sigma):
     cubic = 1.0 + jittered[:5] ** 3
     assert abs(temporal_residual(cubic, jittered[:5])) < 1e-9
     assert temporal_residual(np.eye(5), jittered[:5]) @ temporal_residual(np.eye(5), jittered[:5]) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("sigma", [0.0, 0.02, 0.05])
+def test_noise_levels_count_the_rounding_once(sigma):
+    """The frame-to-frame estimate of a 2-decimal export holds the rounding (``sqrt(σ² + q²/12)``, as the data
+    do): :func:`noise_levels` gives it as the noise the data carry and the pixels' own noise without it; on a
+    noise-free export the pixels' own noise is below the rounding's (the uncertainty's bias flag: the export step
+    exceeds the noise)."""
+    from irdic.noise import noise_levels
+
+    f, t, mask = _frames(sigma, decimals=2, seed=6)
+    est = ir_noise(f, t, mask)
+    own, q, carried = noise_levels({"ir_noise_temporal_k": est.temporal, "ir_quantisation_k": est.quantisation})
+    assert q == 0.01 and carried == est.temporal
+    if sigma:
+        assert carried == pytest.approx(np.hypot(sigma, q / np.sqrt(12)), rel=0.03)
+        assert own == pytest.approx(sigma, rel=0.03)
+    else:
+        assert own < q / np.sqrt(12)
+    assert np.isnan(noise_levels({})[0])
