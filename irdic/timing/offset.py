@@ -83,7 +83,8 @@ log = logging.getLogger(__name__)
 
 #: frames used (evenly spread over the record)
 MAX_FRAMES = 600
-#: frames (evenly spread) the pixel noise is estimated on (irdic.noise.spatial_noise)
+#: frames (evenly spread over the record) the pixel noise is estimated on, whatever the offset
+#: (irdic.noise.spatial_noise)
 NOISE_FRAMES = 20
 #: samples (nodes x frames) of the refinement: beyond the first the nodes are spread wider (up to twice), beyond
 #: the second frames are left out
@@ -233,7 +234,6 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     coarse = _nodes(mesh, SEARCH_SMOOTHING_PX, max(2.0, np.sqrt(mesh.area / SEARCH_NODES)))
     some = _spread_out(t_ir.size, SEARCH_SAMPLES // coarse.M)
     search = Sampler(frames[some], t_ir[some], coarse, SEARCH_SMOOTHING_PX)
-    # the pixel noise whatever the offset: up to 20 frames spread over the record
     sigma = spatial_noise(frames[_spread_out(frames.shape[0], NOISE_FRAMES)])
     fits, fine, spacing = _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma)
     rank, shift = _model_order(fits, period)
