@@ -16,14 +16,14 @@ import numpy as np
 from ..errors import ConfigError, DataError
 from ..footprint.fields import pixel_pitch
 from ..numerics.series import gcv_columns
-from ..numerics.temporal import RATE_MAX_FRACTION, gcv_temporal
-from ..numerics.temporal_risk import CP_LIMIT, bias_ratio
+from ..numerics.temporal import gcv_temporal
+from ..numerics.temporal_risk import CP_LIMIT, bias_ratio, rate_risk_temporal
 from ..parameters import settings
 from ..surface import fit_surface
 from .spatial import judged_points, regressed_gradient, space_gcv
 
 __all__ = ["GCV_STAGES", "SMOOTHING", "checked_settings", "resolve_gcv", "surface_kw", "guarded_time_smoothing",
-           "gradient_noise_var", "parameter_dual"]
+           "gradient_noise_var", "parameter_dual", "rate_smoothing"]
 
 log = logging.getLogger(__name__)
 
@@ -96,11 +96,27 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
         k = gcv_temporal(t[w], theta, c=p["c_time"], R0=p["R0_time"])[0]
         p["temperature_smoothing"] = k if grad is None else guarded_time_smoothing(k, t[w], grad, psi, noise_var, p)
         if p["temperature_smoothing_space"] is not None:  # the rate's own spacing (see irdic.fields.space_time)
-            p["temperature_smoothing_rate"] = gcv_temporal(t[w], theta, c=p["c_time"], R0=p["R0_time"],
-                                                           max_fraction=RATE_MAX_FRACTION)[0]
+            p["temperature_smoothing_rate"] = rate_smoothing(t[w], theta, k, p)
     log.info("fields: smoothing chosen once on DIC times %d..%d: %s", w.start, w.stop - 1,
              ", ".join(f"{k} {p[k]}" for k in gcv))
     return p
+
+
+def rate_smoothing(t, series, value_k, p) -> float:
+    """The rate's temporal spacing: least estimated risk of the rate
+    (:func:`~irdic.numerics.temporal_risk.rate_risk_temporal`) on the complete ``series`` (M, n) at ``t``, at
+    most GCV's spacing of the value ``value_k`` (None or 1: interpolation), so that the rate's regression is at
+    most as smooth as GCV would make the value's (:func:`irdic.fields.space_time._rate_series`).
+
+    Notes
+    -----
+    GCV's spacing, not the value's after :func:`guarded_time_smoothing`: where the guard interpolates the value
+    in time (a narrow band passing each point within two DIC times, the noisy family's drawn-101), the rate of the
+    interpolation erred by 10.1 % against 9.1 % from the regression; without a bound the rate's risk took 16
+    stages on the static shell-edge (0.37 % against 0.26 % at GCV's 8, 45 % of it flagged bias-dominated against
+    10 %)."""
+    k = rate_risk_temporal(t, series, c=p["c_time"], R0=p["R0_time"])[0]
+    return min(float(k), float(value_k or 1.0))
 
 
 #: times of the points' noise through the spatial regression that give its gradient's noise (:func:`gradient_noise_var`)

@@ -16,9 +16,9 @@ from ..footprint.fields import paper_value
 from ..gradient import material_rate, surface_gradient
 from ..logs import report
 from ..numerics.series import fill_series, smooth_series
-from ..numerics.temporal import RATE_MAX_FRACTION, gcv_temporal, rate_reference_weights
+from ..numerics.temporal import gcv_temporal, rate_reference_weights
 from ..uncertainty.model import paper_std, uncertainties
-from .smoothing import gradient_noise_var, guarded_time_smoothing
+from .smoothing import gradient_noise_var, guarded_time_smoothing, rate_smoothing
 from .spatial import regressed_gradient
 
 __all__ = ["space_time", "temperature_fields"]
@@ -153,9 +153,9 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     # the regressions in time below fill the same gaps: once, together
     th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
     tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)
-    fit = smooth_series(th_s, ts_in, t_eval, smoothing=_time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var),
-                        **tkw)
-    rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw)
+    k, k_gcv = _time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var)
+    fit = smooth_series(th_s, ts_in, t_eval, smoothing=k, **tkw)
+    rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw, fit.smoothing if k_gcv == "gcv" else k_gcv)
     chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing
     total = np.where(visible, rate_fit.rate, np.nan)
     smoothed = np.where(visible, fit.value, np.nan)
@@ -175,20 +175,21 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
 def _time_spacing(th_s, t, grad, psi, p, ks, noise_var):
     """``temperature_smoothing``, a ``"gcv"`` one resolved where ``noise_var`` is given: GCV's choice on the
     filled series ``th_s`` (as :func:`~irdic.numerics.series.smooth_series` makes it), kept where its bias does not
-    outweigh the noise it removes from the gradient ``grad`` (:func:`~irdic.fields.smoothing.guarded_time_smoothing`)."""
+    outweigh the noise it removes from the gradient ``grad`` (:func:`~irdic.fields.smoothing.guarded_time_smoothing`);
+    and GCV's choice itself (the rate's regression is at most as smooth: :func:`_rate_series`)."""
     k = p["temperature_smoothing"]
     if k != "gcv" or noise_var is None:
-        return k
+        return k, k
     live = np.isfinite(th_s).all(axis=0)
     k = gcv_temporal(t, th_s[:, live] if live.any() else th_s, c=p["c_time"], R0=p["R0_time"])[0]
-    return guarded_time_smoothing(k, t, grad, psi, noise_var(ks), p)
+    return guarded_time_smoothing(k, t, grad, psi, noise_var(ks), p), k
 
 
-def _rate_series(th_s, ts_in, t_eval, p, fit, tkw):
+def _rate_series(th_s, ts_in, t_eval, p, fit, tkw, value_k):
     """The temporal regression of the spatially regressed series ``th_s`` whose derivative is the rate.
 
-    With ``temperature_smoothing`` "gcv": GCV's spacing among candidates with up to
-    :data:`~irdic.numerics.temporal.RATE_MAX_FRACTION` parameters per stage (the value's: 1/2), or that
+    With ``temperature_smoothing`` "gcv": the spacing of least estimated risk of the rate, at most the value's
+    GCV spacing ``value_k`` (before the value's guard: :func:`~irdic.fields.smoothing.rate_smoothing`), or that
     resolved for the record (``p["temperature_smoothing_rate"]``); a configured number serves both (``fit``).
 
     Notes
@@ -200,4 +201,7 @@ def _rate_series(th_s, ts_in, t_eval, p, fit, tkw):
     k = p.get("temperature_smoothing_rate") or ("gcv" if p["temperature_smoothing"] == "gcv" else None)
     if k is None:
         return fit
-    return smooth_series(th_s, ts_in, t_eval, smoothing=k, gcv_max_fraction=RATE_MAX_FRACTION, **tkw)
+    if k == "gcv":  # the series are filled (space_time): those with a value at every time judge
+        live = np.isfinite(th_s).all(axis=0)
+        k = rate_smoothing(ts_in, th_s[:, live] if live.any() else th_s, value_k, p)
+    return smooth_series(th_s, ts_in, t_eval, smoothing=k, **tkw)

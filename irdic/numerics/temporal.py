@@ -24,8 +24,8 @@ from .imq import imq, imq_dr, regression_R0
 from .saddle import SaddleFactor
 
 __all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "GCV_MAX_SERIES", "judged_columns", "temporal_reach",
-           "temporal_window", "REACH_TOL", "REGRESSION_SPACINGS", "RATE_MAX_FRACTION", "local_rate_weights",
-           "LOCAL_RATE_SAMPLES", "rate_reference_stencil", "rate_reference_weights", "RATE_REFERENCE_MIN_SPACING",
+           "temporal_window", "regression_candidates", "TEMPORAL_CANDIDATES", "REACH_TOL", "REGRESSION_SPACINGS",
+           "RATE_MAX_FRACTION", "local_rate_weights", "LOCAL_RATE_SAMPLES", "rate_reference_stencil", "rate_reference_weights", "RATE_REFERENCE_MIN_SPACING",
            "RATE_REFERENCE_DEGREE", "FLAT_KERNEL_SPACINGS", "kernel_R0"]
 
 log = logging.getLogger(__name__)
@@ -34,8 +34,9 @@ log = logging.getLogger(__name__)
 #: taken as equal: the interpolation weights are then the identity row.
 TIME_SNAP = 1e-9
 
-#: Most parameters per sample GCV may give the regression the material rate is taken from
-#: (:func:`gcv_temporal`'s ``max_fraction``; the value's is 1/2). The rate of a fast transient sampled
+#: Most parameters per sample of the regression the material rate is taken from
+#: (:func:`~irdic.numerics.temporal_risk.rate_risk_temporal`'s ``max_fraction``; the value's GCV has 1/2; the
+#: figures below are GCV's, which chose the rate's spacing before the rate's risk did). The rate of a fast transient sampled
 #: at a few stages per time constant is limited by the regression's bias, not by the noise left after
 #: the spatial regression: on the tube (demo, 21 stages at 2 Hz, 0.05 K) GCV's curve has its minimum
 #: at centres every 2 stages (13 parameters of 21), which the cap of 1/2 excluded (it took 3: rate
@@ -312,7 +313,8 @@ def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=GC
     c, R0 : float
         Kernel (as :class:`TemporalInterpolant`).
     candidates : sequence of float, optional
-        Centre spacing factors (> 1); default 1.5 ... 64, as many as ``M`` allows.
+        Centre spacing factors (> 1); default :data:`TEMPORAL_CANDIDATES`, as many as ``M`` allows
+        (:func:`regression_candidates`).
     max_series : int
         At most this many columns (evenly spaced) enter the pooled GCV.
     max_fraction : float
@@ -344,21 +346,9 @@ def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=GC
     if F.shape[1] > max_series:
         F = F[:, judged_columns(F.shape[1], max_series)]
     M = t.size
-    if candidates is None:
-        candidates = (1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
     table = []
-    seen = set()
-    for k in sorted(float(x) for x in candidates):
-        if k <= 1:
-            raise ConfigError(f"candidates must be > 1 (1 is interpolation, GCV undefined), got {k}")
-        try:
-            ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k)
-        except (DataError, GeometryError):
-            continue
+    for k, ts in regression_candidates(t, c=c, R0=R0, candidates=candidates, max_fraction=max_fraction):
         p = ts.n_parameters
-        if p in seen or p > int(max_fraction * M) or ts.centre_index.size < 3:
-            continue
-        seen.add(p)
         rss = ts.residual_ss(F)
         table.append((k, p, M * rss / F.shape[1] / (M - p) ** 2))
     if not table:
@@ -367,6 +357,31 @@ def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=GC
     best = min(table, key=lambda r: r[2])
     log.info("temporal GCV: centres every %.3g times (%d parameters of %d)", best[0], best[1], M)
     return best[0], table
+
+
+#: the temporal regressions' centre spacing factors a choice from the data tries (:func:`regression_candidates`)
+TEMPORAL_CANDIDATES = (1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
+
+
+def regression_candidates(times, *, c=1.0, R0=1.0, candidates=None, max_fraction=0.5):
+    """``[(k, TemporalInterpolant)]``: the regressions of the spacings ``candidates`` (> 1; default
+    :data:`TEMPORAL_CANDIDATES`) on ``times`` that fit, in increasing ``k``: at least 3 centres, at most
+    ``max_fraction`` parameters per sample, each number of parameters once (the least spacing that gives it)."""
+    t = increasing_times(times, "times", "n_times")
+    out, seen = [], set()
+    for k in sorted(float(x) for x in (TEMPORAL_CANDIDATES if candidates is None else candidates)):
+        if k <= 1:
+            raise ConfigError(f"candidates must be > 1 (1 is interpolation, GCV undefined), got {k}")
+        try:
+            ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k)
+        except (DataError, GeometryError):
+            continue
+        p = ts.n_parameters
+        if p in seen or p > int(max_fraction * t.size) or ts.centre_index.size < 3:
+            continue
+        seen.add(p)
+        out.append((k, ts))
+    return out
 
 
 def judged_columns(n, max_series=GCV_MAX_SERIES):
