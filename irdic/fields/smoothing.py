@@ -113,7 +113,7 @@ def rate_smoothing(t, series, value_k, p) -> float:
     GCV's spacing, not the value's after :func:`guarded_time_smoothing`: where the guard interpolates the value
     in time (a narrow band passing each point within two DIC times, the noisy family's drawn-101), the rate of the
     interpolation erred by 10.1 % against 9.1 % from the regression; without a bound the rate's risk took 16
-    stages on the static shell-edge (0.37 % against 0.26 % at GCV's 8, 45 % of it flagged bias-dominated against
+    stages on the static shell-edge (0.37 % against 0.26 % at GCV's 12, 45 % of it flagged bias-dominated against
     10 %)."""
     k = rate_risk_temporal(t, series, c=p["c_time"], R0=p["R0_time"])[0]
     return min(float(k), float(value_k or 1.0))
