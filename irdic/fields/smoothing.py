@@ -16,8 +16,8 @@ import numpy as np
 from ..errors import ConfigError, DataError
 from ..footprint.fields import pixel_pitch
 from ..numerics.series import gcv_columns
-from ..numerics.temporal import gcv_temporal
-from ..numerics.temporal_risk import CP_LIMIT, bias_ratio, rate_risk_temporal
+from ..numerics.temporal_choice import gcv_temporal, rate_risk_temporal
+from ..numerics.temporal_risk import CP_LIMIT, bias_ratio
 from ..parameters import settings
 from ..surface import fit_surface
 from .spatial import judged_points, regressed_gradient, space_gcv
@@ -104,7 +104,7 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
 
 def rate_smoothing(t, series, value_k, p) -> float:
     """The rate's temporal spacing: least estimated risk of the rate
-    (:func:`~irdic.numerics.temporal_risk.rate_risk_temporal`) on the complete ``series`` (M, n) at ``t``, at
+    (:func:`~irdic.numerics.temporal_choice.rate_risk_temporal`) on the complete ``series`` (M, n) at ``t``, at
     most GCV's spacing of the value ``value_k`` (None or 1: interpolation), so that the rate's regression is at
     most as smooth as GCV would make the value's (:func:`irdic.fields.space_time._rate_series`).
 

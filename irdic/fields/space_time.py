@@ -16,7 +16,8 @@ from ..footprint.fields import paper_value
 from ..gradient import material_rate, surface_gradient
 from ..logs import report
 from ..numerics.series import fill_series, smooth_series
-from ..numerics.temporal import gcv_temporal, rate_reference_weights
+from ..numerics.temporal import rate_reference_weights
+from ..numerics.temporal_choice import gcv_temporal
 from ..uncertainty.model import paper_std, uncertainties
 from .smoothing import gradient_noise_var, guarded_time_smoothing, rate_smoothing
 from .spatial import regressed_gradient

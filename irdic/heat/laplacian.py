@@ -497,7 +497,7 @@ def smooth_in_time(result: Laplacian, times, smoothing="gcv", *, c=1.0, R0=1.0) 
     times : array_like, shape (T,)
         DIC times (s).
     smoothing : "gcv", None or float >= 1
-        Centre spacing in time (stages); "gcv": :func:`irdic.numerics.temporal.gcv_temporal` among
+        Centre spacing in time (stages); "gcv": :func:`irdic.numerics.temporal_choice.gcv_temporal` among
         :data:`TIME_CANDIDATES` on the series of the points that have a Laplacian at every time; None: unchanged.
     c, R0 : float
         Temporal IMQ kernel (the fields stage's ``c_time``, ``R0_time``).
@@ -517,7 +517,8 @@ def smooth_in_time(result: Laplacian, times, smoothing="gcv", *, c=1.0, R0=1.0) 
     DIC rate on most tests, so the time regression removes most of that
     noise at a small temporal bias.
     """
-    from ..numerics.temporal import TemporalInterpolant, gcv_temporal
+    from ..numerics.temporal import TemporalInterpolant
+    from ..numerics.temporal_choice import gcv_temporal
 
     t = float_array(times, "times")
     lap, std = result.laplacian, result.std

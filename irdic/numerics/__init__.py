@@ -3,7 +3,8 @@
 from .imq import imq, imq_dr, imq_matrix, imq_planar
 from .saddle import SaddleFactor
 from .series import SeriesFit, smooth_series
-from .temporal import TemporalInterpolant, gcv_temporal
+from .temporal import TemporalInterpolant
+from .temporal_choice import gcv_temporal
 
 __all__ = [
     "imq",

@@ -6,7 +6,7 @@ times (the temporal interpolant), then interpolates or regresses in time
 temperatures its derivative is the material rate. :func:`fill_series` fills
 several arrays at once (one interpolant per pattern of missing times,
 shared by all of them); :func:`gcv_columns` fills only the series that
-:func:`~irdic.numerics.temporal.gcv_temporal` judges; :func:`cardinal_weights`
+:func:`~irdic.numerics.temporal_choice.gcv_temporal` judges; :func:`cardinal_weights`
 are the weights of one gap from its neighbouring samples (also the surface's
 short-gap fill).
 """
@@ -22,7 +22,8 @@ from ..validation import float_array, increasing_times, smoothing_factor
 from .imq import imq
 from .patterns import same_patterns
 from .saddle import solve_dense
-from .temporal import GCV_MAX_SERIES, TIME_SNAP, TemporalInterpolant, gcv_temporal, judged_columns, temporal_window
+from .temporal import TIME_SNAP, TemporalInterpolant, temporal_window
+from .temporal_choice import GCV_MAX_SERIES, gcv_temporal, judged_columns
 from .threads import blas_threads, parallel_map
 
 __all__ = ["SeriesFit", "smooth_series", "fill_series", "gcv_columns", "fill_gaps", "cardinal_weights"]
@@ -132,7 +133,7 @@ def gcv_columns(values, times, *, c=1.0, R0=1.0, max_series=GCV_MAX_SERIES):
     times, c, R0
         As :func:`smooth_series` (the fill's interpolant).
     max_series : int
-        As :func:`~irdic.numerics.temporal.gcv_temporal`.
+        As :func:`~irdic.numerics.temporal_choice.gcv_temporal`.
 
     Returns
     -------
@@ -242,7 +243,7 @@ def smooth_series(values, times, t_eval=None, *, smoothing="gcv", c=1.0, R0=1.0,
         the operator's window (:func:`temporal_window`) is the record's.
         Default ``times``.
     gcv_max_fraction : float
-        ``max_fraction`` of :func:`~irdic.numerics.temporal.gcv_temporal` (with ``smoothing="gcv"``).
+        ``max_fraction`` of :func:`~irdic.numerics.temporal_choice.gcv_temporal` (with ``smoothing="gcv"``).
 
     Returns
     -------

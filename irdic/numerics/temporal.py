@@ -5,7 +5,8 @@ DIC series (:mod:`irdic.surface`) are treated alike: an IMQ kernel
 ``m(r) = c / sqrt(c^2 + r^2)``, ``r = (t - t_j) / R0``, on every time plus the
 monomials {1, t} (the paper's interpolant; c = 1, R0 = 1 s), or, for noisy
 series, a least-squares regression with fewer centres whose spacing
-generalised cross-validation can choose (:func:`gcv_temporal`).
+generalised cross-validation can choose
+(:func:`~irdic.numerics.temporal_choice.gcv_temporal`).
 :func:`irdic.numerics.series.smooth_series` applies the operator to any per-point series.
 """
 
@@ -23,10 +24,9 @@ from ..validation import as_int, float_array, increasing_times, positive, smooth
 from .imq import imq, imq_dr, regression_R0
 from .saddle import SaddleFactor
 
-__all__ = ["TIME_SNAP", "TemporalInterpolant", "gcv_temporal", "GCV_MAX_SERIES", "judged_columns", "temporal_reach",
-           "temporal_window", "regression_candidates", "TEMPORAL_CANDIDATES", "REACH_TOL", "REGRESSION_SPACINGS",
-           "RATE_MAX_FRACTION", "local_rate_weights", "LOCAL_RATE_SAMPLES", "rate_reference_stencil", "rate_reference_weights", "RATE_REFERENCE_MIN_SPACING",
-           "RATE_REFERENCE_DEGREE", "FLAT_KERNEL_SPACINGS", "kernel_R0"]
+__all__ = ["TIME_SNAP", "TemporalInterpolant", "temporal_reach", "temporal_window", "REACH_TOL", "REGRESSION_SPACINGS",
+           "local_rate_weights", "LOCAL_RATE_SAMPLES", "rate_reference_stencil", "rate_reference_weights",
+           "RATE_REFERENCE_MIN_SPACING", "RATE_REFERENCE_DEGREE", "FLAT_KERNEL_SPACINGS", "kernel_R0"]
 
 log = logging.getLogger(__name__)
 
@@ -34,19 +34,6 @@ log = logging.getLogger(__name__)
 #: taken as equal: the interpolation weights are then the identity row.
 TIME_SNAP = 1e-9
 
-#: Most parameters per sample of the regression the material rate is taken from
-#: (:func:`~irdic.numerics.temporal_risk.rate_risk_temporal`'s ``max_fraction``; the value's GCV has 1/2; the
-#: figures below are GCV's, which chose the rate's spacing before the rate's risk did). The rate of a fast transient sampled
-#: at a few stages per time constant is limited by the regression's bias, not by the noise left after
-#: the spatial regression: on the tube (demo, 21 stages at 2 Hz, 0.05 K) GCV's curve has its minimum
-#: at centres every 2 stages (13 parameters of 21), which the cap of 1/2 excluded (it took 3: rate
-#: error 3.5 %, against 2.7 % at 2). Not more: with 17 parameters of 21 (spacing 1.5) the GCV
-#: denominator is 0.04 and its choice scatters.
-RATE_MAX_FRACTION = 2.0 / 3.0
-
-#: Series (columns) :func:`gcv_temporal` pools at most, evenly spaced among those given: its choice is a
-#: property of the record's signal and noise, which a few thousand points judge as well as all of them.
-GCV_MAX_SERIES = 4096
 
 
 #: Samples of the local polynomial (degree one less) whose derivative is the reference of a temporal
@@ -105,7 +92,7 @@ class TemporalInterpolant:
     smoothing : None or float >= 1
         None / 1: interpolation (the paper). ``k > 1``: least squares with
         centres on about every k-th time (first and last always) and a kernel
-        six centre spacings wide (``c R0_eff = 6 H``); see :func:`gcv_temporal`.
+        six centre spacings wide (``c R0_eff = 6 H``); see :func:`~irdic.numerics.temporal_choice.gcv_temporal`.
     window : None or int >= 1
         None: one operator over all times (the paper). ``n``: the windowed
         operator of a long record: each evaluation time uses only the ``n``
@@ -298,95 +285,6 @@ class TemporalInterpolant:
         if f.ndim < 1 or f.shape[0] != self.n_times:
             raise ConfigError(f"values must have n_times = {self.n_times} rows, got shape {f.shape}")
         return np.tensordot(self.weights(t_eval, derivative), f, axes=(1, 0))
-
-
-def gcv_temporal(times, series, *, c=1.0, R0=1.0, candidates=None, max_series=GCV_MAX_SERIES,
-                 max_fraction=0.5):
-    """Choose the temporal regression's centre spacing by generalised cross-validation.
-
-    Parameters
-    ----------
-    times : array_like, shape (M,)
-        Sample times (s).
-    series : array_like, shape (M, ...)
-        Time series (finite) to judge by, pooled: every column counts.
-    c, R0 : float
-        Kernel (as :class:`TemporalInterpolant`).
-    candidates : sequence of float, optional
-        Centre spacing factors (> 1); default :data:`TEMPORAL_CANDIDATES`, as many as ``M`` allows
-        (:func:`regression_candidates`).
-    max_series : int
-        At most this many columns (evenly spaced) enter the pooled GCV.
-    max_fraction : float
-        Candidates with more than ``max_fraction M`` parameters are left out
-        (GCV's denominator ``(1 - p/M)²`` becomes unreliable as ``p`` nears
-        ``M``); the value's default 1/2, the rate's
-        :data:`RATE_MAX_FRACTION`.
-
-    Returns
-    -------
-    k : float
-        Factor with the least ``GCV = n RSS / (n - p)^2``; 1.0 (interpolation)
-        when no candidate fits (at most ``max_fraction M`` parameters: fewer
-        than ~10 times).
-    table : list of (k, n_parameters, gcv)
-
-    Notes
-    -----
-    The hat matrix of the regression is ``Q Q^T`` with trace ``p``, the number
-    of parameters, so GCV is exact and cheap.
-    """
-    t = increasing_times(times, "times", "n_times")
-    F = float_array(series, "series")
-    if F.shape[0] != t.size:
-        raise ConfigError(f"series must have M = {t.size} rows, got shape {F.shape}")
-    F = F.reshape(t.size, -1)
-    if not np.isfinite(F).all():
-        raise DataError("series contain NaN or inf; GCV needs complete series")
-    if F.shape[1] > max_series:
-        F = F[:, judged_columns(F.shape[1], max_series)]
-    M = t.size
-    table = []
-    for k, ts in regression_candidates(t, c=c, R0=R0, candidates=candidates, max_fraction=max_fraction):
-        p = ts.n_parameters
-        rss = ts.residual_ss(F)
-        table.append((k, p, M * rss / F.shape[1] / (M - p) ** 2))
-    if not table:
-        log.warning("temporal GCV: %d times are too few for a regression; interpolating", M)
-        return 1.0, table
-    best = min(table, key=lambda r: r[2])
-    log.info("temporal GCV: centres every %.3g times (%d parameters of %d)", best[0], best[1], M)
-    return best[0], table
-
-
-#: the temporal regressions' centre spacing factors a choice from the data tries (:func:`regression_candidates`)
-TEMPORAL_CANDIDATES = (1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
-
-
-def regression_candidates(times, *, c=1.0, R0=1.0, candidates=None, max_fraction=0.5):
-    """``[(k, TemporalInterpolant)]``: the regressions of the spacings ``candidates`` (> 1; default
-    :data:`TEMPORAL_CANDIDATES`) on ``times`` that fit, in increasing ``k``: at least 3 centres, at most
-    ``max_fraction`` parameters per sample, each number of parameters once (the least spacing that gives it)."""
-    t = increasing_times(times, "times", "n_times")
-    out, seen = [], set()
-    for k in sorted(float(x) for x in (TEMPORAL_CANDIDATES if candidates is None else candidates)):
-        if k <= 1:
-            raise ConfigError(f"candidates must be > 1 (1 is interpolation, GCV undefined), got {k}")
-        try:
-            ts = TemporalInterpolant(t, c=c, R0=R0, smoothing=k)
-        except (DataError, GeometryError):
-            continue
-        p = ts.n_parameters
-        if p in seen or p > int(max_fraction * t.size) or ts.centre_index.size < 3:
-            continue
-        seen.add(p)
-        out.append((k, ts))
-    return out
-
-
-def judged_columns(n, max_series=GCV_MAX_SERIES):
-    """Indices of the columns of ``n`` that :func:`gcv_temporal` pools: all, or ``max_series`` evenly spaced."""
-    return np.arange(n) if n <= max_series else np.linspace(0, n - 1, max_series).astype(int)
 
 
 def temporal_reach(times, *, c=1.0, R0=1.0, tol=REACH_TOL, model=401):

@@ -24,7 +24,7 @@ Public API
   applies it to any per-point time series (point temperatures: their
   derivative at fixed ``Psi`` is the material rate).
 * :func:`gcv_spatial` (:mod:`.regression`),
-  :func:`irdic.numerics.temporal.gcv_temporal`: choice of the smoothing by
+  :func:`irdic.numerics.temporal_choice.gcv_temporal`: choice of the smoothing by
   generalised cross-validation.
 * :func:`fit_surface` (:mod:`.fit`): the whole stage: ``x``, tangents
   ``a_alpha``, ``dx/dt``, reference tangents ``A_alpha``, fill flags and edge

@@ -12,7 +12,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, DataError, IrdicWarning
 from ..numerics.series import cardinal_weights
-from ..numerics.temporal import TemporalInterpolant, gcv_temporal, temporal_window
+from ..numerics.temporal import TemporalInterpolant, temporal_window
+from ..numerics.temporal_choice import gcv_temporal
 from ..validation import as_int, choice, float_array, increasing_times, psi_array, smoothing_factor
 from .geometry import edge_distance
 from .interpolation import shared_interpolant

@@ -254,7 +254,7 @@ def test_gcv_max_fraction_admits_the_rates_lighter_regression():
     """GCV used to leave out every candidate with more than M/2 parameters, so on 21 stages of a fast
     transient it could not reach centres every 2 stages (13 parameters), where its own curve has its minimum;
     the rate's regression admits up to RATE_MAX_FRACTION."""
-    from irdic.numerics.temporal import RATE_MAX_FRACTION, gcv_temporal
+    from irdic.numerics.temporal_choice import RATE_MAX_FRACTION, gcv_temporal
 
     t = np.arange(21) * 0.5
     rng = np.random.default_rng(0)
@@ -277,7 +277,7 @@ def test_gcv_on_the_judged_columns_is_the_choice_of_smooth_series(n_series):
     spaced): GCV on them chooses as smooth_series does after filling every series, with the same table, for
     the value's and the rate's limit, with gaps inside and at the ends and dead series among the others."""
     from irdic.numerics.series import gcv_columns
-    from irdic.numerics.temporal import GCV_MAX_SERIES, RATE_MAX_FRACTION, gcv_temporal
+    from irdic.numerics.temporal_choice import GCV_MAX_SERIES, RATE_MAX_FRACTION, gcv_temporal
 
     rng = np.random.default_rng(4)
     t = np.arange(48) * 0.25
@@ -324,8 +324,8 @@ def test_rate_risk_temporal_tracks_the_true_risk(period, M, sigma):
     every candidate's rate is within 20 % of its true mean squared error (interior samples) and the spacing
     chosen is the truly best one; GCV (judging the values) takes 3 stages on the 3-s period, whose rate errs
     hundreds of times more than at 2."""
-    from irdic.numerics.temporal import gcv_temporal
-    from irdic.numerics.temporal_risk import rate_risk_temporal
+    from irdic.numerics.temporal_choice import gcv_temporal
+    from irdic.numerics.temporal_choice import rate_risk_temporal
 
     rng = np.random.default_rng(0)
     t = np.arange(M) * 0.5
@@ -345,7 +345,7 @@ def test_rate_risk_temporal_tracks_the_true_risk(period, M, sigma):
 
 
 def test_rate_risk_temporal_needs_two_candidates():
-    from irdic.numerics.temporal_risk import rate_risk_temporal
+    from irdic.numerics.temporal_choice import rate_risk_temporal
 
     t = np.arange(5) * 0.5
     assert rate_risk_temporal(t, np.ones((5, 3))) == (1.0, [])
