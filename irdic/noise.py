@@ -40,8 +40,8 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 __all__ = ["IRNoise", "NoiseGains", "interpolation_noise_gains", "ir_noise", "quantisation_step", "spatial_noise",
-           "noise_levels", "temporal_residual", "TEMPORAL_ORDER", "dic_noise", "choose_smoothing", "mad_std", "clipped_std",
-           "CLIP_SIGMAS", "NOISE_TO_SIGNAL", "STRAIN_NOISE_FLOOR", "auto_smoothing"]
+           "noise_levels", "temporal_residual", "TEMPORAL_ORDER", "dic_noise", "choose_smoothing", "mad_std",
+           "clipped_std", "CLIP_SIGMAS", "NOISE_TO_SIGNAL", "STRAIN_NOISE_FLOOR", "auto_smoothing"]
 
 log = logging.getLogger(__name__)
 
