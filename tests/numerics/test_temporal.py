@@ -324,8 +324,7 @@ def test_rate_risk_temporal_tracks_the_true_risk(period, M, sigma):
     every candidate's rate is within 20 % of its true mean squared error (interior samples) and the spacing
     chosen is the truly best one; GCV (judging the values) takes 3 stages on the 3-s period, whose rate errs
     hundreds of times more than at 2."""
-    from irdic.numerics.temporal_choice import gcv_temporal
-    from irdic.numerics.temporal_choice import rate_risk_temporal
+    from irdic.numerics.temporal_choice import gcv_temporal, rate_risk_temporal
 
     rng = np.random.default_rng(0)
     t = np.arange(M) * 0.5
