@@ -105,8 +105,10 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
 def rate_smoothing(t, series, value_k, p) -> float:
     """The rate's temporal spacing: least estimated risk of the rate
     (:func:`~irdic.numerics.temporal_choice.rate_risk_temporal`) on the complete ``series`` (M, n) at ``t``, at
-    most GCV's spacing of the value ``value_k`` (None or 1: interpolation), so that the rate's regression is at
-    most as smooth as GCV would make the value's (:func:`irdic.fields.space_time._rate_series`).
+    most GCV's spacing of the value ``value_k``, so that the rate's regression is at most as smooth as GCV would
+    make the value's (:func:`irdic.fields.space_time._rate_series`). Where GCV had no candidate for the value
+    (``value_k`` None or 1: too few stages for its 1/2 parameters per stage, 9 and fewer) the rate's own choice
+    stands, among candidates up to :data:`~irdic.numerics.temporal_choice.RATE_MAX_FRACTION`.
 
     Notes
     -----
@@ -115,8 +117,8 @@ def rate_smoothing(t, series, value_k, p) -> float:
     interpolation erred by 10.1 % against 9.1 % from the regression; without a bound the rate's risk took 16
     stages on the static shell-edge (0.37 % against 0.26 % at GCV's 12, 45 % of it flagged bias-dominated against
     10 %)."""
-    k = rate_risk_temporal(t, series, c=p["c_time"], R0=p["R0_time"])[0]
-    return min(float(k), float(value_k or 1.0))
+    k = float(rate_risk_temporal(t, series, c=p["c_time"], R0=p["R0_time"])[0])
+    return min(k, float(value_k)) if value_k is not None and value_k > 1.0 else k
 
 
 #: times of the points' noise through the spatial regression that give its gradient's noise (:func:`gradient_noise_var`)

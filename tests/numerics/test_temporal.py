@@ -350,3 +350,18 @@ def test_rate_risk_temporal_needs_two_candidates():
     assert rate_risk_temporal(t, np.ones((5, 3))) == (1.0, [])
     with pytest.raises(DataError, match="NaN"):
         rate_risk_temporal(np.arange(21.0), np.full((21, 2), np.nan))
+
+
+def test_rate_smoothing_is_bounded_by_the_values_gcv_spacing_only_where_gcv_chose_one():
+    """Nine stages: GCV has no candidate for the value (1/2 parameters per stage) and the rate's risk takes its own
+    regression (4 stages, as GCV's choice for the rate did); on more stages the value's spacing bounds it."""
+    from irdic.fields.smoothing import rate_smoothing
+    from irdic.numerics.temporal_choice import gcv_temporal, rate_risk_temporal
+
+    p = {"c_time": 1.0, "R0_time": 1.0}
+    rng = np.random.default_rng(0)
+    t = np.arange(9) * 0.5
+    F = np.sin(0.4 * t[:, None] + rng.uniform(0, 2 * np.pi, 2000)) + rng.normal(0.0, 0.05, (9, 2000))
+    assert gcv_temporal(t, F)[0] == 1.0
+    assert rate_smoothing(t, F, 1.0, p) == rate_smoothing(t, F, None, p) == rate_risk_temporal(t, F)[0] == 4.0
+    assert rate_smoothing(t, F, 3.0, p) == 3.0
