@@ -179,6 +179,51 @@ def test_pools_keep_to_the_budget():
         assert peak[0] == 1 and set(rest) == {first} == {threading.get_ident()}
 
 
+def test_both_takes_a_free_thread_of_the_stage_only():
+    """``both`` runs its second job on a thread the stage has free: a pool of two outside any pool, the worker the
+    items of ``map_beside`` leave free; else in the caller, after the first."""
+    import threading
+    import time
+
+    from irdic.numerics.threads import both, map_beside
+
+    busy, peak, lock = [0], [0], threading.Lock()
+
+    def job(seconds):
+        def run():
+            with lock:
+                busy[0] += 1
+                peak[0] = max(peak[0], busy[0])
+            time.sleep(seconds)
+            with lock:
+                busy[0] -= 1
+            return threading.get_ident()
+        return run
+
+    with stage_threads(2):
+        a, b = both(job(0.05), job(0.05))
+        assert a != b and peak[0] == 2
+        # beside quick items the second job goes to the worker they leave free ...
+        peak[0] = 0
+        (a, b), _ = map_beside(lambda: both(job(0.3), job(0.05)), lambda _: job(0.01)(), range(2))
+        assert a != b and peak[0] == 2
+        # ... and where the items keep it busy, it runs after the first, on the same thread
+        peak[0] = 0
+        (a, b), items = map_beside(lambda: both(job(0.01), job(0.01)), lambda _: job(0.4)(), range(1))
+        assert a == b != items[0] and peak[0] == 2
+        # an error of the first job is raised, its second job not run by another worker
+        ran = []
+
+        def fail():
+            raise ValueError("first")
+
+        with pytest.raises(ValueError, match="first"):
+            map_beside(lambda: both(fail, lambda: ran.append(1)), lambda _: job(0.2)(), range(1))
+        assert not ran
+    with stage_threads(1):
+        assert both(job(0.01), job(0.01)) == (threading.get_ident(),) * 2
+
+
 def test_blas_limit_outlives_the_blocks_of_other_threads_inside_it():
     # the limit is the process's: a worker leaving its own block while the pool's is open must not lift it
     # (the workers' BLAS would then run more threads than the stage was given)

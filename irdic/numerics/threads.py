@@ -14,7 +14,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 from ..threads import blas_threads, thread_budget
 
-__all__ = ["workers", "parallel_map", "map_beside", "worker_slices", "blas_threads"]
+__all__ = ["workers", "parallel_map", "map_beside", "both", "worker_slices", "blas_threads"]
 
 #: set in the threads of a pool of this module
 _pool = threading.local()
@@ -69,7 +69,40 @@ def map_beside(task, fn, items):
     n = workers()
     if n == 1:
         return task(), [fn(i) for i in items]
+
+    def beside():  # the task may hand work to a worker the items leave free (:func:`both`)
+        _pool.spare = ex
+        try:
+            return task()
+        finally:
+            _pool.spare = None
+
     with blas_threads(1), ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
-        first = ex.submit(task)  # the pool's queue is first in, first out
+        first = ex.submit(beside)  # the pool's queue is first in, first out
         rest = list(ex.map(fn, items))
         return first.result(), rest
+
+
+def both(first, second):
+    """``(first(), second())``, the two at once where a thread of the stage is free for ``second``.
+
+    Outside a pool with two workers or more, on a pool of two. In the job
+    run beside a pool's items (:func:`map_beside`), ``second`` is queued on
+    that pool behind the items and taken by the first worker they leave
+    free; if none has taken it when ``first`` is done, it runs here. Inside
+    any other pool's worker, one after the other. Never more threads than
+    the stage was given.
+    """
+    spare = getattr(_pool, "spare", None)
+    if spare is not None:
+        later = spare.submit(second)
+        try:
+            a = first()
+        except BaseException:
+            later.cancel()
+            raise
+        return a, (second() if later.cancel() else later.result())
+    if workers() > 1:
+        a, b = parallel_map(lambda f: f(), [first, second])
+        return a, b
+    return first(), second()

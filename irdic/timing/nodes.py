@@ -16,7 +16,7 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
+from scipy.interpolate import BSpline, make_interp_spline
 from scipy.ndimage import distance_transform_edt, gaussian_filter
 from scipy.sparse import csr_matrix
 from scipy.spatial import Delaunay, QhullError, cKDTree
@@ -29,6 +29,10 @@ __all__ = ["Mesh", "Nodes", "MAX_EDGE_FACTOR"]
 MAX_EDGE_FACTOR = 3.0
 #: times per block of the nodes' reference velocities
 TIME_BLOCK = 16
+#: the nodes' own spline in time (their positions at the stages combined once) where its coefficients take at
+#: most this many bytes: it costs about as much per node as the points' spline per point, and spares the
+#: barycentric combination of the points' positions at every time, which costs twice as much per node
+NODE_SPLINE_BYTES = 128 << 20
 
 
 class Mesh:
@@ -137,12 +141,35 @@ class Nodes:
         self.e_ref = np.stack([cr[:, 0] - cr[:, 2], cr[:, 1] - cr[:, 2]], axis=-1)
         self.mesh, self.t_dic = mesh, mesh.t_dic
         self.spline, self.velocity, self.order = mesh.spline(order)
+        self._own, self._uses = None, 0
 
     def with_order(self, order: int) -> "Nodes":
         """The same nodes moved by a spline of another degree in time."""
         out = copy.copy(self)
         out.spline, out.velocity, out.order = self.mesh.spline(order)
+        out._own, out._uses = None, 0
         return out
+
+    def _own_spline(self):
+        """The spline in time through the nodes' positions at the stages (a BSpline over (M, 2) values), built at
+        the second call (nodes that move once, e.g. by a spline of another degree for one comparison, do not
+        pay for it); None before, and where its coefficients would take more than :data:`NODE_SPLINE_BYTES`
+        (the points' spline and the combination at each time then).
+
+        The spline is linear in its values, so its coefficients combined barycentrically are the nodes' spline:
+        the same positions up to rounding (1e-13 px)."""
+        self._uses += 1
+        if self._own is not None or self._uses < 2:
+            return self._own
+        c = self.spline.c  # (coefficients, 2 N)
+        k = c.shape[0]
+        if k * 2 * self.M * c.itemsize > NODE_SPLINE_BYTES:
+            self._uses = -(1 << 62)  # never
+            return None
+        own = self.weights @ c.reshape(k, self.N, 2).transpose(1, 0, 2).reshape(self.N, 2 * k)
+        own = own.reshape(self.M, k, 2).transpose(1, 0, 2).reshape(k, 2 * self.M)
+        self._own = BSpline(self.spline.t, own, self.spline.k, extrapolate=self.spline.extrapolate, axis=0)
+        return self._own
 
     def _combine(self, V: np.ndarray) -> np.ndarray:
         """The nodes' (n, M, 2) barycentric combinations of the points' ``V`` (n, N, 2), one time at a time (a
@@ -155,6 +182,9 @@ class Nodes:
     def at(self, t: np.ndarray) -> np.ndarray:
         """Image positions (n, M, 2) px of the nodes at times ``t`` (n,) s."""
         t = np.asarray(t, float)
+        own = self._own_spline()
+        if own is not None:
+            return own(t).reshape(t.size, self.M, 2)
         return self._combine(self.spline(t).reshape(t.size, self.N, 2))
 
     def reference_velocity(self, t: np.ndarray, deformations: int = 12) -> np.ndarray:

@@ -69,6 +69,7 @@ from scipy.optimize import minimize_scalar
 
 from ..errors import DataError
 from ..noise import spatial_noise
+from ..numerics.threads import both
 from .checks import (MAX_STD_FRAMES, MIN_MOTION_JITTERS, MIN_MOTION_PX, check_fit, check_identified, check_inside,
                      check_motion, check_sizes)
 from .nodes import Mesh, Nodes
@@ -266,9 +267,14 @@ def _log(out: ClockOffset, spacing: float, redrawn: float):
 
 def _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma):
     """The estimates of the models with one component and, where it leaves structure, two and three:
-    {rank: (tau, score, Uncertainty, grid, criterion)}, the refinement's sampler and its node spacing (px)."""
-    fits, failed, fine, spacing = {}, None, None, np.nan
-    for rank in range(1, MAX_RANK + 1):
+    {rank: (tau, score, Uncertainty, grid, criterion)}, the refinement's sampler and its node spacing (px).
+
+    The models of two and three components are fitted at once where a thread of the stage is free
+    (:func:`~irdic.numerics.threads.both`; the clock of the couple stage runs beside its masks, and takes a
+    worker they leave), each on its own copy of the samplers."""
+    def fit(rank, search, fine):
+        """(the fit or the DataError that ended it, the refinement's sampler, its node spacing)"""
+        spacing = np.nan
         try:
             roots, grid, crit = _search(search, centre, period, motion, parameter, rank)
             if fine is None:
@@ -278,13 +284,26 @@ def _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma):
             tau0 = _tournament(fine, roots, rank)
             tau, score, slope = _refined(fine, tau0, period, motion, parameter, rank)
         except DataError as exc:
-            failed = failed or exc
-            if rank > 1:
+            return exc, fine, spacing
+        return (tau, score, uncertainty(score, tau, slope, sigma), grid, crit), fine, spacing
+
+    one, fine, spacing = fit(1, search, None)
+    if not isinstance(one, DataError) and not _structured(one[2], period):
+        return {1: one}, fine, spacing
+    if fine is None:  # the first fit to pass the search builds the refinement's sampler
+        two, fine, spacing = fit(2, search, None)
+        three = fit(3, search, fine)[0] if not isinstance(two, DataError) else None
+    else:
+        (two, _, _), (three, _, _) = both(lambda: fit(2, search, fine),
+                                          lambda: fit(3, search.copy(), fine.copy()))
+    fits, failed = {}, None
+    for rank, got in ((1, one), (2, two), (3, three)):
+        if isinstance(got, DataError):
+            failed = failed or got
+            if rank > 1:  # no third component without a second
                 break
-            continue
-        fits[rank] = (tau, score, uncertainty(score, tau, slope, sigma), grid, crit)
-        if rank == 1 and not _structured(fits[1][2], period):
-            break
+        elif got is not None:
+            fits[rank] = got
     if not fits:
         raise failed
     return fits, fine, spacing
