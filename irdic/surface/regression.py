@@ -97,19 +97,41 @@ def grid_subset(psi, H):
 
 def ls_design(psi, k, h, c, R0):
     """QR of the regression design matrix: centres spaced k h, kernel width c R0_eff = 6 k h."""
-    idx = grid_subset(psi, k * h)
-    centres = psi[idx]
+    centres, R0k, ctr, E = _design(psi, k, h, c, R0)
+    Qm, Rm = scipy.linalg.qr(E, mode="economic", overwrite_a=True, check_finite=False)
+    _check_rank(Rm, k)
+    return centres, R0k, ctr, Qm, Rm
+
+
+def _design(psi, k, h, c, R0):
+    """``(centres, R0k, ctr, E)``: the regression's centres spaced ``k h``, its kernel's width, the monomials'
+    centre and the design matrix (N, centres + 3) at the points ``psi``."""
+    centres = psi[grid_subset(psi, k * h)]
     R0k = regression_R0(c, k * h)
     ctr = psi.mean(axis=0)
-    E = np.concatenate([imq_matrix(psi, centres, c * R0k), monomials(psi, ctr, R0, 0)], axis=1)
-    Qm, Rm = scipy.linalg.qr(E, mode="economic", overwrite_a=True, check_finite=False)
+    return centres, R0k, ctr, np.concatenate([imq_matrix(psi, centres, c * R0k), monomials(psi, ctr, R0, 0)], axis=1)
+
+
+def _check_rank(Rm, k):
     dg = np.abs(np.diag(Rm))
     if dg.min() < 1e-12 * dg.max():
         raise GeometryError(
             f"the regression with centres every {k:g} spacings is rank deficient "
             f"(condition > 1e12); use a larger smoothing factor"
         )
-    return centres, R0k, ctr, Qm, Rm
+
+
+def _residual_ss(p, k, h, c, R0, F):
+    """``(parameters, RSS)`` of the regression with spacing ``k`` of the samples ``F`` (n, m) at ``p``: the
+    triangular factor of the design with the samples beside it, ``[E F] = Q [[R, Qᵀ F], [0, S]]``, holds the
+    residual's sum of squares as ``‖S‖²`` (half the cost of a QR that forms ``Q``). GeometryError as
+    :func:`_fit_design`."""
+    _check_judged(p, k, h)
+    E = _design(p, k, h, c, R0)[3]
+    pp = E.shape[1]
+    R = scipy.linalg.qr(np.concatenate([E, F], axis=1), mode="r", overwrite_a=True, check_finite=False)[0]
+    _check_rank(R[:pp, :pp], k)
+    return pp, float(np.sum(R[pp:, pp:] ** 2))
 
 
 #: Points GCV judges at most: a larger cloud is judged on the round patch of this many points about its
@@ -142,11 +164,16 @@ def _candidates(candidates):
 def _fit_design(p, k, h, c, R0):
     """:func:`ls_design`, or GeometryError when spacing ``k`` leaves too few or too many centres for
     a regression judged on ``p`` (fewer than 6, or more than half the points)."""
+    _check_judged(p, k, h)
+    return ls_design(p, k, h, c, R0)
+
+
+def _check_judged(p, k, h):
+    """GeometryError where spacing ``k`` leaves fewer than 6 centres, or more than half the points ``p``."""
     n = p.shape[0]
     nc = grid_subset(p, k * h).size
     if nc + 3 > n // 2 or nc < MIN_POINTS:
         raise GeometryError(f"{nc} centres for {n} points")
-    return ls_design(p, k, h, c, R0)
 
 
 def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0),
@@ -189,14 +216,12 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
 
     def gcv(k):  # (k, parameters, GCV) of spacing k, or None where it does not fit
         try:
-            _, _, _, Qm, _ = _fit_design(p, k, h, c, R0)
+            pp, rss = _residual_ss(p, k, h, c, R0, F)
         except GeometryError:
             return None
-        rss = float(np.sum((F - Qm @ (Qm.T @ F)) ** 2))
-        pp = Qm.shape[1]
         return k, pp, n * rss / F.shape[1] / (n - pp) ** 2
 
-    # each candidate a QR and two products: on the stage's threads
+    # each candidate a QR: on the stage's threads
     table = [r for r in parallel_map(gcv, _candidates(candidates)) if r is not None]
     if not table:
         raise DataError(f"gcv_spatial: no candidate spacing fits {n} points (too few points)")

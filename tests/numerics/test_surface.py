@@ -381,6 +381,25 @@ def test_regression_reduces_noise_in_derivatives():
     assert e_int / e_reg > 3
 
 
+def test_gcv_table_is_the_regressions_residual():
+    """Each GCV entry is ``n RSS / m / (n - p)²`` of the regression's projection ``Q Qᵀ`` (the residual's sum of
+    squares read off the triangular factor of the design with the samples beside it)."""
+    from irdic.surface.regression import ls_design, median_spacing
+
+    rng = np.random.default_rng(11)
+    psi = grid(0.7, 14)
+    psi = psi + rng.normal(0, 0.05, psi.shape)
+    F = curved(psi) + rng.normal(0, 0.005, (psi.shape[0], 3))
+    h, n = median_spacing(psi), psi.shape[0]
+    _, table = gcv_spatial(psi, F)
+    assert len(table) >= 3
+    for k, pp, g in table:
+        Qm = ls_design(psi, k, h, 0.95, 1.0)[3]
+        rss = float(np.sum((F - Qm @ (Qm.T @ F)) ** 2))
+        assert pp == Qm.shape[1]
+        np.testing.assert_allclose(g, n * rss / 3 / (n - pp) ** 2, rtol=1e-10)
+
+
 def test_spatial_interpolant_errors():
     psi = grid(1.0, 3)
     with pytest.raises(GeometryError, match=r"points 0 and 49 have the same surface parameters"):
