@@ -8,6 +8,7 @@ and the truth within 3 stated standard uncertainties.
 """
 
 import re
+import time
 import warnings
 
 import numpy as np
@@ -130,6 +131,33 @@ def test_two_pattern_components_estimated():
     est = estimate_from_stores(dic, ir, cal, "s07")
     assert est.rank >= 2
     assert abs(est.offset - offset) <= min(0.1 * period, 3 * est.std), (est.offset - offset, est.std)
+
+
+def test_the_estimate_does_not_depend_on_the_threads():
+    """The models of two and three components fitted one after the other (one thread), at once (two), and beside a
+    pool's busy items (the couple stage's masks: the second model runs after the first on the same thread) give
+    the same estimate, to the last bit; so do the nodes' own spline and the points' combined at every time."""
+    from irdic.numerics.threads import map_beside
+    from irdic.threads import stage_threads
+
+    dic, ir, cal, _, offset, period = family_scene("second-pattern", 1.3, realistic=False)
+    runs = []
+    for threads in (1, 2):
+        with stage_threads(threads):
+            runs.append(estimate_from_stores(dic, ir, cal, "s07"))
+    with stage_threads(2):
+        runs.append(map_beside(lambda: estimate_from_stores(dic, ir, cal, "s07"), lambda _: time.sleep(3), [0])[0])
+    assert runs[0].rank >= 2
+    for est in runs[1:]:
+        assert (est.offset, est.std, est.rank) == (runs[0].offset, runs[0].std, runs[0].rank)
+    # the nodes moved by their own spline (from the second evaluation on) and by the points' spline combined
+    mesh = Mesh(np.cumsum(np.random.default_rng(2).normal(0, 0.3, (6, 40, 2)), axis=0) + np.mgrid[0:40:5, 0:50:10]
+                .reshape(2, -1).T[None], np.arange(6.0))
+    nodes = Nodes(mesh, 1.5, 1.0)
+    t = np.linspace(-0.2, 5.2, 23)
+    first, second = nodes.at(t), nodes.at(t)
+    assert nodes._own is not None
+    np.testing.assert_allclose(second, first, rtol=0, atol=1e-10)
 
 
 @pytest.mark.parametrize("realistic", [False, True])
