@@ -103,6 +103,5 @@ def both(first, second):
             raise
         return a, (second() if later.cancel() else later.result())
     if workers() > 1:
-        a, b = parallel_map(lambda f: f(), [first, second])
-        return a, b
+        return tuple(parallel_map(lambda f: f(), [first, second]))
     return first(), second()

@@ -159,13 +159,10 @@ class Nodes:
         The spline is linear in its values, so its coefficients combined barycentrically are the nodes' spline:
         the same positions up to rounding (1e-13 px)."""
         self._uses += 1
-        if self._own is not None or self._uses < 2:
-            return self._own
         c = self.spline.c  # (coefficients, 2 N)
         k = c.shape[0]
-        if k * 2 * self.M * c.itemsize > NODE_SPLINE_BYTES:
-            self._uses = -(1 << 62)  # never
-            return None
+        if self._own is not None or self._uses < 2 or k * 2 * self.M * c.itemsize > NODE_SPLINE_BYTES:
+            return self._own
         own = self.weights @ c.reshape(k, self.N, 2).transpose(1, 0, 2).reshape(self.N, 2 * k)
         own = own.reshape(self.M, k, 2).transpose(1, 0, 2).reshape(k, 2 * self.M)
         self._own = BSpline(self.spline.t, own, self.spline.k, extrapolate=self.spline.extrapolate, axis=0)
