@@ -88,7 +88,7 @@ from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_block, probe_times, spread
 from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
-                              scaled_probes)
+                              ring_mean, scaled_probes)
 from .strain import noise_floor_note, strain_std
 
 __all__ = ["uncertainties", "with_strain_std", "paper_std", "uncertainty_notes", "Window", "PROBES", "EDGE_PX",
@@ -360,8 +360,10 @@ def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, wi
         temp_std = grad_std = None
         rate_std = None if W is not None else rate_std
         # the value is regressed from the paper's temperatures: their own noise through the operators
+        # the value's difference is averaged over each point's nearest before it is squared (ring_mean)
+        ring = ring_mean(sf.psi) if spatial is not None else None
         acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
-                              spatial is not None, pix_draw)
+                              spatial is not None, pix_draw, ring)
         own = None if spatial is None else spatial[0]  # the regressions' input (the footprint's, with one)
         acc = scaled_probes(acc, noise_scale(own if draw is None else theta_paper, acc, regress_space, ks, trusted))
         del acc["res"]  # the residuals' sole use
@@ -384,15 +386,18 @@ def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, wi
             rate_std = np.sqrt(acc.pop("r"))
         if spatial is not None:
             temp_std, grad_std, rate_std, rate_biased = _bias_terms(spatial, acc, sf.psi, trusted, ks, regress_space,
-                                                                    geo, W is not None, temp_std, grad_std, rate_std)
+                                                                    geo, W is not None, temp_std, grad_std, rate_std,
+                                                                    ring)
     release()  # the probes' and bias estimates' blocks are freed: what follows starts on returned pages
     return temp_std, grad_std, rate_std, rate_biased
 
 
-def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, temp_std, grad_std, rate_std):
+def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, temp_std, grad_std, rate_std, ring):
     """Temperature, gradient and rate std with the regressions' estimated bias added
     (:func:`~irdic.uncertainty.regression_bias.local_bias`), and where the rate's temporal bias exceeds its noise
-    (T, N) or None; ``spatial`` and ``acc`` as in :func:`_ir_std`, ``in_time``: with a regression in time."""
+    (T, N) or None; ``spatial`` and ``acc`` as in :func:`_ir_std`, ``in_time``: with a regression in time,
+    ``ring``: the mean the value's difference takes before it is squared, as the probes' did
+    (:func:`~irdic.uncertainty.regression_bias.ring_mean`)."""
     theta, grad, value_in, value = spatial[:4]
     # against the lighter regression of the gradient's input after the same regression in time (the
     # value's reference; the points' own series at each time carried the temporal bias and full noise)
@@ -401,7 +406,7 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     # products, which release the GIL) on the stage's threads
     nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
     # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
-    jobs = [(d_grad, "g_var", reference_options(ks)), (value - value_in, "v_var", {})]
+    jobs = [(d_grad, "g_var", reference_options(ks)), (ring(value - value_in), "v_var", {})]
     temporal = len(spatial) > 5 and in_time
     if temporal:  # the space-time regression's terms (_space_time_bias)
         jobs += [(d, key, {}) for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]
@@ -416,7 +421,7 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     return temp_std, grad_std, rate_std, biased
 
 
-def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias, draw=None):
+def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias, draw=None, ring=None):
     """Noise probes through the spatial (and temporal) regression of the temperatures.
 
     :data:`~irdic.uncertainty.probes.PROBES` white-noise fields of the point noise ``s_T`` (K) run
@@ -451,7 +456,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         ref_k = (reference_spacing(ks) or 1.0) if bias and start < BIAS_PROBES else None
 
         def part(rows):  # the group's probes split over the stage's threads: the group's memory, not more
-            return probe_block(noise[rows], regress_space, geo, visible, ks, W, sub, off, bias, ref_k)
+            return probe_block(noise[rows], regress_space, geo, visible, ks, W, sub, off, bias, ref_k, ring)
 
         parts = parallel_map(part, worker_slices(b))
         del noise

@@ -97,7 +97,7 @@ class SpreadStack:
         return out if dtype is None else out.astype(dtype)
 
 
-def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k):
+def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k, ring=None):
     """A block of the noise probes of the spatial (and temporal) regression of the temperatures
     (:func:`irdic.uncertainty.model.uncertainties`; its probe groups run a block per thread).
 
@@ -105,7 +105,8 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
     ``T`` of ``visible`` (T, N) start at ``off``; ``sub``: the probed times among the ``T``; ``W`` the temporal
     weights (value, rate, their exact interpolation's) or None; ``ks`` the spatial spacing; ``bias``: with the
     noise of the regressions' differences; ``ref_k``: the spacing of the gradient's reference (1: the exact
-    interpolation) these probes also run through, or None.
+    interpolation) these probes also run through, or None; ``ring``: the mean over each point's nearest that the
+    value's difference takes before it is squared (:func:`~irdic.uncertainty.regression_bias.ring_mean`), or None.
 
     Returns the sums over the ``b`` probes of the squares the uncertainty averages (``v``, ``g``, ``res``;
     ``r`` with ``W``; with ``bias`` ``v_var``, ``rt_var``, ``rs_var``, ``vt_var``; with ``ref_k``
@@ -142,8 +143,10 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
     sums["res"] = np.sum(res ** 2, axis=0)  # (noise - S noise): see noise_scale
     sums["g"] = np.sum(g ** 2, axis=0)
     if bias:
-        sums["v_var"] = np.sum((v - value_in) ** 2, axis=0)
-        squares["v_var"] += list((v - value_in) ** 2) if ref_k is not None else []
+        # the data's difference is NaN at the hidden points: the mean leaves them out there as well
+        dv = (v - value_in) ** 2 if ring is None else ring(np.where(visible[sub], v - value_in, np.nan)) ** 2
+        sums["v_var"] = np.sum(dv, axis=0)
+        squares["v_var"] += list(dv) if ref_k is not None else []
     if ref_k is not None:
         # the same probes through the exact interpolation (k = 1): the noise expected in the
         # difference regression - interpolation, which is subtracted from the data's difference
