@@ -88,7 +88,7 @@ from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_block, probe_times, spread
 from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
-                              ring_mean, scaled_probes)
+                              ring_apart, ring_mean, scaled_probes)
 from .strain import noise_floor_note, strain_std
 
 __all__ = ["uncertainties", "with_strain_std", "paper_std", "uncertainty_notes", "Window", "PROBES", "EDGE_PX",
@@ -203,8 +203,7 @@ def uncertainties(points, sf, geo, paper, grad, g_pix, t, p, chosen_k, regress_s
         drop_derivative_weights(ops)  # no exact interpolation's derivatives from here on
     temp_std, grad_std, rate_std, rate_biased = _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng,
                                                         s_T, window, spatial, trusted,
-                                                        footprint_probes(points, window, sigma),
-                                                        _values(points, "temperature_paper"))
+                                                        **_probe_inputs(points, sf, window, sigma))
     rate_bias |= _rate_bias_flags(rate_biased, visible, notes)
     report("uncertainty", PROGRESS["ir"])
     s_x = float(a.get("dic_noise_mm", np.nan))
@@ -320,14 +319,16 @@ def _ir_noise(a):
 
 
 def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, window=None, spatial=None,
-            trusted=None, footprint=None, theta_paper=None):
+            trusted=None, footprint=None, theta_paper=None, apart=0.0):
     """Standard uncertainties of temperature, in-plane gradient and rate from the IR noise and the regressions'
     bias (:func:`~irdic.uncertainty.regression_bias.local_bias`); last, where the rate's estimated bias exceeds
     its noise (T, N), or None. ``paper``: the paper's relations' (:func:`paper_std`), where nothing is regressed;
     ``s_T`` the point temperatures' noise (K).
     ``footprint``: ``(draw, s_paper)`` of :func:`~irdic.footprint.fields.footprint_probes`, with
     ``theta_paper`` (T, N) the paper's point temperatures. The probes' noise is scaled to the data's
-    (:func:`~irdic.uncertainty.regression_bias.noise_scale`)."""
+    (:func:`~irdic.uncertainty.regression_bias.noise_scale`). ``apart``: the least distance (mm of the surface
+    parameters) between the points the value's difference is averaged over
+    (:func:`~irdic.uncertainty.regression_bias.ring_apart`)."""
     T, N = visible.shape
     temp_std, grad_std, rate_std = paper
     paper.clear()
@@ -361,7 +362,7 @@ def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, wi
         rate_std = None if W is not None else rate_std
         # the value is regressed from the paper's temperatures: their own noise through the operators
         # the value's difference is averaged over each point's nearest before it is squared (ring_mean)
-        ring = ring_mean(sf.psi) if spatial is not None else None
+        ring = ring_mean(sf.psi, apart=apart) if spatial is not None else None
         acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
                               spatial is not None, pix_draw, ring)
         own = None if spatial is None else spatial[0]  # the regressions' input (the footprint's, with one)
@@ -499,6 +500,20 @@ def _probe_window(rng, t, N, window):
     for start in range(0, PROBES, PROBE_GROUP):
         rng.standard_normal((min(PROBE_GROUP, PROBES - start), t.size, N))
     return window.t.size, int(np.searchsorted(window.t, t[0]))
+
+
+def _probe_inputs(points, sf, window, sigma):
+    """The :func:`_ir_std` keywords from the points: the footprint's probes
+    (:func:`~irdic.footprint.fields.footprint_probes`), the paper's temperatures, and the ring's least distance
+    (:func:`~irdic.uncertainty.regression_bias.ring_apart` of the pixel positions, the chunk window's with one;
+    0 without them)."""
+    if window is not None and getattr(window, "pixel", None) is not None:
+        apart = ring_apart(window.pixel, sf.psi)
+    else:
+        apart = ring_apart(points["pixel"].transpose("time", "point", "axis").values, sf.psi) if "pixel" in points \
+            else 0.0
+    return dict(footprint=footprint_probes(points, window, sigma), theta_paper=_values(points, "temperature_paper"),
+                apart=apart)
 
 
 def _values(points, name):

@@ -4,8 +4,8 @@ reference in time (irdic.numerics.temporal.local_rate_weights)."""
 import numpy as np
 
 from irdic.numerics.temporal import TemporalInterpolant, local_rate_weights, rate_reference_stencil
-from irdic.uncertainty.regression_bias import (BIAS_Z, RING_POINTS, local_bias, reference_options, reference_spacing,
-                                               ring_mean, strain_reference_options)
+from irdic.uncertainty.regression_bias import (BIAS_Z, RING_APART_PX, RING_POINTS, local_bias, reference_options,
+                                               reference_spacing, ring_apart, ring_mean, strain_reference_options)
 
 
 def _grid(n=30):
@@ -85,6 +85,28 @@ def test_ring_mean_averages_each_points_finite_nearest_and_keeps_its_gaps():
     np.testing.assert_allclose(ring(np.full((2, 2, 400), 3.0))[..., have], 3.0, rtol=1e-12)
     white = ring(rng.normal(size=(200, 400)))[:, have]
     assert abs(np.var(white) * RING_POINTS - 1.0) < 0.1, np.var(white) * RING_POINTS
+
+
+def test_ring_members_apart_and_the_apart_distance_from_the_image_scale():
+    """With ``apart`` the ring's members are pairwise at least that far (nearest first, RING_POINTS of them
+    inside the cloud): on a unit grid at 1.5, no two members are neighbours on the grid, and a constant is
+    still its own mean; the distance is RING_APART_PX over the image's scale (px per mm, its 10th percentile
+    over neighbour pairs): 2 / 1.3 mm for an image 1.3 px per mm, whatever the offset and the NaN points."""
+    from irdic.uncertainty.regression_bias import _ring_members
+
+    psi = _grid(15)
+    rows, cols = _ring_members(psi, RING_POINTS, 1.5)
+    inner = np.flatnonzero((np.abs(psi - 7).max(axis=1) <= 3))
+    for i in inner:
+        m = cols[rows == i]
+        assert m.size == RING_POINTS and m[0] == i
+        d = np.linalg.norm(psi[m][:, None] - psi[m][None], axis=2)
+        assert d[~np.eye(m.size, dtype=bool)].min() >= 1.5
+    np.testing.assert_allclose(ring_mean(psi, apart=1.5)(np.full(225, 2.0)), 2.0, rtol=1e-12)
+    pixel = np.stack([1.3 * psi + 40.0, 1.3 * psi + 41.0])
+    pixel[1, 3] = np.nan
+    assert abs(ring_apart(pixel, psi) - RING_APART_PX / 1.3) < 1e-9
+    assert ring_apart(np.full((2, 225, 2), np.nan), psi) == 0.0
 
 
 def test_ring_mean_before_the_square_resolves_a_small_bias_under_a_noise_model_misfit():
