@@ -88,7 +88,8 @@ from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_block, probe_times, spread
 from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
-                              ring_apart, ring_mean, scaled_probes)
+                              scaled_probes)
+from .ring import ring_apart, ring_noise_scale, value_ring
 from .strain import noise_floor_note, strain_std
 
 __all__ = ["uncertainties", "with_strain_std", "paper_std", "uncertainty_notes", "Window", "PROBES", "EDGE_PX",
@@ -328,7 +329,7 @@ def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, wi
     ``theta_paper`` (T, N) the paper's point temperatures. The probes' noise is scaled to the data's
     (:func:`~irdic.uncertainty.regression_bias.noise_scale`). ``apart``: the least distance (mm of the surface
     parameters) between the points the value's difference is averaged over
-    (:func:`~irdic.uncertainty.regression_bias.ring_apart`)."""
+    (:func:`~irdic.uncertainty.ring.ring_apart`)."""
     T, N = visible.shape
     temp_std, grad_std, rate_std = paper
     paper.clear()
@@ -361,8 +362,8 @@ def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, wi
         temp_std = grad_std = None
         rate_std = None if W is not None else rate_std
         # the value is regressed from the paper's temperatures: their own noise through the operators
-        # the value's difference is averaged over each point's nearest before it is squared (ring_mean)
-        ring = ring_mean(sf.psi, apart=apart) if spatial is not None else None
+        # the value's difference is averaged over each point's nearest before it is squared (value_ring)
+        ring = value_ring(sf.psi, ks, apart) if spatial is not None else None
         acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
                               spatial is not None, pix_draw, ring)
         own = None if spatial is None else spatial[0]  # the regressions' input (the footprint's, with one)
@@ -397,8 +398,8 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     """Temperature, gradient and rate std with the regressions' estimated bias added
     (:func:`~irdic.uncertainty.regression_bias.local_bias`), and where the rate's temporal bias exceeds its noise
     (T, N) or None; ``spatial`` and ``acc`` as in :func:`_ir_std`, ``in_time``: with a regression in time,
-    ``ring``: the mean the value's difference takes before it is squared, as the probes' did
-    (:func:`~irdic.uncertainty.regression_bias.ring_mean`)."""
+    ``ring``: the mean the value's difference takes before it is squared, as the probes' did, or None
+    (:func:`~irdic.uncertainty.ring.value_ring`)."""
     theta, grad, value_in, value = spatial[:4]
     # against the lighter regression of the gradient's input after the same regression in time (the
     # value's reference; the points' own series at each time carried the temporal bias and full noise)
@@ -407,7 +408,13 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     # products, which release the GIL) on the stage's threads
     nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
     # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
-    jobs = [(d_grad, "g_var", reference_options(ks)), (ring(value - value_in), "v_var", {})]
+    # the probes' noise in the value's ring mean scaled to the data's (ring_noise_scale)
+    k2 = ring_noise_scale(value - value_in, ring, acc.pop("v_spread", None), trusted)
+    for key in ("v_var", "v_var_null"):
+        if acc.get(key) is not None:
+            acc[key] *= k2
+    jobs = [(d_grad, "g_var", reference_options(ks)), (value - value_in if ring is None else ring(value - value_in),
+                                                       "v_var", {})]
     temporal = len(spatial) > 5 and in_time
     if temporal:  # the space-time regression's terms (_space_time_bias)
         jobs += [(d, key, {}) for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]
@@ -442,7 +449,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     """
     T, N = visible.shape
     sub, near = probe_times(T)
-    acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var", "res"), 0.0)
+    acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var", "res", "v_spread"), 0.0)
     n_bias = 0  # probes through the exact interpolation (whole groups, the first BIAS_PROBES or more)
     # each of the first BIAS_PROBES probes' squared differences: the bias estimates' own scatter on noise
     nulls = {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
@@ -505,7 +512,7 @@ def _probe_window(rng, t, N, window):
 def _probe_inputs(points, sf, window, sigma):
     """The :func:`_ir_std` keywords from the points: the footprint's probes
     (:func:`~irdic.footprint.fields.footprint_probes`), the paper's temperatures, and the ring's least distance
-    (:func:`~irdic.uncertainty.regression_bias.ring_apart` of the pixel positions, the chunk window's with one;
+    (:func:`~irdic.uncertainty.ring.ring_apart` of the pixel positions, the chunk window's with one;
     0 without them)."""
     if window is not None and getattr(window, "pixel", None) is not None:
         apart = ring_apart(window.pixel, sf.psi)

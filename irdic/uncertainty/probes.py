@@ -106,10 +106,11 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
     weights (value, rate, their exact interpolation's) or None; ``ks`` the spatial spacing; ``bias``: with the
     noise of the regressions' differences; ``ref_k``: the spacing of the gradient's reference (1: the exact
     interpolation) these probes also run through, or None; ``ring``: the mean over each point's nearest that the
-    value's difference takes before it is squared (:func:`~irdic.uncertainty.regression_bias.ring_mean`), or None.
+    value's difference takes before it is squared (:func:`~irdic.uncertainty.ring.ring_mean`), or None.
 
     Returns the sums over the ``b`` probes of the squares the uncertainty averages (``v``, ``g``, ``res``;
-    ``r`` with ``W``; with ``bias`` ``v_var``, ``rt_var``, ``rs_var``, ``vt_var``; with ``ref_k``
+    ``r`` with ``W``; with ``bias`` ``v_var``, ``rt_var``, ``rs_var``, ``vt_var``, and ``v_spread`` with
+    ``ring``; with ``ref_k``
     ``g_var``), and with ``ref_k`` each probe's squared differences (the bias estimates' nulls).
     """
     T, N = visible.shape
@@ -143,8 +144,13 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
     sums["res"] = np.sum(res ** 2, axis=0)  # (noise - S noise): see noise_scale
     sums["g"] = np.sum(g ** 2, axis=0)
     if bias:
-        # the data's difference is NaN at the hidden points: the mean leaves them out there as well
-        dv = (v - value_in) ** 2 if ring is None else ring(np.where(visible[sub], v - value_in, np.nan)) ** 2
+        if ring is None:
+            dv = (v - value_in) ** 2
+        else:  # the data's difference is NaN at the hidden points: the mean leaves them out there as well
+            dd = np.where(visible[sub], v - value_in, np.nan)
+            dv = ring(dd) ** 2
+            # the scatter within each mean, which calibrates the probes to the data (ring_noise_scale)
+            sums["v_spread"] = np.sum(ring(dd ** 2) - dv, axis=0)
         sums["v_var"] = np.sum(dv, axis=0)
         squares["v_var"] += list(dv) if ref_k is not None else []
     if ref_k is not None:

@@ -22,20 +22,13 @@ import numpy as np
 
 from ..numerics.threads import parallel_map, worker_slices, workers
 
-__all__ = ["local_bias", "ring_mean", "reference_spacing", "reference_options", "strain_reference_options",
-           "noise_scale", "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z", "REFERENCE_SHARE", "REFERENCE_Z", "RING_POINTS",
-           "RING_APART_PX", "ring_apart"]
+__all__ = ["local_bias", "reference_spacing", "reference_options", "strain_reference_options",
+           "noise_scale", "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z", "REFERENCE_SHARE", "REFERENCE_Z"]
 
 log = logging.getLogger(__name__)
 
 #: nearest points (surface parameters) over which a regression's bias is averaged, at each time and its neighbours
 BIAS_NEIGHBOURS = 32
-#: points (each with its nearest) over which the value's difference is averaged before it is squared
-RING_POINTS = 7
-#: the least distance (px in the IR image) between the points of such a mean: closer, the point temperatures'
-#: noise is correlated by the image interpolation (-0.13 to -0.19 at 1-2 px on two dense family members,
-#: within +-0.05 from 2 px on), which the probes do not draw
-RING_APART_PX = 2.0
 #: a local bias estimate counts where it exceeds this many of its own standard errors on pure noise
 BIAS_Z = 1.0
 #: times (each with its neighbours) over which the estimate's scatter on pure noise is pooled
@@ -247,105 +240,6 @@ def local_bias(d, noise_var, psi, trusted=None, null=None, spacing=None, neighbo
         res = _local_estimate(d[e0:e1], noise_rows(e0, e1), ok[e0:e1], nbs, scales, z)
         out[t0:t1] = np.sqrt(share * res[t0 - e0:t1 - e0])
     return out
-
-
-def ring_mean(psi, n=RING_POINTS, apart=0.0):
-    """The mean over each point and its nearest, ``n`` in all (by surface parameters ``psi``, (N, 2)), as a
-    function of ``a`` (..., N): over the finite values; NaN where the point's own value or parameters are not.
-    The members are taken nearest first, each at least ``apart`` (mm of ``psi``) from those taken before
-    (:func:`ring_apart`); fewer than ``n`` where the nearest :data:`RING_CANDIDATES` hold no more.
-
-    Notes
-    -----
-    The value's bias is estimated from its difference ``d`` to the input
-    (:func:`local_bias`), whose noise is nearly all the input's own: ``E d²
-    = b² + v`` with ``b`` a hundredth of ``v`` on the family's band members.
-    Squared, each value's noise sits in the estimate, and ``v`` must be
-    known to about 1 % (the probes' scaled noise was 7 % off on two smooth
-    members, 0.3 % on a band member: the threshold at one standard error
-    then hid the band's bias with the misfit). The bias varies on the
-    regression's centre spacing, the noise from point to point: averaged over
-    a point and its six nearest before it is squared, the difference keeps
-    70 % of ``b²`` on strip-band (centres 4 spacings apart) and 12 % of the
-    noise variance, so the same misfit weighs 6 x less against the bias.
-    The probes' differences take the same mean (:func:`~irdic.uncertainty.probes.probe_block`): its noise
-    variance is theirs only where the members' noise is as correlated as the probes' (white), hence ``apart``.
-    """
-    from scipy import sparse
-
-    psi = np.asarray(psi, dtype=float)
-    have = np.flatnonzero(np.isfinite(psi).all(axis=1))
-    rows, cols = _ring_members(psi[have], int(n), float(apart))
-    S = sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(have.size, have.size))
-
-    def mean(a):
-        a = np.asarray(a, dtype=float)
-        out = np.full(a.shape, np.nan)
-        X = np.moveaxis(a[..., have], -1, 0).reshape(have.size, -1)
-        ok = np.isfinite(X)
-        total, count = S @ np.where(ok, X, 0.0), S @ ok.astype(float)
-        m = np.divide(total, count, out=np.full(total.shape, np.nan), where=ok & (count > 0))
-        out[..., have] = np.moveaxis(m.reshape((have.size,) + a.shape[:-1]), 0, -1)
-        return out
-
-    return mean
-
-
-#: nearest points among which :func:`ring_mean` looks for its members
-RING_CANDIDATES = 48
-
-
-def _ring_members(p, n, apart):
-    """``(rows, cols)``: each point (row) and its ring's members (cols), nearest first, each at least ``apart``
-    from the members before it (the point itself first)."""
-    from scipy.spatial import cKDTree
-
-    N = p.shape[0]
-    if N == 0 or n < 1:
-        return np.zeros(0, int), np.zeros(0, int)
-    k = min(RING_CANDIDATES if apart > 0 else n, N)
-    nb = cKDTree(p).query(p, k=k)[1].reshape(N, k)
-    taken = np.full((N, n), -1)
-    taken[:, 0] = nb[:, 0]
-    count = np.ones(N, int)
-    for j in range(1, k):  # nearest first: a candidate joins where it is far enough from every member so far
-        c = nb[:, j]
-        far = np.ones(N, bool)
-        for m in range(n):
-            has = taken[:, m] >= 0
-            dist = np.linalg.norm(p[c] - p[np.maximum(taken[:, m], 0)], axis=1)
-            far &= ~has | (dist >= apart)
-        join = far & (count < n)
-        taken[join, count[join]] = c[join]
-        count += join
-        if (count >= n).all():
-            break
-    rows = np.repeat(np.arange(N), n).reshape(N, n)
-    return rows[taken >= 0], taken[taken >= 0]
-
-
-def ring_apart(pixel, psi):
-    """The :data:`RING_APART_PX` in mm of the surface parameters ``psi`` (N, 2): over the points' nearest
-    neighbours at up to 8 times of ``pixel`` (T, N, 2, px; NaN: none), the image's scale (px per mm) at its
-    10th percentile, so that nine in ten neighbour pairs are that far apart in the image; 0 where none."""
-    from scipy.spatial import cKDTree
-
-    psi = np.asarray(psi, dtype=float)
-    pixel = np.asarray(pixel, dtype=float)
-    ok = np.isfinite(psi).all(axis=1)
-    if ok.sum() < 2 or pixel.ndim != 3:
-        return 0.0
-    idx = np.flatnonzero(ok)
-    d, nb = cKDTree(psi[idx]).query(psi[idx], k=2)
-    a, b = idx, idx[nb[:, 1]]
-    scales = []
-    for t in np.unique(np.linspace(0, pixel.shape[0] - 1, min(8, pixel.shape[0])).round().astype(int)):
-        px = np.linalg.norm(pixel[t, a] - pixel[t, b], axis=1)
-        good = np.isfinite(px) & (d[:, 1] > 0)
-        scales.append(px[good] / d[good, 1])
-    scales = np.concatenate(scales) if scales else np.zeros(0)
-    scales = scales[scales > 0]
-    return float(RING_APART_PX / np.percentile(scales, 10)) if scales.size else 0.0
 
 
 def _rows_of(a, shape):

@@ -4,8 +4,9 @@ reference in time (irdic.numerics.temporal.local_rate_weights)."""
 import numpy as np
 
 from irdic.numerics.temporal import TemporalInterpolant, local_rate_weights, rate_reference_stencil
-from irdic.uncertainty.regression_bias import (BIAS_Z, RING_APART_PX, RING_POINTS, local_bias, reference_options,
-                                               reference_spacing, ring_apart, ring_mean, strain_reference_options)
+from irdic.uncertainty.regression_bias import (BIAS_Z, local_bias, reference_options, reference_spacing,
+                                               strain_reference_options)
+from irdic.uncertainty.ring import RING_APART_PX, RING_POINTS, ring_apart, ring_mean, ring_noise_scale, value_ring
 
 
 def _grid(n=30):
@@ -92,7 +93,7 @@ def test_ring_members_apart_and_the_apart_distance_from_the_image_scale():
     inside the cloud): on a unit grid at 1.5, no two members are neighbours on the grid, and a constant is
     still its own mean; the distance is RING_APART_PX over the image's scale (px per mm, its 10th percentile
     over neighbour pairs): 2 / 1.3 mm for an image 1.3 px per mm, whatever the offset and the NaN points."""
-    from irdic.uncertainty.regression_bias import _ring_members
+    from irdic.uncertainty.ring import _ring_members
 
     psi = _grid(15)
     rows, cols = _ring_members(psi, RING_POINTS, 1.5)
@@ -107,6 +108,32 @@ def test_ring_members_apart_and_the_apart_distance_from_the_image_scale():
     pixel[1, 3] = np.nan
     assert abs(ring_apart(pixel, psi) - RING_APART_PX / 1.3) < 1e-9
     assert ring_apart(np.full((2, 225, 2), np.nan), psi) == 0.0
+
+
+def test_value_ring_only_where_it_keeps_the_regressions_ripple():
+    """The mean of seven points (radius sqrt(2) spacings on a unit grid) for centres 3, 4 or 8 spacings apart,
+    none for 2 or 2.5 (radius above half the centre spacing: it would average the bias's ripple away) nor
+    without a regression in space."""
+    psi = _grid(20)
+    assert all(value_ring(psi, k, 0.0) is not None for k in (3.0, 4.0, 8.0))
+    assert all(value_ring(psi, k, 0.0) is None for k in (2.0, 2.5, None))
+    assert abs(value_ring(psi, 8.0, 0.0).radius - np.sqrt(2.0)) < 1e-12
+
+
+def test_ring_noise_scale_is_the_noise_ratio_whatever_the_smooth_bias():
+    """The data's noise 10 % above the probes' in variance: the scatter within the ring means gives 1.10
+    within 2 %, with or without a smooth bias of a third of the noise's sd (which a ratio of the means'
+    squares would take in); 1 without a ring or the probes' scatter."""
+    rng = np.random.default_rng(3)
+    psi, T = _grid(40), 8
+    ring = ring_mean(psi)
+    probes = rng.normal(0.0, 1.0, (16, T, psi.shape[0]))
+    spread = np.mean(ring(probes ** 2) - ring(probes) ** 2, axis=0)
+    noise = rng.normal(0.0, np.sqrt(1.1), (T, psi.shape[0]))
+    bias = 0.5 * np.sin(psi[:, 0] / 5.0)[None] * np.ones((T, 1))
+    for d in (noise, noise + bias):
+        assert abs(ring_noise_scale(d, ring, spread, None) - 1.1) < 0.022, ring_noise_scale(d, ring, spread, None)
+    assert ring_noise_scale(noise, None, spread, None) == 1.0 and ring_noise_scale(noise, ring, 0.0, None) == 1.0
 
 
 def test_ring_mean_before_the_square_resolves_a_small_bias_under_a_noise_model_misfit():
