@@ -408,20 +408,20 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     # products, which release the GIL) on the stage's threads
     nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
     # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
+    d_value = value - value_in
     # the probes' noise in the value's ring mean scaled to the data's (ring_noise_scale)
-    k2 = ring_noise_scale(value - value_in, ring, acc.pop("v_spread", None), trusted)
+    k2 = ring_noise_scale(d_value, ring, acc.pop("v_spread", None), trusted)
     for key in ("v_var", "v_var_null"):
-        if acc.get(key) is not None:
+        if k2 != 1.0 and acc.get(key) is not None:
             acc[key] *= k2
-    jobs = [(d_grad, "g_var", reference_options(ks)), (value - value_in if ring is None else ring(value - value_in),
-                                                       "v_var", {})]
+    jobs = [(d_grad, "g_var", reference_options(ks)), (d_value if ring is None else ring(d_value), "v_var", {})]
     temporal = len(spatial) > 5 and in_time
     if temporal:  # the space-time regression's terms (_space_time_bias)
         jobs += [(d, key, {}) for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]
     # one pool for all, the gradient's (three components) first: the threads stay busy to the end
     b = parallel_map(lambda a: local_bias(a[0], acc[a[1]], psi, trusted, acc[a[1] + "_null"], ks, nbs, **a[2]),
                      jobs)
-    del jobs, d_grad  # the differences, each (T, N[, 3]), before the sums below
+    del jobs, d_grad, d_value  # the differences, each (T, N[, 3]), before the sums below
     grad_std, temp_std = np.hypot(grad_std, b[0]), np.hypot(temp_std, b[1])
     if not temporal:
         return temp_std, grad_std, rate_std, None
