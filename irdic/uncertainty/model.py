@@ -89,7 +89,7 @@ from .gradient_geometry import position_std
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_block, probe_times, spread
 from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
                               scaled_probes)
-from .ring import ring_apart, ring_noise_scale, value_ring
+from .ring import ring_apart, ring_noise_scale, ring_scatter, value_ring
 from .strain import noise_floor_note, strain_std
 
 __all__ = ["uncertainties", "with_strain_std", "paper_std", "uncertainty_notes", "Window", "PROBES", "EDGE_PX",
@@ -408,13 +408,14 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     # products, which release the GIL) on the stage's threads
     nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
     # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
-    d_value = value - value_in
+    d_value, scatter = (value - value_in, None) if ring is None else ring_scatter(ring, value - value_in)
     # the probes' noise in the value's ring mean scaled to the data's (ring_noise_scale)
-    k2 = ring_noise_scale(d_value, ring, acc.pop("v_spread", None), trusted)
+    k2 = ring_noise_scale(scatter, acc.pop("v_spread", None), trusted)
     for key in ("v_var", "v_var_null"):
         if k2 != 1.0 and acc.get(key) is not None:
             acc[key] *= k2
-    jobs = [(d_grad, "g_var", reference_options(ks)), (d_value if ring is None else ring(d_value), "v_var", {})]
+    del scatter
+    jobs = [(d_grad, "g_var", reference_options(ks)), (d_value, "v_var", {})]
     temporal = len(spatial) > 5 and in_time
     if temporal:  # the space-time regression's terms (_space_time_bias)
         jobs += [(d, key, {}) for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]

@@ -14,6 +14,8 @@ import warnings
 
 import numpy as np
 
+from .ring import ring_scatter
+
 __all__ = ["PROBES", "PROBE_GROUP", "BIAS_PROBES", "PROBE_TIMES", "probe_times", "spread", "SpreadStack", "probe_block"]
 
 #: random probes of the operators propagated by Monte Carlo
@@ -147,10 +149,10 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
         if ring is None:
             dv = (v - value_in) ** 2
         else:  # the data's difference is NaN at the hidden points: the mean leaves them out there as well
-            dd = np.where(visible[sub], v - value_in, np.nan)
-            dv = ring(dd) ** 2
+            mean, scatter = ring_scatter(ring, np.where(visible[sub], v - value_in, np.nan))
+            dv = mean ** 2
             # the scatter within each mean, which calibrates the probes to the data (ring_noise_scale)
-            sums["v_spread"] = np.sum(ring(dd ** 2) - dv, axis=0)
+            sums["v_spread"] = np.sum(scatter, axis=0)
         sums["v_var"] = np.sum(dv, axis=0)
         squares["v_var"] += list(dv) if ref_k is not None else []
     if ref_k is not None:

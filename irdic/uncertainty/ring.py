@@ -16,7 +16,7 @@ import logging
 
 import numpy as np
 
-__all__ = ["ring_mean", "ring_apart", "ring_noise_scale", "value_ring", "RING_POINTS", "RING_APART_PX",
+__all__ = ["ring_mean", "ring_scatter", "ring_apart", "ring_noise_scale", "value_ring", "RING_POINTS", "RING_APART_PX",
            "RING_RADIUS_SHARE"]
 
 log = logging.getLogger(__name__)
@@ -80,6 +80,13 @@ def ring_mean(psi, n=RING_POINTS, apart=0.0):
 
     mean.radius = float(np.median(far)) if far.size else 0.0  # mm: the farthest member, median over the points
     return mean
+
+
+def ring_scatter(ring, d):
+    """``(ring(d), ring(d²) - ring(d)²)``: the :func:`ring_mean` of ``d`` and the scatter of ``d`` within each
+    mean (the probes' and the data's alike, :func:`ring_noise_scale`)."""
+    m = ring(d)
+    return m, ring(np.square(d)) - np.square(m)
 
 
 def value_ring(psi, ks, apart):
@@ -163,9 +170,10 @@ def ring_apart(pixel, psi):
     return float(RING_APART_PX / np.percentile(scales, 10)) if scales.size else 0.0
 
 
-def ring_noise_scale(d, ring, spread, trusted):
-    """``κ_r²``: the data's noise variance over the probes' in the value's :func:`ring_mean` of ``d`` (T, N), from
-    the scatter within each mean (``spread``: the probes' mean of it, (T, N)); 1 where it cannot be formed.
+def ring_noise_scale(own, spread, trusted):
+    """``κ_r²``: the data's noise variance over the probes' in the value's :func:`ring_mean`, from the scatter
+    within each mean (:func:`ring_scatter`): the data's ``own`` and the probes' mean ``spread``, (T, N) each (None
+    or a number: no ring); 1 where it cannot be formed.
 
     Notes
     -----
@@ -179,10 +187,8 @@ def ring_noise_scale(d, ring, spread, trusted):
     for a bias (plate-fine-twist: ``κ_r²`` 1.03-1.05 over four noise seeds,
     the RMS of error/std 0.79 -> 0.84; strip-band 1.00-1.02, unchanged).
     """
-    if ring is None or not np.ndim(spread):
+    if own is None or not np.ndim(spread):
         return 1.0
-    r = ring(d)
-    own = ring(np.square(d)) - np.square(r)
     ok = np.isfinite(own) & np.isfinite(spread) & (True if trusted is None else trusted)
     if ok.sum() < 10 or not np.sum(spread[ok]) > 0:
         return 1.0
