@@ -70,7 +70,11 @@ def map_beside(task, fn, items):
     if n == 1:
         return task(), [fn(i) for i in items]
 
+    queued = threading.Event()
+
     def beside():  # the task may hand work to a worker the items leave free (:func:`both`)
+        # once the items are queued: what the task hands on is queued behind them, not taken before them
+        queued.wait()
         _pool.spare = ex
         try:
             return task()
@@ -79,7 +83,11 @@ def map_beside(task, fn, items):
 
     with blas_threads(1), ThreadPoolExecutor(max_workers=n, initializer=_marked) as ex:
         first = ex.submit(beside)  # the pool's queue is first in, first out
-        rest = list(ex.map(fn, items))
+        try:
+            results = ex.map(fn, items)  # every item submitted here
+        finally:
+            queued.set()
+        rest = list(results)
         return first.result(), rest
 
 
