@@ -19,8 +19,8 @@ from ..numerics.series import fill_series, smooth_series
 from ..numerics.temporal import rate_reference_weights
 from ..numerics.temporal_choice import gcv_temporal
 from ..uncertainty.model import paper_std, uncertainties
-from .smoothing import gradient_noise_var, guarded_time_smoothing, rate_smoothing
-from .spatial import regressed_gradient
+from .smoothing import gradient_noise_var, guarded_time_smoothing, rate_smoothing, spacing_with_time
+from .spatial import regressed_gradient, space_gcv
 
 __all__ = ["space_time", "temperature_fields"]
 
@@ -137,9 +137,12 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     regressed series, by a lighter regression in time (:func:`_rate_series`).
     """
     kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
+    ks, table = p["temperature_smoothing_space"], None
+    if ks == "gcv":  # chosen here (a short record): with the table of the gradient's risks, for the time's share
+        chosen = space_gcv(theta, sf.psi, **kw)
+        ks, table = ("gcv", None) if chosen is None else chosen
     # also where a point has no temperature: its series in time holds the time's field there (docs/method.md, 4)
-    grad, field, ks = regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], everywhere=True,
-                                         **kw)
+    grad, field, ks = regressed_gradient(theta, sf.psi, geo.dual, ks, everywhere=True, **kw)
     value = np.where(np.isfinite(theta), field, np.nan)
     chosen = {"temperature_smoothing": None, "temperature_smoothing_space": ks}
     total, loc = paper_rate
@@ -155,22 +158,36 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
     tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)
     k, k_gcv = _time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var)
+    respaced = None if table is None else spacing_with_time(table, ks, ts_in, {**p, "temperature_smoothing": k})
+    if respaced is not None:  # the spatial spacing for the noise the regression in time leaves: all again with it
+        return space_time(theta, t, sf, geo, {**p, "temperature_smoothing_space": respaced}, series, convective,
+                          visible, paper_rate, ops, noise_var)
     fit = smooth_series(th_s, ts_in, t_eval, smoothing=k, **tkw)
     rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw, fit.smoothing if k_gcv == "gcv" else k_gcv)
     chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing
     total = np.where(visible, rate_fit.rate, np.nan)
     smoothed = np.where(visible, fit.value, np.nan)
     grad, value, _ = regressed_gradient(smoothed, sf.psi, geo.dual, ks, **kw)
+    bias_inputs = _bias_inputs(theta, grad, value, total, smoothed, (th_in, th_s, ts_in, t_eval), visible,
+                               fit.smoothing, rate_fit.smoothing, tkw)
+    return grad, total, total - convective, value, bias_inputs, chosen
+
+
+def _bias_inputs(theta, grad, value, total, smoothed, series, visible, k, k_rate, tkw):
+    """The inputs of the regressions' bias estimates (:func:`irdic.uncertainty.model.uncertainties`).
+
+    ``series`` is ``(th_in, th_s, ts_in, t_eval)``: the points' own series, the spatially regressed one, their
+    times and the times evaluated; ``k`` and ``k_rate`` the temporal spacings of the value and of the rate."""
+    th_in, th_s, ts_in, t_eval = series
     # the spatial regression's bias is judged against the temporal regression of the points' own series
-    own = smooth_series(th_in, ts_in, t_eval, smoothing=fit.smoothing, **tkw)
-    own_rate = own.rate if rate_fit.smoothing == fit.smoothing else \
-        smooth_series(th_in, ts_in, t_eval, smoothing=rate_fit.smoothing, **tkw).rate
+    own = smooth_series(th_in, ts_in, t_eval, smoothing=k, **tkw)
+    own_rate = own.rate if k_rate == k else smooth_series(th_in, ts_in, t_eval, smoothing=k_rate, **tkw).rate
     # the temporal regressions' bias: against the same (regressed) series, whose noise is small (against the
     # points' own series the estimate drowned in their noise): the rate's against a local polynomial in time
     exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)
-    bias_inputs = (theta, grad, (own_v := np.where(visible, own.value, np.nan)), value, total - rate_reference_weights(
-        ts_in, t_eval, smoothing=rate_fit.smoothing) @ th_s, total - own_rate, smoothed - exact.value, own_v)
-    return grad, total, total - convective, value, bias_inputs, chosen
+    own_v = np.where(visible, own.value, np.nan)
+    return (theta, grad, own_v, value, total - rate_reference_weights(ts_in, t_eval, smoothing=k_rate) @ th_s,
+            total - own_rate, smoothed - exact.value, own_v)
 
 
 def _time_spacing(th_s, t, grad, psi, p, ks, noise_var):

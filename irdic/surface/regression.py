@@ -21,7 +21,8 @@ from ..numerics.threads import parallel_map
 from ..validation import float_array, positive, psi_array
 from .parametrisation import MIN_POINTS, median_spacing
 
-__all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "gradient_risk_spatial", "SURFACE_CANDIDATES",
+__all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "gradient_risk_spatial", "spacing_after_smoothing",
+           "SURFACE_CANDIDATES",
            "GRADIENT_CANDIDATES", "GRADIENT_MIN_PARAMETERS", "LAPLACIAN_CANDIDATES", "laplacian_risk_spatial",
            "hessian_operator"]
 
@@ -33,15 +34,22 @@ SURFACE_CANDIDATES = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 1
 
 #: Centre spacing factors the gradient-risk criterion tries for the temperature (:func:`gradient_risk_spatial`).
 #: Wider than GCV's: a smooth temperature field's gradient keeps falling in error up to 12 spacings at
-#: 0.05 K (tube demo: 7.8 % at GCV's 5-8, 4.7 % at 12), which GCV, judging values, does not see. The wider
-#: ones only where they keep :data:`GRADIENT_MIN_PARAMETERS`: with the 6-9 centres of 16-20 spacings on the
-#: demo clouds the estimate (a small difference of the pilot's large variance terms) no longer resolves the
-#: bias (tube demo: it chose 20, 5.6 %), while a cloud of paper density (9,821 points, 4 times the demo's
-#: per mm) needs them (paper tube: 61 parameters at 12 spacings, the risk still falling, 11.5 %).
+#: 0.05 K (tube demo: 7.8 % at GCV's 5-8, 4.7 % at 12), which GCV, judging values, does not see; a cloud of
+#: paper density (9,821 points, 4 times the demo's per mm) needs the wider ones (paper tube: 61 parameters at 12
+#: spacings, the risk still falling, 11.5 %).
 GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 24.0, 32.0)
 #: The fewest parameters (centres and the 3 monomials) of a candidate beyond 12 spacings that the
-#: gradient-risk criterion judges (the demo tube: 18 at 12 spacings, chosen; 9-12 at 16-20, not resolved)
-GRADIENT_MIN_PARAMETERS = 16
+#: gradient-risk criterion judges. With the noise of the white model the risk of 9-12 parameters did not resolve
+#: the bias (tube demo: it chose 20 spacings, 5.6 % against 4.7 % at 12; the model's noise of a wide candidate
+#: was 2.4 x too low); with the noise measured in time (``quintets``) 10 keeps the smooth members' gain
+#: (the noisy family's drawn-202 and drawn-707: 7.5 -> 5.4 %, 6.3 -> 4.7 % against 16), 7 and 4 chose as 10.
+GRADIENT_MIN_PARAMETERS = 10
+
+#: The fewest fourth differences in time (runs of five times x judged points) that measure the gradient's noise
+#: for :func:`gradient_risk_spatial`; fewer: the white model. The tiny demo tube (7 times, 1 run, ~150 judged
+#: points) chose 3 spacings on the measured covariance's scatter (gradient 15.8 % against 10.8 %); the noisy
+#: family's members (17-31 stages, 3-6 runs of ~1,500 points) are measured.
+QUINTET_MIN_SAMPLES = 1000
 
 #: Centre spacing factors the Laplacian-risk criterion tries (:func:`laplacian_risk_spatial`): a second
 #: derivative's noise grows like σ / H², so its best spacing is wider than the gradient's. 4 is the pilot: a narrow
@@ -230,34 +238,42 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
     return best[0], table
 
 
-def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row=None):
-    """``(k, n_parameters, risk)`` of each candidate that fits (Notes of :func:`gradient_risk_spatial`);
+def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row=None, quintets=0):
+    """``(k, n_parameters, risk, noise)`` of each candidate that fits (Notes of :func:`gradient_risk_spatial`);
     ``operator(p, design, c, R0)`` the derivative whose risk counts (default the gradient's). ``per_row``: a
     list that gets each candidate's terms of the risk per judged row (their sum over ``nj`` is ``risk``).
+    ``quintets``: the last ``5 quintets`` columns of ``F`` are that many runs of five consecutive times, whose
+    fourth differences measure the noise (else the white-noise model gives it).
 
     The pilot (the first candidate that fits) is fitted first; the others, each a QR and a few products
     against the pilot's, run on the stage's threads."""
     operator = _gradient_operator if operator is None else operator
-    n, ns = p.shape[0], F.shape[1]
+    n, ns = p.shape[0], F.shape[1] - 5 * quintets
+    stencil = np.array([1.0, -4.0, 6.0, -4.0, 1.0]) / np.sqrt(70.0)  # unit variance for white noise in time
 
-    def fitted(k):  # (Q, M, g) of spacing k, or None where it does not fit
+    def fitted(k):  # (Q, M, g, fourth differences) of spacing k, or None where it does not fit
         try:
             design = _fit_design(p, k, h, c, R0)
         except GeometryError:
             return None
         Qm = design[3]
         M = operator(p, design, c, R0)[rows]
-        return Qm, M, M @ (Qm.T @ F)
+        g = M @ (Qm.T @ F)
+        return Qm, M, g[:, :ns], g[:, ns:].reshape(g.shape[0], quintets, 5) @ stencil
 
-    def risk(k, fit=None):  # (k, n_parameters, risk, terms per judged row) against the pilot, or None
+    def risk(k, fit=None):  # (k, n_parameters, risk, noise, terms per judged row) against the pilot, or None
         fit = fitted(k) if fit is None else fit
         if fit is None:
             return None
-        Qm, M, g = fit
+        Qm, M, g, q = fit
         MQ = M @ (Qm.T @ Q0)
         cross = float(np.sum(MQ * M0))
         d = np.sum((g - g0) ** 2, axis=1) / ns
-        return (k, Qm.shape[1], (float(np.sum(d)) - var * (norm0 - 2.0 * cross)) / nj,
+        if quintets:  # the noise and the pilot's covariance with it as measured in time (correlated in space)
+            noise, cross_noise = float(np.sum(q * q)) / quintets / nj, float(np.sum(q * q0)) / quintets / nj
+        else:
+            noise, cross_noise = var * float(np.sum(M * M)) / nj, var * cross / nj
+        return (k, Qm.shape[1], float(np.sum(d)) / nj - var * norm0 / nj + 2.0 * cross_noise, noise,
                 d - var * np.sum(M0 * (M0 - 2.0 * MQ), axis=1))
 
     ks = _widths(p, h, _candidates(candidates))
@@ -267,10 +283,10 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row
         fit = fitted(k)
         if fit is None:
             continue
-        Q0, M0, g0 = fit
+        Q0, M0, g0, q0 = fit
         # the residual r_i has variance σ² (1 - H_ii), H = Q Qᵀ; summed over the judged points
         jr = rows[:n]
-        rss = float(np.sum((F - Q0 @ (Q0.T @ F))[jr] ** 2))
+        rss = float(np.sum((F[:, :ns] - Q0 @ (Q0.T @ F[:, :ns]))[jr] ** 2))
         var = rss / ns / (nj - float(np.sum(Q0[jr] ** 2)))
         norm0 = float(np.sum(M0 ** 2))
         pilot = risk(k, fit)
@@ -279,8 +295,8 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row
         return []
     out = [pilot] + [r for r in parallel_map(risk, ks) if r is not None]
     if per_row is not None:
-        per_row += [r[3] for r in out]
-    return [r[:3] for r in out]
+        per_row += [r[4] for r in out]
+    return [r[:4] for r in out]
 
 
 def _widths(p, h, ks):
@@ -351,7 +367,7 @@ def _one_per_separation(p, F, judged, separation, h):
 
 
 def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_CANDIDATES,
-                          max_points=GCV_MAX_POINTS, judged=None, separation=None):
+                          max_points=GCV_MAX_POINTS, judged=None, separation=None, quintets=None):
     """Choose the spatial regression's centre spacing by the estimated mean squared error of its gradient.
 
     Parameters
@@ -382,9 +398,10 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     k : float
         The factor with the least estimated gradient risk, in units of the
         median spacing of all points.
-    table : list of (k, n_parameters, risk)
+    table : list of (k, n_parameters, risk, noise)
         ``risk``: the estimated mean squared error of ``∂f/∂Ψ`` per point
-        and series (data units² / mm²).
+        and series (data units² / mm²); ``noise``: its noise part
+        ``σ² ‖D_k‖²_F`` per point (:func:`spacing_after_smoothing`).
 
     Notes
     -----
@@ -411,16 +428,52 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     7.8 % gradient error; see benchmarks/README.md.
     """
     return _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, "gradient",
-                        _gradient_operator, 2)
+                        _gradient_operator, 2, quintets=quintets)
+
+
+def spacing_after_smoothing(table, share):
+    """The spacing of least estimated gradient risk when a later linear smoothing keeps ``share`` of the noise.
+
+    Parameters
+    ----------
+    table : list of (k, n_parameters, risk, noise)
+        As returned by :func:`gradient_risk_spatial`.
+    share : float
+        The share (0, 1] of the regressed field's noise variance that a later smoothing leaves, e.g. the
+        regression in time of each point's series (:func:`irdic.numerics.temporal.noise_share`).
+
+    Returns
+    -------
+    float
+        The factor of least ``risk - (1 - share) noise``.
+
+    Notes
+    -----
+    The estimated risk is ``|b_k|² + σ² ‖D_k‖²_F`` (the bias and the noise of
+    candidate ``k``); a later smoothing ``S`` of the points' series in time,
+    linear and nearly without effect on a spatial bias that changes slowly
+    in time, leaves the bias and ``share`` of the noise variance. The
+    gradient then delivered by the fields (the spatial regression of the
+    temporally regressed series) errs by ``|b_k|² + share σ² ‖D_k‖²_F``:
+    judged without the temporal regression, the noise of the narrow
+    candidates weighs too much against the bias of the wide ones.
+    """
+    share = min(max(float(share), 0.0), 1.0)
+    return min(table, key=lambda r: r[2] - (1.0 - share) * r[3])[0]
 
 
 def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, what, operator, copies,
-                 one_se=False):
+                 one_se=False, quintets=None):
     """The spacing of least estimated risk of the derivative ``operator`` (its ``copies`` row blocks per point)
     and the table of :func:`gradient_risk_spatial` / :func:`laplacian_risk_spatial`; ``one_se`` (one row block):
     the widest within one standard error of it (:func:`_widest_within_one_se`)."""
     p = psi_array(psi, "psi")
     F = float_array(samples, "samples").reshape(p.shape[0], -1)
+    nq = 0
+    if quintets is not None:  # runs of five times beside the samples (the same rows: subsets below take both)
+        Fq = float_array(quintets, "quintets").reshape(p.shape[0], -1, 5)
+        nq = Fq.shape[1]
+        F = np.concatenate([F, Fq.reshape(p.shape[0], -1)], axis=1)
     c, R0 = positive(c, "c"), positive(R0, "R0")
     judged = None if judged is None else np.asarray(judged, dtype=bool).reshape(p.shape[0])
     h_all = median_spacing(p)
@@ -432,17 +485,19 @@ def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation
     if nj == 0:
         raise DataError(f"{what}_risk_spatial: no point is judged (judged is all False)")
     terms = [] if one_se else None
-    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator, terms)
+    if nq and nq * nj < QUINTET_MIN_SAMPLES:
+        F, nq = F[:, :F.shape[1] - 5 * nq], 0  # too few to measure the noise better than the white model
+    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator, terms, nq)
     if not table:
         raise DataError(f"{what}_risk_spatial: no candidate spacing fits {n} points (too few points)")
     chosen = _widest_within_one_se(table, terms, p[rows[:n]], h) if one_se else None
-    table = [(k * h / h_all, n_par, r) for k, n_par, r in table]
+    table = [(k * h / h_all, n_par, r, noise) for k, n_par, r, noise in table]
     least = min(table, key=lambda r: r[2])
     best = least if chosen is None else table[chosen]
     log.info("spatial %s risk: centre spacing %.3g x %.3g mm (%d parameters, judged on %d points %.3g mm "
              "apart%s); %s", what, best[0], h_all, best[1], n, h,
              "" if best is least else f"; the widest within one standard error of the least, {least[0]:.3g}",
-             ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r in table))
+             ", ".join(f"{k:.3g}: {r:.3g}" for k, _, r, _ in table))
     return best[0], table
 
 

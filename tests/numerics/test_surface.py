@@ -844,7 +844,7 @@ def test_gradient_risk_estimates_the_gradient_error_and_beats_gcv():
     F = f[:, None] + rng.normal(0, 0.05, (len(psi), 8))  # 0.05 K on 8 "times"
     k, table = gradient_risk_spatial(psi, F)
     true = {}
-    for kk, _, risk in table:
+    for kk, _, risk, _ in table:
         _, d1, d2 = SpatialInterpolant(psi, smoothing=kk).evaluate(F, value=False)
         true[kk] = np.mean((d1 - g[:, :1]) ** 2 + (d2 - g[:, 1:]) ** 2)
         # within 40 % of the true risk or 10 % of the least smoothed candidate's (the pilot's scatter)
@@ -933,3 +933,42 @@ def test_the_regressions_factor_is_built_once_when_two_threads_ask_at_once(monke
     assert len(built) == 1 and out[0] is not None and out[1] is not None
     for a, b in zip(out[0], out[1]):
         np.testing.assert_array_equal(a, b)
+
+
+def test_gradient_risk_measures_noise_correlated_in_space_from_runs_in_time():
+    """Noise shared by neighbouring points (pixels, the DIC surface) is not white in space: the white model's
+    noise of a wide candidate is several times too low and its risk chooses a spacing of 20 times the best one's
+    error. Runs of five consecutive times (the noise white in time) measure each candidate's noise within 25 %,
+    and the risk then chooses near the best; with a later regression in time that keeps 30 % of the noise
+    (:func:`~irdic.surface.regression.spacing_after_smoothing`) the choice weighs bias against that share."""
+    from irdic.surface.regression import gradient_risk_spatial, spacing_after_smoothing
+
+    rng = np.random.default_rng(1)
+    psi = np.stack(np.meshgrid(np.arange(40.0), np.arange(40.0)), -1).reshape(-1, 2) * 0.5
+    psi = psi + rng.uniform(-0.1, 0.1, psi.shape)
+    f = 0.02 * (psi[:, 0] - 10) ** 2 + 0.3 * psi[:, 1] + np.sin(psi[:, 0] / 4)
+    g = np.c_[0.04 * (psi[:, 0] - 10) + np.cos(psi[:, 0] / 4) / 4, np.full(len(psi), 0.3)]
+    cell = np.unique(np.floor(psi / 1.5).astype(int), axis=0, return_inverse=True)[1].ravel()
+
+    def noise(n):  # 0.05 K white plus 0.05 K shared by the points of a 1.5 mm cell, white in time
+        return rng.normal(0, 0.05, (len(psi), n)) + rng.normal(0, 0.05, (cell.max() + 1, n))[cell]
+
+    F = f[:, None] + noise(8)
+    k_white, white = gradient_risk_spatial(psi, F)
+    k, table = gradient_risk_spatial(psi, F, quintets=f[:, None, None] + noise(40).reshape(len(psi), 8, 5))
+    probe = noise(200)
+    bias, var = {}, {}
+    for (kk, _, _, measured), (_, _, _, modelled) in zip(table, white):
+        interp = SpatialInterpolant(psi, smoothing=kk)
+        _, d1, d2 = interp.evaluate(probe, value=False)
+        var[kk] = np.mean(d1 ** 2 + d2 ** 2)
+        _, b1, b2 = interp.evaluate(f[:, None], value=False)
+        bias[kk] = np.mean((b1 - g[:, :1]) ** 2 + (b2 - g[:, 1:]) ** 2)
+        assert measured == pytest.approx(var[kk], rel=0.25), kk
+        if kk >= 4:
+            assert modelled < 0.3 * var[kk], kk
+    risk = {kk: bias[kk] + var[kk] for kk in var}
+    assert risk[k] <= 1.2 * min(risk.values()) and risk[k_white] > 20 * risk[k]
+    later = {kk: bias[kk] + 0.3 * var[kk] for kk in var}
+    assert later[spacing_after_smoothing(table, 0.3)] <= 2.0 * min(later.values())
+    assert spacing_after_smoothing(table, 1.0) == k
