@@ -16,16 +16,14 @@ import numpy as np
 from ..errors import ConfigError, DataError
 from ..footprint.fields import pixel_pitch
 from ..numerics.series import gcv_columns
-from ..numerics.temporal import noise_share
 from ..numerics.temporal_choice import gcv_temporal, rate_risk_temporal
 from ..numerics.temporal_risk import CP_LIMIT, bias_ratio
 from ..parameters import settings
 from ..surface import fit_surface
-from ..surface.regression import spacing_after_smoothing
 from .spatial import judged_points, regressed_gradient, space_gcv
 
 __all__ = ["GCV_STAGES", "SMOOTHING", "checked_settings", "resolve_gcv", "surface_kw", "guarded_time_smoothing",
-           "gradient_noise_var", "parameter_dual", "rate_smoothing", "spacing_with_time"]
+           "gradient_noise_var", "parameter_dual", "rate_smoothing"]
 
 log = logging.getLogger(__name__)
 
@@ -77,61 +75,31 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
             p["surface_smoothing"] = (info["smoothing_shape"], info["smoothing"])
         p["surface_smoothing_time"] = info["smoothing_t"] if p["surface_smoothing_time"] is not None else None
     theta = points["temperature"].isel(time=w).values.astype(float)
-    table = None
     if p["temperature_smoothing_space"] == "gcv":
-        chosen = space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"], ops=ops, separation=pixel_pitch(points, psi))
-        if chosen is not None:  # no time with 6 visible points among them: each chunk chooses its own
-            p["temperature_smoothing_space"], table = chosen
+        k = space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"], ops=ops, separation=pixel_pitch(points, psi))
+        if k is not None:  # no time with 6 visible points among them: each chunk chooses its own
+            p["temperature_smoothing_space"] = k
     if p["temperature_smoothing"] == "gcv":
-        p.update(_time_gcv(points.isel(time=w), theta, t[w], psi, p, ops))
-    k = None if table is None else spacing_with_time(table, p["temperature_smoothing_space"], t[w], p)
-    if k is not None:
-        p["temperature_smoothing_space"] = k
-        if "temperature_smoothing" in gcv:  # chosen again on the series regressed at the new spacing
-            p.update(_time_gcv(points.isel(time=w), theta, t[w], psi, {**p, "temperature_smoothing": "gcv"}, ops))
+        grad = None
+        if p["temperature_smoothing_space"] not in (None, "gcv"):
+            # judged on the spatially regressed series, as the fields regress them (the field also where a point has
+            # no temperature: irdic.fields.space_time.space_time); the gradient in the surface parameters (no
+            # surface yet) for the guard below
+            dual = parameter_dual(psi.shape[0])
+            ks = p["temperature_smoothing_space"]
+            grad, theta = regressed_gradient(theta, psi, dual, ks, c=p["c_space"], R0=p["R0_space"], ops=ops,
+                                             everywhere=True)[:2]
+            noise_var = gradient_noise_var(points.isel(time=w), psi, dual, ks, p, ops)
+        # what smooth_series(theta, smoothing="gcv") would choose, at the cost of the series GCV judges; once
+        # for both choices below
+        theta = gcv_columns(theta, t[w], c=p["c_time"], R0=p["R0_time"])
+        k = gcv_temporal(t[w], theta, c=p["c_time"], R0=p["R0_time"])[0]
+        p["temperature_smoothing"] = k if grad is None else guarded_time_smoothing(k, t[w], grad, psi, noise_var, p)
+        if p["temperature_smoothing_space"] is not None:  # the rate's own spacing (see irdic.fields.space_time)
+            p["temperature_smoothing_rate"] = rate_smoothing(t[w], theta, k, p)
     log.info("fields: smoothing chosen once on DIC times %d..%d: %s", w.start, w.stop - 1,
              ", ".join(f"{k} {p[k]}" for k in gcv))
     return p
-
-
-def spacing_with_time(table, ks, t, p):
-    """The spatial regression's spacing for the gradient the fields deliver, regressed in time as well with
-    ``p["temperature_smoothing"]`` at the times ``t``: the least of the gradient's estimated risks ``table``
-    (:func:`~irdic.surface.regression.gradient_risk_spatial`) with the noise share that regression leaves
-    (:func:`~irdic.surface.regression.spacing_after_smoothing`); None where that is ``ks``, chosen without it."""
-    kt = p["temperature_smoothing"]
-    share = noise_share(t, c=p["c_time"], R0=p["R0_time"], smoothing=kt if kt not in ("gcv", "auto") else None)
-    k = spacing_after_smoothing(table, share)
-    if k == ks:
-        return None
-    log.info("temperature_smoothing_space: %.3g point spacings, not %.3g: the regression in time (centres every "
-             "%.3g times) leaves %.2g of the noise variance", k, ks, kt, share)
-    return k
-
-
-def _time_gcv(points, theta, t, psi, p, ops):
-    """``temperature_smoothing`` (and the rate's, ``temperature_smoothing_rate``) chosen on the series ``theta``
-    (T, N) of ``points`` at times ``t``: GCV's spacing of the series regressed in space as the fields regress
-    them, guarded by the gradient's bias (:func:`guarded_time_smoothing`)."""
-    grad = None
-    out = {}
-    if p["temperature_smoothing_space"] not in (None, "gcv"):
-        # judged on the spatially regressed series, as the fields regress them (the field also where a point has
-        # no temperature: irdic.fields.space_time.space_time); the gradient in the surface parameters (no
-        # surface yet) for the guard below
-        dual = parameter_dual(psi.shape[0])
-        ks = p["temperature_smoothing_space"]
-        grad, theta = regressed_gradient(theta, psi, dual, ks, c=p["c_space"], R0=p["R0_space"], ops=ops,
-                                         everywhere=True)[:2]
-        noise_var = gradient_noise_var(points, psi, dual, ks, p, ops)
-    # what smooth_series(theta, smoothing="gcv") would choose, at the cost of the series GCV judges; once
-    # for both choices below
-    theta = gcv_columns(theta, t, c=p["c_time"], R0=p["R0_time"])
-    k = gcv_temporal(t, theta, c=p["c_time"], R0=p["R0_time"])[0]
-    out["temperature_smoothing"] = k if grad is None else guarded_time_smoothing(k, t, grad, psi, noise_var, p)
-    if p["temperature_smoothing_space"] is not None:  # the rate's own spacing (see irdic.fields.space_time)
-        out["temperature_smoothing_rate"] = rate_smoothing(t, theta, k, p)
-    return out
 
 
 def rate_smoothing(t, series, value_k, p) -> float:

@@ -19,8 +19,8 @@ from ..numerics.series import fill_series, smooth_series
 from ..numerics.temporal import rate_reference_weights
 from ..numerics.temporal_choice import gcv_temporal
 from ..uncertainty.model import paper_std, uncertainties
-from .smoothing import gradient_noise_var, guarded_time_smoothing, rate_smoothing, spacing_with_time
-from .spatial import regressed_gradient, space_gcv
+from .smoothing import gradient_noise_var, guarded_time_smoothing, rate_smoothing
+from .spatial import regressed_gradient
 
 __all__ = ["space_time", "temperature_fields"]
 
@@ -137,12 +137,9 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     regressed series, by a lighter regression in time (:func:`_rate_series`).
     """
     kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
-    ks, table = p["temperature_smoothing_space"], None
-    if ks == "gcv":  # chosen here (a short record): with the table of the gradient's risks, for the time's share
-        chosen = space_gcv(theta, sf.psi, **kw)
-        ks, table = ("gcv", None) if chosen is None else chosen
     # also where a point has no temperature: its series in time holds the time's field there (docs/method.md, 4)
-    grad, field, ks = regressed_gradient(theta, sf.psi, geo.dual, ks, everywhere=True, **kw)
+    grad, field, ks = regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], everywhere=True,
+                                         **kw)
     value = np.where(np.isfinite(theta), field, np.nan)
     chosen = {"temperature_smoothing": None, "temperature_smoothing_space": ks}
     total, loc = paper_rate
@@ -158,10 +155,6 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
     tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)
     k, k_gcv = _time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var)
-    respaced = None if table is None else spacing_with_time(table, ks, ts_in, {**p, "temperature_smoothing": k})
-    if respaced is not None:  # the spatial spacing for the noise the regression in time leaves: all again with it
-        return space_time(theta, t, sf, geo, {**p, "temperature_smoothing_space": respaced}, series, convective,
-                          visible, paper_rate, ops, noise_var)
     fit = smooth_series(th_s, ts_in, t_eval, smoothing=k, **tkw)
     rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw, fit.smoothing if k_gcv == "gcv" else k_gcv)
     chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing

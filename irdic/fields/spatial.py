@@ -38,8 +38,7 @@ def judged_points(p):
 
 
 def space_gcv_filled(filled, p, *, c, R0, separation=None):
-    """Centre spacing of the spatial regression from up to 8 filled times (rows of ``filled``), and the table of
-    the candidates' estimated risks (:func:`irdic.surface.regression.gradient_risk_spatial`).
+    """Centre spacing of the spatial regression from up to 8 filled times (rows of ``filled``).
 
     Chosen by the estimated risk of the gradient
     (:func:`irdic.surface.regression.gradient_risk_spatial`), not by GCV of
@@ -61,15 +60,14 @@ def space_gcv_filled(filled, p, *, c, R0, separation=None):
     # the rim's data carry more than noise (mixed edge pixels, extrapolation), which the least smoothed
     # pilot follows: judged inside it, all points fitted
     judged = judged_points(p)
-    k, table = gradient_risk_spatial(p, sample, c=c, R0=R0, judged=judged if judged.sum() >= 6 else None,
-                                     separation=separation, quintets=quintets)
+    k, _ = gradient_risk_spatial(p, sample, c=c, R0=R0, judged=judged if judged.sum() >= 6 else None,
+                                 separation=separation, quintets=quintets)
     log.info("temperature_smoothing_space: the gradient's estimated risk chose %.1f point spacings", k)
-    return k, table
+    return k
 
 
 def space_gcv(theta, psi, *, c, R0, ops=None, separation=None):
-    """:func:`space_gcv_filled` of the times of ``theta`` (T, N) with 6 or more visible points: ``(k, table)``, or
-    None where no time has 6."""
+    """:func:`space_gcv_filled` of the times of ``theta`` (T, N) with 6 or more visible points."""
     from ..surface import shared_interpolant
 
     have = np.isfinite(psi).all(axis=1)
@@ -112,7 +110,7 @@ def regressed_gradient(theta, psi, dual, smoothing, *, c, R0, ops=None, everywhe
     filled, _ = shared_interpolant(ops, p, c=c, R0=R0, smoothing=1.0).fill(
         theta if whole else theta[np.ix_(times, have)], visible if whole else visible[np.ix_(times, have)])
     if smoothing == "gcv":
-        k = space_gcv_filled(filled, p, c=c, R0=R0)[0]
+        k = space_gcv_filled(filled, p, c=c, R0=R0)
     else:
         k = float(smoothing)
     v0, d1, d2 = shared_interpolant(ops, p, c=c, R0=R0, smoothing=k).evaluate(filled.T, derivatives=dual is not None)

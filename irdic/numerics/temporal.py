@@ -26,7 +26,7 @@ from .saddle import SaddleFactor
 
 __all__ = ["TIME_SNAP", "TemporalInterpolant", "temporal_reach", "temporal_window", "REACH_TOL", "REGRESSION_SPACINGS",
            "local_rate_weights", "LOCAL_RATE_SAMPLES", "rate_reference_stencil", "rate_reference_weights",
-           "RATE_REFERENCE_MIN_SPACING", "RATE_REFERENCE_DEGREE", "FLAT_KERNEL_SPACINGS", "kernel_R0", "noise_share"]
+           "RATE_REFERENCE_MIN_SPACING", "RATE_REFERENCE_DEGREE", "FLAT_KERNEL_SPACINGS", "kernel_R0"]
 
 log = logging.getLogger(__name__)
 
@@ -412,36 +412,6 @@ def temporal_window(times, *, c=1.0, R0=1.0, smoothing=None, tol=REACH_TOL):
     if k > 1.0 and n < t.size:
         n += int(math.ceil(REGRESSION_SPACINGS * k))
     return None if 2 * n + 3 >= t.size else int(n)
-
-
-def noise_share(times, *, c=1.0, R0=1.0, smoothing=None) -> float:
-    """The mean share of white noise variance that the regression in time leaves at the sample times.
-
-    Parameters
-    ----------
-    times : array_like, shape (M,)
-        Sample times (s).
-    c, R0 : float
-        Kernel (as :class:`TemporalInterpolant`).
-    smoothing : None or float >= 1
-        The operator's smoothing; None or 1: the interpolation, which keeps the noise (1.0).
-
-    Returns
-    -------
-    float
-        ``p / M`` (``p``: the regression's parameters), in (0, 1].
-
-    Notes
-    -----
-    The regression is a least-squares projection ``H`` (``H = Hᵀ = H²``): at
-    sample time ``i`` it leaves ``Σ_j H_ij² σ² = H_ii σ²`` of white noise of
-    variance σ², on average ``tr(H) / M = p / M``.
-    """
-    t = increasing_times(times, "times", "n_times")
-    k = smoothing_factor(smoothing, "smoothing", allow_gcv=False)
-    if k <= 1.0:
-        return 1.0
-    return TemporalInterpolant(t, c=c, R0=R0, smoothing=k).n_parameters / t.size
 
 
 def rate_reference_stencil(smoothing):

@@ -21,8 +21,7 @@ from ..numerics.threads import parallel_map
 from ..validation import float_array, positive, psi_array
 from .parametrisation import MIN_POINTS, median_spacing
 
-__all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "gradient_risk_spatial", "spacing_after_smoothing",
-           "SURFACE_CANDIDATES",
+__all__ = ["monomials", "grid_subset", "ls_design", "gcv_spatial", "gradient_risk_spatial", "SURFACE_CANDIDATES",
            "GRADIENT_CANDIDATES", "GRADIENT_MIN_PARAMETERS", "LAPLACIAN_CANDIDATES", "laplacian_risk_spatial",
            "hessian_operator"]
 
@@ -41,8 +40,9 @@ GRADIENT_CANDIDATES = (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0
 #: The fewest parameters (centres and the 3 monomials) of a candidate beyond 12 spacings that the
 #: gradient-risk criterion judges. With the noise of the white model the risk of 9-12 parameters did not resolve
 #: the bias (tube demo: it chose 20 spacings, 5.6 % against 4.7 % at 12; the model's noise of a wide candidate
-#: was 2.4 x too low); with the noise measured in time (``quintets``) 10 keeps the smooth members' gain
-#: (the noisy family's drawn-202 and drawn-707: 7.5 -> 5.4 %, 6.3 -> 4.7 % against 16), 7 and 4 chose as 10.
+#: was 2.4 x too low); with the noise measured in time (``quintets``) 10 gains on six smooth members of the
+#: noisy family against 16 (drawn-202 7.5 -> 5.4 %, drawn-707 6.3 -> 3.9 %) and loses on tube-twist (2.2 ->
+#: 4.0 %: its risk flat from 8 to 24 spacings, the bias of 11 parameters not resolved); 12 as 10 elsewhere.
 GRADIENT_MIN_PARAMETERS = 10
 
 #: The fewest fourth differences in time (runs of five times x judged points) that measure the gradient's noise
@@ -401,7 +401,7 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     table : list of (k, n_parameters, risk, noise)
         ``risk``: the estimated mean squared error of ``∂f/∂Ψ`` per point
         and series (data units² / mm²); ``noise``: its noise part
-        ``σ² ‖D_k‖²_F`` per point (:func:`spacing_after_smoothing`).
+        ``σ² ‖D_k‖²_F`` per point.
 
     Notes
     -----
@@ -429,37 +429,6 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     """
     return _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, "gradient",
                         _gradient_operator, 2, quintets=quintets)
-
-
-def spacing_after_smoothing(table, share):
-    """The spacing of least estimated gradient risk when a later linear smoothing keeps ``share`` of the noise.
-
-    Parameters
-    ----------
-    table : list of (k, n_parameters, risk, noise)
-        As returned by :func:`gradient_risk_spatial`.
-    share : float
-        The share (0, 1] of the regressed field's noise variance that a later smoothing leaves, e.g. the
-        regression in time of each point's series (:func:`irdic.numerics.temporal.noise_share`).
-
-    Returns
-    -------
-    float
-        The factor of least ``risk - (1 - share) noise``.
-
-    Notes
-    -----
-    The estimated risk is ``|b_k|² + σ² ‖D_k‖²_F`` (the bias and the noise of
-    candidate ``k``); a later smoothing ``S`` of the points' series in time,
-    linear and nearly without effect on a spatial bias that changes slowly
-    in time, leaves the bias and ``share`` of the noise variance. The
-    gradient then delivered by the fields (the spatial regression of the
-    temporally regressed series) errs by ``|b_k|² + share σ² ‖D_k‖²_F``:
-    judged without the temporal regression, the noise of the narrow
-    candidates weighs too much against the bias of the wide ones.
-    """
-    share = min(max(float(share), 0.0), 1.0)
-    return min(table, key=lambda r: r[2] - (1.0 - share) * r[3])[0]
 
 
 def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, what, operator, copies,

@@ -939,9 +939,8 @@ def test_gradient_risk_measures_noise_correlated_in_space_from_runs_in_time():
     """Noise shared by neighbouring points (pixels, the DIC surface) is not white in space: the white model's
     noise of a wide candidate is several times too low and its risk chooses a spacing of 20 times the best one's
     error. Runs of five consecutive times (the noise white in time) measure each candidate's noise within 25 %,
-    and the risk then chooses near the best; with a later regression in time that keeps 30 % of the noise
-    (:func:`~irdic.surface.regression.spacing_after_smoothing`) the choice weighs bias against that share."""
-    from irdic.surface.regression import gradient_risk_spatial, spacing_after_smoothing
+    and the risk then chooses near the best."""
+    from irdic.surface.regression import gradient_risk_spatial
 
     rng = np.random.default_rng(1)
     psi = np.stack(np.meshgrid(np.arange(40.0), np.arange(40.0)), -1).reshape(-1, 2) * 0.5
@@ -969,6 +968,3 @@ def test_gradient_risk_measures_noise_correlated_in_space_from_runs_in_time():
             assert modelled < 0.3 * var[kk], kk
     risk = {kk: bias[kk] + var[kk] for kk in var}
     assert risk[k] <= 1.2 * min(risk.values()) and risk[k_white] > 20 * risk[k]
-    later = {kk: bias[kk] + 0.3 * var[kk] for kk in var}
-    assert later[spacing_after_smoothing(table, 0.3)] <= 2.0 * min(later.values())
-    assert spacing_after_smoothing(table, 1.0) == k

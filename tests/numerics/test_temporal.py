@@ -365,18 +365,3 @@ def test_rate_smoothing_is_bounded_by_the_values_gcv_spacing_only_where_gcv_chos
     assert gcv_temporal(t, F)[0] == 1.0
     assert rate_smoothing(t, F, 1.0, p) == rate_smoothing(t, F, None, p) == rate_risk_temporal(t, F)[0] == 4.0
     assert rate_smoothing(t, F, 3.0, p) == 3.0
-
-
-@pytest.mark.parametrize("k", [2.0, 3.0, 6.0])
-def test_noise_share_is_the_white_noise_the_regression_leaves(k):
-    """The regression in time leaves ``p / M`` of white noise's variance at the sample times, on average: the
-    share :func:`~irdic.numerics.temporal.noise_share` gives the fields' choice of the spatial spacing."""
-    from irdic.numerics.temporal import noise_share
-
-    t = np.sort(np.random.default_rng(0).uniform(0.0, 15.0, 31))
-    noise = np.random.default_rng(1).standard_normal((t.size, 4000))
-    left = TemporalInterpolant(t, smoothing=k)(noise)
-    share = noise_share(t, smoothing=k)
-    assert np.mean(left ** 2) == pytest.approx(share, rel=0.03)
-    assert 1.0 / k - 0.05 < share < 1.0
-    assert noise_share(t) == noise_share(t, smoothing=1.0) == 1.0
