@@ -19,7 +19,7 @@ from ..numerics.series import fill_series, smooth_series
 from ..numerics.temporal import rate_reference_weights
 from ..numerics.temporal_choice import gcv_temporal
 from ..uncertainty.model import paper_std, uncertainties
-from .smoothing import gradient_noise_var, guarded_time_smoothing, rate_smoothing
+from .smoothing import guarded_time_smoothing, rate_smoothing, regression_noise_var, value_time_smoothing
 from .spatial import regressed_gradient
 
 __all__ = ["space_time", "temperature_fields"]
@@ -60,8 +60,8 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     spatial = None
     ops = {} if ops is None else ops  # the spatial operators of the regressions and their probes, factorised once
     if p["temperature_smoothing_space"] is not None:
-        def noise_var(ks):  # the regressed gradient's noise, for the choice of the smoothing in time
-            return gradient_noise_var(points, sf.psi, geo.dual, ks, p, ops)
+        def noise_var(ks):  # the regressed gradient's and value's noise, for the choice of the smoothing in time
+            return regression_noise_var(points, sf.psi, geo.dual, ks, p, ops)
 
         def regress(th, ser, q=p):
             return space_time(th, t, sf, geo, q, ser, rate.convective, visible, (total, loc), ops,
@@ -112,9 +112,10 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     ops : dict, optional
         Cache of the spatial operators (:func:`irdic.surface.shared_interpolant`).
     noise_var : callable, optional
-        ``noise_var(ks)``: the noise variance (K²/mm² per component) of the gradient regressed with spacing
-        ``ks`` (:func:`~irdic.fields.smoothing.gradient_noise_var`); with it a ``"gcv"`` smoothing in time is
-        guarded (:func:`~irdic.fields.smoothing.guarded_time_smoothing`).
+        ``noise_var(ks)``: the noise variances (K²/mm² per component, K²) of the gradient and the value
+        regressed with spacing ``ks`` (:func:`~irdic.fields.smoothing.regression_noise_var`); with it a ``"gcv"``
+        smoothing in time is guarded (:func:`~irdic.fields.smoothing.guarded_time_smoothing`), the value's own
+        (:func:`~irdic.fields.smoothing.value_time_smoothing`).
 
     Returns
     -------
@@ -134,7 +135,8 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     chooses the light smoothing the signal needs. The gradient is the spatial
     regression's derivative of the temporally regressed values (the regressed
     field's own gradient), the rate the temporal derivative of the spatially
-    regressed series, by a lighter regression in time (:func:`_rate_series`).
+    regressed series, by a lighter regression in time (:func:`_rate_series`), the
+    value that field's or the spatially regressed series (:func:`~irdic.fields.smoothing.value_time_smoothing`).
     """
     kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
     # also where a point has no temperature: its series in time holds the time's field there (docs/method.md, 4)
@@ -154,24 +156,35 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     # the regressions in time below fill the same gaps: once, together
     th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
     tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)
-    k, k_gcv = _time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var)
+    k, k_gcv, k_value = _time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var)
     fit = smooth_series(th_s, ts_in, t_eval, smoothing=k, **tkw)
     rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw, fit.smoothing if k_gcv == "gcv" else k_gcv)
     chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing
     total = np.where(visible, rate_fit.rate, np.nan)
     smoothed = np.where(visible, fit.value, np.nan)
     grad, value, _ = regressed_gradient(smoothed, sf.psi, geo.dual, ks, **kw)
-    bias_inputs = _bias_inputs(theta, grad, value, total, smoothed, (th_in, th_s, ts_in, t_eval), visible,
-                               fit.smoothing, rate_fit.smoothing, tkw)
-    return grad, total, total - convective, value, bias_inputs, chosen
+    bias_inputs = _bias_inputs(theta, grad, value, total, (th_in, th_s, ts_in, t_eval), visible,
+                               (fit.smoothing, rate_fit.smoothing), tkw)
+    chosen["temperature_smoothing_value"] = fit.smoothing if k_value is None else float(k_value)
+    if chosen["temperature_smoothing_value"] != fit.smoothing:  # the value's own, lighter regression in time
+        smoothed = np.where(visible, smooth_series(th_s, ts_in, t_eval, smoothing=k_value, **tkw).value, np.nan)
+        value = regressed_gradient(smoothed, sf.psi, None, ks, **kw)[1]
+    bias_inputs[6] = smoothed - bias_inputs[6]  # the value's temporal bias
+    return grad, total, total - convective, value, tuple(bias_inputs), chosen
 
 
-def _bias_inputs(theta, grad, value, total, smoothed, series, visible, k, k_rate, tkw):
-    """The inputs of the regressions' bias estimates (:func:`irdic.uncertainty.model.uncertainties`).
+def _bias_inputs(theta, grad, value, total, series, visible, spacings, tkw):
+    """The inputs of the regressions' bias estimates (:func:`irdic.uncertainty.model.uncertainties`), a list; its
+    item 6 the interpolation in time of the spatially regressed series, which the caller subtracts from the
+    value's regression in time of it. The value's spatial bias is judged on the gradient's field ``value``
+    (where the value has a lighter regression in time of its own, the spatial bias hardly differs, and the
+    interpolated points' own series would drown the estimate in their noise: drawn-1005's temperature std 3 x
+    its noise part, the RMS of error/std 0.50).
 
     ``series`` is ``(th_in, th_s, ts_in, t_eval)``: the points' own series, the spatially regressed one, their
-    times and the times evaluated; ``k`` and ``k_rate`` the temporal spacings of the value and of the rate."""
+    times and the times evaluated; ``spacings`` the temporal spacings of the gradient and of the rate."""
     th_in, th_s, ts_in, t_eval = series
+    k, k_rate = spacings
     # the spatial regression's bias is judged against the temporal regression of the points' own series
     own = smooth_series(th_in, ts_in, t_eval, smoothing=k, **tkw)
     own_rate = own.rate if k_rate == k else smooth_series(th_in, ts_in, t_eval, smoothing=k_rate, **tkw).rate
@@ -179,21 +192,25 @@ def _bias_inputs(theta, grad, value, total, smoothed, series, visible, k, k_rate
     # points' own series the estimate drowned in their noise): the rate's against a local polynomial in time
     exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)
     own_v = np.where(visible, own.value, np.nan)
-    return (theta, grad, own_v, value, total - rate_reference_weights(ts_in, t_eval, smoothing=k_rate) @ th_s,
-            total - own_rate, smoothed - exact.value, own_v)
+    return [theta, grad, own_v, value, total - rate_reference_weights(ts_in, t_eval, smoothing=k_rate) @ th_s,
+            total - own_rate, exact.value, own_v]
 
 
 def _time_spacing(th_s, t, grad, psi, p, ks, noise_var):
     """``temperature_smoothing``, a ``"gcv"`` one resolved where ``noise_var`` is given: GCV's choice on the
     filled series ``th_s`` (as :func:`~irdic.numerics.series.smooth_series` makes it), kept where its bias does not
     outweigh the noise it removes from the gradient ``grad`` (:func:`~irdic.fields.smoothing.guarded_time_smoothing`);
-    and GCV's choice itself (the rate's regression is at most as smooth: :func:`_rate_series`)."""
+    GCV's choice itself (the rate's regression is at most as smooth: :func:`_rate_series`); and the value's
+    spacing (:func:`~irdic.fields.smoothing.value_time_smoothing`; one resolved for the record,
+    ``p["temperature_smoothing_value"]``), or None: the gradient's."""
     k = p["temperature_smoothing"]
     if k != "gcv" or noise_var is None:
-        return k, k
+        return k, k, p.get("temperature_smoothing_value")
     live = np.isfinite(th_s).all(axis=0)
-    k = gcv_temporal(t, th_s[:, live] if live.any() else th_s, c=p["c_time"], R0=p["R0_time"])[0]
-    return guarded_time_smoothing(k, t, grad, psi, noise_var(ks), p), k
+    k_gcv = gcv_temporal(t, th_s[:, live] if live.any() else th_s, c=p["c_time"], R0=p["R0_time"])[0]
+    grad_var, value_var = noise_var(ks)
+    k = guarded_time_smoothing(k_gcv, t, grad, psi, grad_var, p)
+    return k, k_gcv, value_time_smoothing(k, t, th_s, psi, value_var, p)
 
 
 def _rate_series(th_s, ts_in, t_eval, p, fit, tkw, value_k):
@@ -205,8 +222,10 @@ def _rate_series(th_s, ts_in, t_eval, p, fit, tkw, value_k):
 
     Notes
     -----
-    The value and gradient stay one field, ``S_x S_t2 S_x Θ``; the rate is ``∂_t S_t1 S_x Θ``, ``S_t1`` at
-    most as smooth; they differ by the heavier one's temporal bias, which the value's std holds. A fast
+    The gradient is that of the field ``S_x S_t2 S_x Θ``; the rate is ``∂_t S_t1 S_x Θ``, ``S_t1`` at most as
+    smooth, and the value ``S_x S_t3 S_x Θ``, ``S_t3`` either ``S_t2`` or the interpolation
+    (:func:`~irdic.fields.smoothing.value_time_smoothing`); they differ by the heavier one's temporal bias, which
+    the value's std holds. A fast
     transient's rate at 2 Hz is bias-limited, the gradient noise-limited (benchmarks/README.md, noisy fields).
     """
     k = p.get("temperature_smoothing_rate") or ("gcv" if p["temperature_smoothing"] == "gcv" else None)

@@ -346,13 +346,17 @@ def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, wi
                                                                            smoothing=k))
 
         ts, ti = operator(kt), operator(None)
-        # the rate may come from a lighter regression than the value (irdic.fields.space_time._rate_series)
+        # the rate and the value may come from lighter regressions than the gradient
+        # (irdic.fields.space_time._rate_series, irdic.fields.smoothing.value_time_smoothing)
         kr = chosen_k.get("temperature_smoothing_rate") or kt
+        kv = chosen_k.get("temperature_smoothing_value") or kt
         tr = ts if kr == kt else operator(kr)
+        W0 = ts.weights(t, 0)
         # the rate's bias reference: a local polynomial in time (irdic.fields.space_time.space_time)
-        W = (ts.weights(t, 0), tr.weights(t, 1), ti.weights(t, 0), rate_reference_weights(ti.times, t, smoothing=kr))
+        W = (W0, tr.weights(t, 1), ti.weights(t, 0), rate_reference_weights(ti.times, t, smoothing=kr),
+             W0 if kv == kt else operator(kv).weights(t, 0))
         rate_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[1] ** 2, axis=1))[:, None], (T, N)).copy()
-        temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[0] ** 2, axis=1))[:, None], (T, N)).copy()
+        temp_std = np.broadcast_to(s_T * np.sqrt(np.sum(W[4] ** 2, axis=1))[:, None], (T, N)).copy()
     if ks is not None:
         draw, s_paper = (None, None) if footprint is None else footprint
         pix_draw = None

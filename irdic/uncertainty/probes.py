@@ -105,8 +105,9 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
 
     ``noise`` (b, T_w, N) K, the hidden points NaN (made 0 here) at the window's ``T_w`` times of which the
     ``T`` of ``visible`` (T, N) start at ``off``; ``sub``: the probed times among the ``T``; ``W`` the temporal
-    weights (value, rate, their exact interpolation's) or None; ``ks`` the spatial spacing; ``bias``: with the
-    noise of the regressions' differences; ``ref_k``: the spacing of the gradient's reference (1: the exact
+    weights (gradient, rate, their exact interpolation's, the rate's reference, the value: the gradient's array
+    itself where it is the same regression) or None; ``ks`` the spatial spacing; ``bias``: with the noise of the
+    regressions' differences; ``ref_k``: the spacing of the gradient's reference (1: the exact
     interpolation) these probes also run through, or None; ``ring``: the mean over each point's nearest that the
     value's difference takes before it is squared (:func:`~irdic.uncertainty.ring.ring_mean`), or None.
 
@@ -118,7 +119,7 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
     T, N = visible.shape
     b = noise.shape[0]
     m = b * sub.size
-    W0, W1, I0, I1 = W if W is not None else (None,) * 4
+    W0, W1, I0, I1, Wv = W if W is not None else (None,) * 5
     sums, squares = {}, {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
     noise_c = noise[:, off:off + T][:, sub]
     if W0 is None:
@@ -134,15 +135,21 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
         smoothed = W0[sub] @ s
         smoothed[:, ~visible[sub]] = np.nan
         g, v = regress_space(smoothed.reshape(m, N), geo.dual[sub], ks)
+        if Wv is not W0:  # the value's own, lighter regression in time (irdic.fields.space_time.space_time)
+            smoothed = Wv[sub] @ s
+            smoothed[:, ~visible[sub]] = np.nan
+            v_own = regress_space(smoothed.reshape(m, N), None, ks)[1]
+        del smoothed
         # the bias is judged against the temporal regression of the points' own series
         value_in = W0[sub] @ noise
         if bias:  # the noise in the space-time regression's differences (model._space_time_bias)
-            for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - noise), ("vt_var", W0 - I0, s)):
+            for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - noise), ("vt_var", Wv - I0, s)):
                 sq = (Wd[sub] @ x) ** 2
                 sums[key] = np.sum(sq, axis=0)
                 squares[key] += list(sq) if ref_k is not None else []
     g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)
-    sums["v"] = np.sum(v ** 2, axis=0)
+    # the value's spatial bias is judged on the gradient's field (model._bias_terms), its noise is its own
+    sums["v"] = np.sum((v if W0 is None or Wv is W0 else v_own.reshape(v.shape)) ** 2, axis=0)
     sums["res"] = np.sum(res ** 2, axis=0)  # (noise - S noise): see noise_scale
     sums["g"] = np.sum(g ** 2, axis=0)
     if bias:

@@ -1,8 +1,9 @@
-"""The guard on the fields' regression in time (irdic.fields.smoothing.guarded_time_smoothing)."""
+"""The guards on the fields' regression in time (irdic.fields.smoothing.guarded_time_smoothing,
+value_time_smoothing)."""
 
 import numpy as np
 
-from irdic.fields.smoothing import guarded_time_smoothing, parameter_dual
+from irdic.fields.smoothing import guarded_time_smoothing, parameter_dual, value_time_smoothing
 from irdic.fields.spatial import regressed_gradient
 
 P = {"c_time": 1.0, "R0_time": 1.0, "c_space": 0.95, "R0_space": 1.0}
@@ -35,6 +36,32 @@ def test_the_guard_keeps_a_regression_that_follows_the_signal_and_interpolates_w
     # interpolation already, or no noise known: nothing to guard
     assert guarded_time_smoothing(1.0, t, band, psi, sigma**2, P) == 1.0
     assert guarded_time_smoothing(3.0, t, band, psi, float("nan"), P) == 3.0
+
+
+def test_the_value_has_its_own_guard_for_a_bias_the_gradient_does_not_see():
+    """A heating uniform over the patch whose rate jumps from 0 to 1 K/s between two of 17 DIC times at 4 Hz:
+    its gradient is constant in time (the gradient's guard keeps the regression), its value is not: the value's
+    regression with centres every 3 times leaves ~25 x its noise (Mallows: interpolation is the better estimate
+    above 2 x), a smooth heating's ~1 x."""
+    rng = np.random.default_rng(4)
+    psi = _grid()
+    t = np.arange(17) * 0.25
+    sigma, n = 0.005, psi.shape[0]
+    grad = np.broadcast_to([0.2, -0.1, 0.0], (t.size, n, 3)) + rng.normal(0.0, sigma, (t.size, n, 3))
+    knee = 20.0 + np.maximum(t - 2.0, 0.0)[:, None] + 0.01 * psi[None, :, 0] + rng.normal(0.0, sigma, (t.size, n))
+    smooth = 20.0 + (0.5 * t + 0.05 * t**2)[:, None] + 0.01 * psi[None, :, 0] + rng.normal(0.0, sigma, (t.size, n))
+    assert guarded_time_smoothing(3.0, t, grad, psi, sigma**2, P) == 3.0
+    assert value_time_smoothing(3.0, t, knee, psi, sigma**2, P) == 1.0
+    assert value_time_smoothing(3.0, t, smooth, psi, sigma**2, P) == 3.0
+    # the value's noise unknown (no pixel positions: irdic.fields.smoothing.regression_noise_var): not judged
+    assert value_time_smoothing(3.0, t, knee, psi, float("nan"), P) == 3.0
+    # a bias only in the rim's values (mixed pixels at a moving outline) is not judged either
+    rim = smooth.copy()
+    edge = (psi.min(axis=1) < 0.5) | (psi.max(axis=1) > 11.0)
+    rim[:, edge] = knee[:, edge]
+    assert value_time_smoothing(3.0, t, rim, psi, sigma**2, P) == 3.0
+    # the gradient interpolated already: the value with it
+    assert value_time_smoothing(1.0, t, smooth, psi, sigma**2, P) == 1.0
 
 
 def test_the_parameter_dual_gives_the_gradient_in_the_surface_parameters():
