@@ -90,7 +90,8 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
             ks = p["temperature_smoothing_space"]
             grad, value = regressed_gradient(theta, psi, dual, ks, c=p["c_space"], R0=p["R0_space"], ops=ops,
                                              everywhere=True)[:2]
-            theta, (noise_var, value_var) = value, regression_noise_var(points.isel(time=w), psi, dual, ks, p, ops)
+            theta = value
+            noise_var, value_var = regression_noise_var(points.isel(time=w), psi, dual, ks, p, ops)
         # what smooth_series(theta, smoothing="gcv") would choose, at the cost of the series GCV judges; once
         # for both choices below
         theta = gcv_columns(theta, t[w], c=p["c_time"], R0=p["R0_time"])

@@ -162,21 +162,21 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing
     total = np.where(visible, rate_fit.rate, np.nan)
     smoothed = np.where(visible, fit.value, np.nan)
-    grad, value, _ = regressed_gradient(smoothed, sf.psi, geo.dual, ks, **kw)
-    bias_inputs = _bias_inputs(theta, grad, value, total, (th_in, th_s, ts_in, t_eval), visible,
-                               (fit.smoothing, rate_fit.smoothing), tkw)
+    grad, field_value, _ = regressed_gradient(smoothed, sf.psi, geo.dual, ks, **kw)
     chosen["temperature_smoothing_value"] = fit.smoothing if k_value is None else float(k_value)
+    value = field_value
     if chosen["temperature_smoothing_value"] != fit.smoothing:  # the value's own, lighter regression in time
         smoothed = np.where(visible, smooth_series(th_s, ts_in, t_eval, smoothing=k_value, **tkw).value, np.nan)
         value = regressed_gradient(smoothed, sf.psi, None, ks, **kw)[1]
-    bias_inputs[6] = smoothed - bias_inputs[6]  # the value's temporal bias
-    return grad, total, total - convective, value, tuple(bias_inputs), chosen
+    bias_inputs = _bias_inputs(theta, grad, field_value, total, smoothed, (th_in, th_s, ts_in, t_eval), visible,
+                               (fit.smoothing, rate_fit.smoothing), tkw)
+    return grad, total, total - convective, value, bias_inputs, chosen
 
 
-def _bias_inputs(theta, grad, value, total, series, visible, spacings, tkw):
-    """The inputs of the regressions' bias estimates (:func:`irdic.uncertainty.model.uncertainties`), a list; its
-    item 6 the interpolation in time of the spatially regressed series, which the caller subtracts from the
-    value's regression in time of it. The value's spatial bias is judged on the gradient's field ``value``
+def _bias_inputs(theta, grad, value, total, smoothed, series, visible, spacings, tkw):
+    """The inputs of the regressions' bias estimates (:func:`irdic.uncertainty.model.uncertainties`); ``smoothed``
+    the value's regression in time of the spatially regressed series (its temporal bias is judged against that
+    series' interpolation). The value's spatial bias is judged on the gradient's field ``value``
     (where the value has a lighter regression in time of its own, the spatial bias hardly differs, and the
     interpolated points' own series would drown the estimate in their noise: drawn-1005's temperature std 3 x
     its noise part, the RMS of error/std 0.50).
@@ -192,8 +192,8 @@ def _bias_inputs(theta, grad, value, total, series, visible, spacings, tkw):
     # points' own series the estimate drowned in their noise): the rate's against a local polynomial in time
     exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)
     own_v = np.where(visible, own.value, np.nan)
-    return [theta, grad, own_v, value, total - rate_reference_weights(ts_in, t_eval, smoothing=k_rate) @ th_s,
-            total - own_rate, exact.value, own_v]
+    return (theta, grad, own_v, value, total - rate_reference_weights(ts_in, t_eval, smoothing=k_rate) @ th_s,
+            total - own_rate, smoothed - exact.value, own_v)
 
 
 def _time_spacing(th_s, t, grad, psi, p, ks, noise_var):
