@@ -11,7 +11,16 @@ mixed edge pixels, 0.003 mm DIC noise) and noise-free ones:
   ``twist-only``: one load each; ``fast-load``: the loading in 2 s instead of
   5; ``slow-small``: half the stretch, 10 deg of twist over 9 s, 2 K;
 - ``moving``: the moving tube of bench_couple_moving.py, IR and DIC at 10 Hz,
-  ``--frames`` frames and ``--points`` points (cost at a larger size).
+  ``--frames`` frames and ``--points`` points (cost at a larger size);
+- ``scene:NAME`` and ``scene:SEED``: a member of the noisy fields' scene
+  family (:mod:`irdic.synthetic.family`, demo scale): the fixed members by
+  name (plates, a sphere cap, a barrel, cylinders; static, stretched,
+  twisted; smooth, edge, band and spot patterns) or one drawn from a seed
+  (a row's seed is added to the member's noise seed: seed 0 is the noise
+  of bench_noisy_fields.py). Their realistic exports are the
+  family's own (its member's IR noise, decimals and DIC noise);
+  ``--scene-family`` puts every fixed member and the members drawn from
+  seeds 101-404 and 505-1006 in place of ``--members``.
 
 For each member, offset (IR frame periods) and seed the IR clock is put
 that far behind the DIC clock and the offset estimated
@@ -34,6 +43,7 @@ Usage (repository root, one BLAS thread on a shared machine)::
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_time_offset.py [--members weak-tiny strong-demo ...]
         [--offsets -4 -1.7 -0.3 0.3 1.7 4] [--seeds 2] [--exports realistic clean] [--couple]
         [--monte-carlo 24] [--repeat 3] [--frames 100] [--points 4000]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_time_offset.py --scene-family --seeds 1 --offsets -3.4 -0.6 0.3 1.7
 """
 
 from __future__ import annotations
@@ -57,6 +67,7 @@ import _tube  # noqa: E402
 from irdic.camera import CameraModel  # noqa: E402
 from irdic.coupling import couple  # noqa: E402
 from irdic.errors import IrdicError, IrdicWarning  # noqa: E402
+from irdic.synthetic import family  # noqa: E402
 from irdic.synthetic.render import realistic_stack  # noqa: E402
 from irdic.timing.clock import ir_clock  # noqa: E402
 from tests._clock_scenes import DECIMALS, DIC_NOISE, FAMILY, IR_NOISE, family_scene  # noqa: E402
@@ -84,12 +95,40 @@ def moving_scene(realistic: bool, seed: int, frames: int, points: int, offset_fr
 _RENDERED: dict = {}
 
 
+#: the drawn members of ``--scene-family`` (the noisy fields benchmark's seeds and the eleven unseen ones)
+SCENE_SEEDS = (101, 202, 303, 404, 505, 606, 707, 808, 919, 1001, 1002, 1003, 1004, 1005, 1006)
+
+
+def family_member(name: str, realistic: bool, seed: int):
+    """``scene:NAME`` / ``scene:SEED`` (:mod:`irdic.synthetic.family`) as :func:`family_scene` returns a member."""
+    key = name.split(":", 1)[1]
+    sc = family.draw(int(key), noise_seed=int(key) + seed) if key.isdigit() else family.member(key, noise_seed=seed)
+    dic, ir, cal = sc.inputs(0.0, realistic=realistic)
+    return dic, ir, cal, sc, None, float(np.median(np.diff(sc.ir_times)))
+
+
+def refusal(message: str) -> str:
+    """The reason of a refusal in a few words (the checks of :mod:`irdic.timing.checks` and :mod:`irdic.timing.offset`)."""
+    for words, reason in (("a static specimen carries", "no motion"),
+                          ("changes its shape on the material (heat", "pattern changes shape (models disagree)"),
+                          ("each frame misfits", "frames misfit the model"),
+                          ("the offset shows where", "too little information"),
+                          ("end of the searched range", "minimum at the range's end"),
+                          ("do not single out", "no single minimum"),
+                          ("do not follow the DIC motion", "frames do not follow the motion"),
+                          ("redrawn", "unstable under redrawn noise")):
+        if words in message:
+            return reason
+    return message[:80]
+
+
 def scene(member, offset_frames, realistic, seed, args):
     """The member rendered once per (exports, seed), its IR clock ``offset_frames`` periods behind."""
     key = (member, realistic, seed)
     if key not in _RENDERED:
         _RENDERED.clear()
         _RENDERED[key] = (moving_scene(realistic, seed, args.frames, args.points, 0.0) if member == "moving"
+                          else family_member(member, realistic, seed) if member.startswith("scene:")
                           else family_scene(member, 0.0, realistic=realistic, seed=seed))
     dic, ir, cal, ex, _, period = _RENDERED[key]
     offset = offset_frames * period
@@ -224,7 +263,11 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=1, help="--couple: timings per figure (the fastest kept)")
     ap.add_argument("--frames", type=int, default=100, help="moving member: IR frames = DIC stages")
     ap.add_argument("--points", type=int, default=4000, help="moving member: DIC points")
+    ap.add_argument("--scene-family", action="store_true",
+                    help="the noisy fields' scene family in place of --members (scene:NAME, scene:SEED)")
     args = ap.parse_args()
+    if args.scene_family:
+        args.members = [f"scene:{m}" for m in (*family.FIXED, *SCENE_SEEDS)]
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}, "
           f"python {platform.python_version()}")
     if args.monte_carlo:
@@ -249,7 +292,7 @@ def main() -> None:
                         _, a = ir_clock(dic, ir.assign_attrs(time_offset="auto"), cal, member)
                     except IrdicError as exc:
                         refused += 1
-                        print(f"| {member} | {seed} | {k:+.2f} | refused: {str(exc)[:100]}... | | | |", flush=True)
+                        print(f"| {member} | {seed} | {k:+.2f} | refused: {refusal(str(exc))} | | | |", flush=True)
                         continue
                     sec = time.perf_counter() - t0
                     err, std = (a["ir_time_offset"] - offset) / period, a["ir_time_offset_std"] / period
