@@ -116,7 +116,8 @@ def refusal(message: str) -> str:
                           ("end of the searched range", "minimum at the range's end"),
                           ("do not single out", "no single minimum"),
                           ("do not follow the DIC motion", "frames do not follow the motion"),
-                          ("redrawn", "unstable under redrawn noise")):
+                          ("redrawn", "unstable under redrawn noise"),
+                          ("fit the frames equally well", "two offsets fit equally well")):
         if words in message:
             return reason
     return message[:80]

@@ -71,7 +71,7 @@ from ..errors import DataError
 from ..noise import spatial_noise
 from ..numerics.threads import both
 from .checks import (MAX_STD_FRAMES, MIN_MOTION_JITTERS, MIN_MOTION_PX, check_fit, check_identified, check_inside,
-                     check_motion, check_sizes)
+                     check_motion, check_single, check_sizes)
 from .nodes import Mesh, Nodes
 from .samples import Criterion, Sampler, leading, prepared
 from .score import Score, Uncertainty, secant, solve, uncertainty
@@ -238,9 +238,11 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     sigma = spatial_noise(frames[_spread_out(frames.shape[0], NOISE_FRAMES)])
     fits, fine, spacing = _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma)
     rank, shift = _model_order(fits, period)
-    tau, score, parts, grid, crit = fits[rank]
+    tau, score, parts, grid, crit, rivals = fits[rank]
     parts = dataclasses.replace(parts, model=shift)
     check_identified(parts, period, motion, parameter)
+    if rank > 1:  # with one component, fitted at full strength, the motion's whole signal tells minima apart
+        check_single(tau, rivals, parts.std, period, motion, parameter)
     check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
     check_fit(_misfit(fine, score.idx[_spread_out(score.idx.size, CHECK_FRAMES)], tau, rank), sigma, tau, period,
                parameter)
@@ -281,11 +283,11 @@ def _fits(search, frames, t_ir, mesh, centre, period, motion, parameter, sigma):
                 fine, spacing = _refinement_sampler(frames, t_ir, mesh, max(search.inside(r, r).size for r in roots)
                                                     * t_ir.size // search.t_ir.size)
             # the minima compared on the refinement's nodes: more samples, less smoothing, more power
-            tau0 = _tournament(fine, roots, rank)
+            tau0, rivals = _tournament(fine, roots, rank)
             tau, score, slope = _refined(fine, tau0, period, motion, parameter, rank)
         except DataError as exc:
             return exc, fine, spacing
-        return (tau, score, uncertainty(score, tau, slope, sigma), grid, crit), fine, spacing
+        return (tau, score, uncertainty(score, tau, slope, sigma), grid, crit, rivals), fine, spacing
 
     one, fine, spacing = fit(1, search, None)
     if not isinstance(one, DataError) and not _structured(one[2], period):
@@ -521,7 +523,10 @@ def _judged(sampler, grid, rank):
 
 def _tournament(sampler, roots, rank):
     """The minimum that fits best, each pair compared on the frames both place inside the DIC record (the
-    first where fewer than 4 are common)."""
+    first where fewer than 4 are common), and the rivals: ``(root, excess, scale)`` of every other minimum
+    compared with the winner, ``excess`` its criterion's relative excess over the winner's on their common
+    frames and ``scale`` the relative scatter of a mean of that many squared residuals, ``sqrt(2 / (n M))``
+    (:func:`~irdic.timing.checks.check_single`)."""
     best = roots[0]
     for r in roots[1:]:
         idx = sampler.inside(min(best, r), max(best, r))
@@ -529,7 +534,13 @@ def _tournament(sampler, roots, rank):
             J = Criterion(sampler, idx, rank)
             if J(r) < J(best):
                 best = r
-    return best
+    rivals = []
+    for r in roots:
+        idx = sampler.inside(min(best, r), max(best, r))
+        if r != best and idx.size >= 4:
+            J = Criterion(sampler, idx, rank)
+            rivals.append((r, J(r) / J(best) - 1.0, float(np.sqrt(2.0 / (idx.size * sampler.M)))))
+    return best, rivals
 
 
 def _minimum(sampler: Sampler, start: float, step: float, period: float, bounds: tuple[float, float],
