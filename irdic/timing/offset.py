@@ -523,8 +523,8 @@ def _judged(sampler, grid, rank):
 
 def _tournament(sampler, roots, rank):
     """The minimum that fits best, each pair compared on the frames both place inside the DIC record (the
-    first where fewer than 4 are common), and the rivals: ``(root, excess, scale)`` of every other minimum
-    compared with the winner, ``excess`` its criterion's relative excess over the winner's on their common
+    first where fewer than 4 are common), and (``rank`` > 1) the rivals: ``(root, excess, scale)`` of every
+    other minimum compared with the winner, ``excess`` its criterion's relative excess over the winner's on their common
     frames and ``scale`` the relative scatter of a mean of that many squared residuals, ``sqrt(2 / (n M))``
     (:func:`~irdic.timing.checks.check_single`)."""
     best = roots[0]
@@ -535,7 +535,7 @@ def _tournament(sampler, roots, rank):
             if J(r) < J(best):
                 best = r
     rivals = []
-    for r in roots:
+    for r in roots if rank > 1 else ():  # only models of two and three components are checked by them
         idx = sampler.inside(min(best, r), max(best, r))
         if r != best and idx.size >= 4:
             J = Criterion(sampler, idx, rank)
