@@ -524,22 +524,28 @@ def _judged(sampler, grid, rank):
 def _tournament(sampler, roots, rank):
     """The minimum that fits best, each pair compared on the frames both place inside the DIC record (the
     first where fewer than 4 are common), and (``rank`` > 1) the rivals: ``(root, excess, scale)`` of every
-    other minimum compared with the winner, ``excess`` its criterion's relative excess over the winner's on their common
-    frames and ``scale`` the relative scatter of a mean of that many squared residuals, ``sqrt(2 / (n M))``
-    (:func:`~irdic.timing.checks.check_single`)."""
+    other minimum compared with the winner, ``excess`` its criterion's relative excess over the winner's on
+    their common frames and ``scale`` the relative scatter of a mean of that many squared residuals,
+    ``sqrt(2 / (n M))`` (:func:`~irdic.timing.checks.check_single`)."""
+    crits, values = {}, {}  # one criterion per pair (its warm start), each root evaluated once on it
+
+    def J(pair, r):
+        lo, hi = min(pair), max(pair)
+        if (lo, hi) not in crits:
+            crits[lo, hi] = Criterion(sampler, sampler.inside(lo, hi), rank)
+        if (lo, hi, r) not in values:
+            values[lo, hi, r] = crits[lo, hi](r)
+        return values[lo, hi, r]
+
+    def common(a, b):
+        return sampler.inside(min(a, b), max(a, b)).size
+
     best = roots[0]
     for r in roots[1:]:
-        idx = sampler.inside(min(best, r), max(best, r))
-        if idx.size >= 4:
-            J = Criterion(sampler, idx, rank)
-            if J(r) < J(best):
-                best = r
-    rivals = []
-    for r in roots if rank > 1 else ():  # only models of two and three components are checked by them
-        idx = sampler.inside(min(best, r), max(best, r))
-        if r != best and idx.size >= 4:
-            J = Criterion(sampler, idx, rank)
-            rivals.append((r, J(r) / J(best) - 1.0, float(np.sqrt(2.0 / (idx.size * sampler.M)))))
+        if common(best, r) >= 4 and J((best, r), r) < J((best, r), best):
+            best = r
+    rivals = [(r, J((best, r), r) / J((best, r), best) - 1.0, float(np.sqrt(2.0 / (common(best, r) * sampler.M))))
+              for r in (roots if rank > 1 else ()) if r != best and common(best, r) >= 4]
     return best, rivals
 
 
