@@ -205,11 +205,10 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     Raises
     ------
     DataError
-        Not identifiable: too few points or frames, a static specimen or too
-        little motion for the noise (uncertainty above :data:`MAX_STD_FRAMES`
-        frame periods), the best candidate at the end of the range, frames
-        that do not follow the motion at the best offset, or an estimate
-        that does not survive a redraw of the noise (:func:`_check_stable`).
+        Not identifiable: too few points or frames, a static specimen or too little motion for the noise
+        (uncertainty above :data:`MAX_STD_FRAMES` frame periods), another minimum that fits as well, the best
+        candidate at the end of the range, frames that do not follow the motion at the best offset, or an
+        estimate that does not survive a redraw of the noise (:func:`_check_stable`).
 
     Notes
     -----
@@ -241,8 +240,7 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     tau, score, parts, grid, crit, rivals = fits[rank]
     parts = dataclasses.replace(parts, model=shift)
     check_identified(parts, period, motion, parameter)
-    if rank > 1:  # with one component, fitted at full strength, the motion's whole signal tells minima apart
-        check_single(tau, rivals, parts.std, period, motion, parameter)
+    check_single(tau, rivals, parts.std, period, motion, parameter)  # rivals: two or three components only
     check_inside(tau, grid, np.nan_to_num(crit, nan=np.nanmax(crit)), motion, parameter)
     check_fit(_misfit(fine, score.idx[_spread_out(score.idx.size, CHECK_FRAMES)], tau, rank), sigma, tau, period,
                parameter)
@@ -544,6 +542,7 @@ def _tournament(sampler, roots, rank):
     for r in roots[1:]:
         if common(best, r) >= 4 and J((best, r), r) < J((best, r), best):
             best = r
+    # with one component, fitted at full strength, the motion's whole signal tells the minima apart
     rivals = [(r, J((best, r), r) / J((best, r), best) - 1.0, float(np.sqrt(2.0 / (common(best, r) * sampler.M))))
               for r in (roots if rank > 1 else ()) if r != best and common(best, r) >= 4]
     return best, rivals
