@@ -17,7 +17,8 @@ mixed edge pixels, 0.003 mm DIC noise) and noise-free ones:
   name (plates, a sphere cap, a barrel, cylinders; static, stretched,
   twisted; smooth, edge, band and spot patterns) or one drawn from a seed
   (a row's seed is added to the member's noise seed: seed 0 is the noise
-  of bench_noisy_fields.py). Their realistic exports are the
+  of bench_noisy_fields.py; ``--same-rate``: only the IR frames at the DIC
+  times, whose IR runs at twice the DIC rate). Their realistic exports are the
   family's own (its member's IR noise, decimals and DIC noise);
   ``--scene-family`` puts every fixed member and the members drawn from
   seeds 101-404 and 505-1006 in place of ``--members``.
@@ -44,6 +45,7 @@ Usage (repository root, one BLAS thread on a shared machine)::
         [--offsets -4 -1.7 -0.3 0.3 1.7 4] [--seeds 2] [--exports realistic clean] [--couple]
         [--monte-carlo 24] [--repeat 3] [--frames 100] [--points 4000]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_time_offset.py --scene-family --seeds 1 --offsets -3.4 -0.6 0.3 1.7
+        [--same-rate]
 """
 
 from __future__ import annotations
@@ -99,12 +101,15 @@ _RENDERED: dict = {}
 SCENE_SEEDS = (101, 202, 303, 404, 505, 606, 707, 808, 919, 1001, 1002, 1003, 1004, 1005, 1006)
 
 
-def family_member(name: str, realistic: bool, seed: int):
-    """``scene:NAME`` / ``scene:SEED`` (:mod:`irdic.synthetic.family`) as :func:`family_scene` returns a member."""
+def family_member(name: str, realistic: bool, seed: int, same_rate: bool = False):
+    """``scene:NAME`` / ``scene:SEED`` (:mod:`irdic.synthetic.family`) as :func:`family_scene` returns a member;
+    ``same_rate``: only the IR frames at the DIC times (the family's IR runs at twice the DIC rate)."""
     key = name.split(":", 1)[1]
     sc = family.draw(int(key), noise_seed=int(key) + seed) if key.isdigit() else family.member(key, noise_seed=seed)
     dic, ir, cal = sc.inputs(0.0, realistic=realistic)
-    return dic, ir, cal, sc, None, float(np.median(np.diff(sc.ir_times)))
+    if same_rate:
+        ir = ir.isel(time=np.flatnonzero(np.isin(np.round(ir["time"].values * 1e6), np.round(sc.dic_times * 1e6))))
+    return dic, ir, cal, sc, None, float(np.median(np.diff(ir["time"].values)))
 
 
 def refusal(message: str) -> str:
@@ -129,7 +134,7 @@ def scene(member, offset_frames, realistic, seed, args):
     if key not in _RENDERED:
         _RENDERED.clear()
         _RENDERED[key] = (moving_scene(realistic, seed, args.frames, args.points, 0.0) if member == "moving"
-                          else family_member(member, realistic, seed) if member.startswith("scene:")
+                          else family_member(member, realistic, seed, args.same_rate) if member.startswith("scene:")
                           else family_scene(member, 0.0, realistic=realistic, seed=seed))
     dic, ir, cal, ex, _, period = _RENDERED[key]
     offset = offset_frames * period
@@ -266,6 +271,7 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=4000, help="moving member: DIC points")
     ap.add_argument("--scene-family", action="store_true",
                     help="the noisy fields' scene family in place of --members (scene:NAME, scene:SEED)")
+    ap.add_argument("--same-rate", action="store_true", help="scene members: the IR frames at the DIC times only")
     args = ap.parse_args()
     if args.scene_family:
         args.members = [f"scene:{m}" for m in (*family.FIXED, *SCENE_SEEDS)]
