@@ -481,7 +481,7 @@ def test_a_refusal_gives_the_reason_that_decides(noise, frames, reason):
 @pytest.mark.parametrize("offset_frames, noise_seed", [(-3.4, 404), (-0.6, 405)])
 def test_two_equally_good_offsets_refused(offset_frames, noise_seed):
     """drawn-404 (the plate whose edge profile widens while it stretches) with its IR clock 3.4 or 0.6 frames
-    behind: two- and three-component models agreed on +7.5 frames (+- 0.07-0.09), while minima 8-11 frames
+    behind: two- and three-component models agreed on +7.5 frames (+- 0.07-0.09), while minima 6-12 frames
     from it fitted the frames within 0.5 % as well. Refused, naming both offsets, instead of a confident wrong
     number."""
     dic, ir, cal = _stretched_plate(None, noise_seed)
