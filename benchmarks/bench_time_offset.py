@@ -113,7 +113,8 @@ def family_member(name: str, realistic: bool, seed: int, same_rate: bool = False
 
 
 def refusal(message: str) -> str:
-    """The reason of a refusal in a few words (the checks of :mod:`irdic.timing.checks` and :mod:`irdic.timing.offset`)."""
+    """The reason of a refusal in a few words (the checks of :mod:`irdic.timing.checks` and
+    :mod:`irdic.timing.offset`)."""
     for words, reason in (("a static specimen carries", "no motion"),
                           ("changes its shape on the material (heat", "pattern changes shape (models disagree)"),
                           ("each frame misfits", "frames misfit the model"),
