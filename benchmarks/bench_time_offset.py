@@ -72,7 +72,7 @@ from irdic.errors import IrdicError, IrdicWarning  # noqa: E402
 from irdic.synthetic import family  # noqa: E402
 from irdic.synthetic.render import realistic_stack  # noqa: E402
 from irdic.timing.clock import ir_clock  # noqa: E402
-from tests._clock_scenes import DECIMALS, DIC_NOISE, FAMILY, IR_NOISE, family_scene  # noqa: E402
+from tests._clock_scenes import DECIMALS, DIC_NOISE, FAMILY, IR_NOISE, at_dic_times, family_scene  # noqa: E402
 
 
 def moving_scene(realistic: bool, seed: int, frames: int, points: int, offset_frames: float):
@@ -108,7 +108,7 @@ def family_member(name: str, realistic: bool, seed: int, same_rate: bool = False
     sc = family.draw(int(key), noise_seed=int(key) + seed) if key.isdigit() else family.member(key, noise_seed=seed)
     dic, ir, cal = sc.inputs(0.0, realistic=realistic)
     if same_rate:
-        ir = ir.isel(time=np.flatnonzero(np.isin(np.round(ir["time"].values * 1e6), np.round(sc.dic_times * 1e6))))
+        ir = ir.isel(time=at_dic_times(ir["time"].values, sc.dic_times))
     return dic, ir, cal, sc, None, float(np.median(np.diff(ir["time"].values)))
 
 

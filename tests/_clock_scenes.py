@@ -103,7 +103,7 @@ def clock_scene(offset, *, name="tube", scale="tiny", realistic=False, seed=0, s
     rng = np.random.default_rng([seed, 30])
     keep = np.arange(ex.ir_times.size)
     if same_rate:  # the frames at the DIC times (the dropped frame lies between two of them)
-        keep = np.flatnonzero(np.isin(np.round(ex.ir_times, 9), np.round(ex.dic_times, 9)))
+        keep = at_dic_times(ex.ir_times, ex.dic_times)
     t = ex.ir_times[keep]
     frames = realistic_stack(ex.renderer, t, rng, noise=IR_NOISE if realistic else 0.0,
                              decimals=DECIMALS if realistic else None, mixed_edges=realistic)
@@ -115,6 +115,11 @@ def clock_scene(offset, *, name="tube", scale="tiny", realistic=False, seed=0, s
     cal = CameraModel(K=cam.K, R=cam.R, C=cam.C).to_dataset()
     cal.attrs.update(sensor_width=1024, sensor_height=768)
     return ex.dic()[["x"]], ir, cal, ex
+
+
+def at_dic_times(ir_times, dic_times):
+    """Indices of the IR times that are DIC times (to the nanosecond): IR at the DIC rate from a faster record."""
+    return np.flatnonzero(np.isin(np.round(np.asarray(ir_times, float), 9), np.round(np.asarray(dic_times, float), 9)))
 
 
 def family_scene(member, offset_frames, *, realistic, seed=0):

@@ -19,7 +19,7 @@ from irdic.timing.clock import estimate_from_stores, ir_clock
 from irdic.timing.nodes import Mesh, Nodes
 from irdic.coupling import couple
 
-from ._clock_scenes import clock_scene, family_scene
+from ._clock_scenes import at_dic_times, clock_scene, family_scene
 
 pytestmark = pytest.mark.slow
 
@@ -439,7 +439,7 @@ def test_other_geometries_estimated(name, realistic, offsets, same_rate):
     scene = family.member(name)
     dic, ir, cal = scene.inputs(realistic=realistic)
     if same_rate:
-        ir = ir.isel(time=np.flatnonzero(np.isin(np.round(ir["time"].values * 1e6), np.round(scene.dic_times * 1e6))))
+        ir = ir.isel(time=at_dic_times(ir["time"].values, scene.dic_times))
         assert ir.sizes["time"] == scene.dic_times.size
     period = float(np.median(np.diff(ir["time"].values)))
     for k in offsets:

@@ -7,6 +7,8 @@ not fix the offset; :mod:`irdic.timing.offset` calls them in turn.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..errors import DataError
@@ -56,8 +58,7 @@ def check_identified(parts, period, motion, parameter):
                + (f"put the offset {parts.model:.3g} s apart" if np.isfinite(parts.model) else "do not fit")
                + ", so the motion cannot be told from the pattern's change")
     elif parts.frames > max(parts.noise, parts.robust, parts.interpolation) and \
-            np.hypot(max(parts.noise, parts.robust), np.hypot(parts.interpolation, parts.model)) \
-            <= MAX_STD_FRAMES * period:
+            dataclasses.replace(parts, frames=0.0).std <= MAX_STD_FRAMES * period:
         # the per-frame misfit is the reason only where the estimate would stand without it (noise alone
         # beyond the bound is too little information whatever the pattern does)
         why = ("each frame misfits the pattern model as a whole, differently from frame to frame: the temperature "
