@@ -208,6 +208,28 @@ def test_nodes_follow_an_affine_motion_exactly():
     np.testing.assert_allclose(g, np.broadcast_to([0.3, -0.7], g.shape), atol=1e-9)
 
 
+@pytest.mark.parametrize("shape", [(40, 300), (300, 40), (25, 25)])
+def test_leading_components_as_the_svd(shape):
+    """The pattern model's components (:func:`irdic.timing.samples.leading`) are the leading singular triplets,
+    to 1e-9 also where the third stands barely above the noise (1.1-1.2 x its next singular value, where a
+    subspace iteration converges slowly), frames fewer or more than nodes."""
+    from irdic.timing.samples import leading
+
+    n, m = shape
+    rng = np.random.default_rng(3)
+    X = (rng.normal(size=(n, 3)) * [30.0, 3.0, 0.015]) @ rng.normal(size=(3, m)) + 0.1 * rng.normal(size=(n, m))
+    X -= X.mean(axis=1, keepdims=True)
+    u, s, vt = np.linalg.svd(X, full_matrices=False)
+    for rank in (1, 2, 3):
+        s2, U, V = leading(X, rank)
+        np.testing.assert_allclose(s2, s[:rank] ** 2, rtol=1e-9 if rank > 1 else 1e-6)
+        tol = 1e-9 if rank > 1 else 1e-6
+        np.testing.assert_allclose(np.abs(np.sum(U * u[:, :rank], axis=0)), 1.0, atol=tol)
+        np.testing.assert_allclose(np.abs(np.sum(V * vt[:rank].T, axis=0)), 1.0, atol=tol)
+        np.testing.assert_allclose(X @ V, U * np.sqrt(s2), atol=1e-9 * s[0])
+        np.testing.assert_allclose(U.T @ U, np.eye(rank), atol=1e-12)
+
+
 def _rms(points, ex):
     tr = ex.truth().sel(point=points.point)
     vis = points.visible.values & np.isfinite(tr.temperature.values)

@@ -165,37 +165,44 @@ class Sampler:
 
 def leading(Xc: np.ndarray, rank: int = 1, start: np.ndarray | None = None, iters: int = 300, tol: float = 1e-13):
     """The ``rank`` largest singular values squared (rank,) of ``Xc`` (n, m) and their left (n, rank) and right
-    (m, rank) unit vectors, by subspace iteration from ``start`` (m, rank) if given.
+    (m, rank) unit vectors.
 
-    Iterates until the sum of the values changes by less than ``tol`` relative (a component at the noise level
-    converges slowly: then ``iters`` ends it, its vectors still orthonormal)."""
+    One component: by power iteration from ``start`` (m, 1) if given, until the value changes by less than
+    ``tol`` relative or after ``iters`` steps (the pattern's value stands far above the noise's, so a few steps
+    do). More: exactly, from the eigenvectors of the smaller Gram matrix (``Xc Xc^T`` or ``Xc^T Xc``) and a
+    Rayleigh-Ritz step on the subspace they span (``start``, ``iters`` and ``tol`` unused). Notes.
+
+    Notes
+    -----
+    A second or third component follows the pattern's change of shape, often barely above the noise: a
+    subspace iteration then converges at the ratio of its value to the noise's next one and needs hundreds of
+    steps, each ``4 rank n m`` operations, where the Gram matrix costs ``min(n, m) n m`` once. The values'
+    error is that of the Gram matrix's eigenvalues, about ``1e-16`` of the largest: far below the criterion's
+    differences between offsets.
+    """
     n, m = Xc.shape
-    if start is not None and start.shape == (m, rank):
-        V = start
-    elif rank == 1:
-        V = np.ones((m, 1)) / np.sqrt(m)
-    else:  # a fixed start: the estimate does not depend on a random draw
-        V = np.linalg.qr(Xc.T @ np.cos(np.outer(np.arange(n), np.arange(1, rank + 1))))[0]
+    if rank > 1:
+        small = Xc @ Xc.T if n <= m else Xc.T @ Xc
+        Q = np.linalg.eigh(small)[1][:, :-rank - 1:-1]  # the top eigenvectors, largest first
+        if n <= m:
+            P, s, Wt = np.linalg.svd(Q.T @ Xc, full_matrices=False)
+            return s**2, Q @ P, Wt.T
+        U, s, Wt = np.linalg.svd(Xc @ Q, full_matrices=False)
+        return s**2, U, Q @ Wt.T
+    V = start if start is not None and start.shape == (m, 1) else np.ones((m, 1)) / np.sqrt(m)
     total = 0.0
     for _ in range(iters):
         W = Xc.T @ (Xc @ V)
-        if rank == 1:
-            norm = float(np.linalg.norm(W))
-            if norm == 0.0:
-                return np.zeros(1), np.zeros((n, 1)), V
-            V, new = W / norm, norm
-        else:
-            V = np.linalg.qr(W)[0]
-            new = float(np.sum(np.linalg.norm(Xc @ V, axis=0) ** 2))
+        norm = float(np.linalg.norm(W))
+        if norm == 0.0:
+            return np.zeros(1), np.zeros((n, 1)), V
+        V, new = W / norm, norm
         if abs(new - total) <= tol * new:
             break
         total = new
     B = Xc @ V
-    if rank == 1:
-        s = np.linalg.norm(B, axis=0)
-        return s**2, B / np.where(s > 0, s, 1.0), V
-    U, s, Wt = np.linalg.svd(B, full_matrices=False)
-    return s**2, U, V @ Wt.T
+    s = np.linalg.norm(B, axis=0)
+    return s**2, B / np.where(s > 0, s, 1.0), V
 
 
 class Criterion:
