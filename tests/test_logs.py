@@ -232,10 +232,11 @@ def test_couple_cost_model_counts_the_specimen_pixels_and_the_masks_built():
     specimen with four times the pixels costs more in the clock, one with twice the outline more in the
     interpolation (by its edge windows), the other parts the same; the outline defaults to a square's; the
     masks, and the interpolation's edge windows, cost per mask built (the default: one per DIC time), the
-    clock per DIC time of the whole record; the pixels and the outline are the area and perimeter of the
-    points' convex hull at their first time seen (a 30 x 20 px rectangle: 600 and 100)."""
-    from irdic.coupling.compute import (MASK_OUTLINE_COST, PIXEL_COSTS, PIXELS_PER_POINT, STAGE_COSTS, specimen_extent,
-                                        stage_costs)
+    clock per DIC time of the whole record and point it keeps (points denser than the pixels thinned); the pixels
+    and the outline are the area and perimeter of the points' convex hull at their first time seen (a 30 x 20 px
+    rectangle: 600 and 100)."""
+    from irdic.coupling.compute import (CLOCK_POINTS_PER_PIXEL, MASK_OUTLINE_COST, PIXEL_COSTS, PIXELS_PER_POINT,
+                                        STAGE_COSTS, specimen_extent, stage_costs)
 
     few, many = stage_costs(300, 13104, 300, 12641, outline=490), stage_costs(300, 13104, 300, 4 * 12641, outline=490)
     assert many["clock"] > 1.5 * few["clock"] and many["interpolation"] == few["interpolation"]
@@ -251,6 +252,8 @@ def test_couple_cost_model_counts_the_specimen_pixels_and_the_masks_built():
     assert few["interpolation"] - reused["interpolation"] == pytest.approx(270 * 490 * MASK_OUTLINE_COST)
     assert reused["clock"] == few["clock"]
     assert stage_costs(300, 13104, 300, 12641, outline=490, n_masks=300) == few
+    dense, kept = stage_costs(300, 26180, 300, 14300), stage_costs(300, CLOCK_POINTS_PER_PIXEL * 14300, 300, 14300)
+    assert dense["clock"] == pytest.approx(kept["clock"]) and dense["masks"] > 4 * kept["masks"]
     chunk = stage_costs(30, 13104, 300, 12641, outline=490, n_record=300)
     assert chunk["clock"] == few["clock"] and chunk["interpolation"] == pytest.approx(few["interpolation"] / 10)
     u, v = np.meshgrid(np.linspace(10, 40, 7), np.linspace(5, 25, 5))

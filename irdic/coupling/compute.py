@@ -149,8 +149,9 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 #: per DIC time and point (the projections, the rest); per mask built and point (the masks: the points' normals
 #: and facing flags dominate; a mask is reused while the outline moves less than
 #: :data:`~irdic.footprint.visibility.MASK_REUSE_PX`) plus :data:`MASK_PLAN_COST`; per DIC time of the whole
-#: record and point plus per IR frame (at most :data:`irdic.timing.offset.MAX_FRAMES`) and specimen pixel (the
-#: IR clock, which reads the whole record in every time chunk); per DIC time and point plus per DIC time and
+#: record and point it keeps (:data:`CLOCK_POINTS_PER_PIXEL`) plus per IR frame (at most
+#: :data:`irdic.timing.offset.MAX_FRAMES`) and specimen pixel (the IR clock, which reads the whole record in every
+#: time chunk); per DIC time and point plus per DIC time and
 #: pixel of the specimen's outline plus per mask built and pixel of the outline (the interpolation: its edge
 #: windows, factorised again for each new mask; :data:`PIXEL_COSTS`, :data:`MASK_OUTLINE_COST`). The masks and
 #: the clock fitted on three tubes (benchmarks/README.md), the clock x 0.48 since it runs beside the masks (the
@@ -179,6 +180,9 @@ MASK_PLAN_COST = 3.2e-7
 STILL_CLOCK_SHARE = 0.2
 #: specimen pixels per DIC point assumed until the points are projected (the benchmarks' tubes: 1 to 4)
 PIXELS_PER_POINT = 2
+#: DIC points per specimen pixel the IR clock keeps at most (those at least
+#: :data:`irdic.timing.nodes.POINT_SPACING_PX` apart: 5,031 of 26,180 points on 14,300 px)
+CLOCK_POINTS_PER_PIXEL = 0.36
 #: the part of each that runs on the stage's threads (from wall and CPU seconds on 2 threads; the IR clock, one
 #: thread, on the masks' pool beside them: it takes a share of the pool's threads)
 STAGE_SHARES = {"setup": 0.0, "masks": 0.95, "clock": 1.0, "interpolation": 0.9, "rest": 0.3, "write": 0.0}
@@ -204,7 +208,9 @@ def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None =
     edge = 4.0 * np.sqrt(px) if outline is None else float(outline)
     record = float(n_t if n_record is None else n_record) * n_points
     masks = float(n_t if n_masks is None else n_masks)
-    size = {"masks": masks * n_points, "clock": record}
+    # the clock thins points denser than its spacing (irdic.timing.nodes.POINT_SPACING_PX)
+    clock = float(n_t if n_record is None else n_record) * min(float(n_points), CLOCK_POINTS_PER_PIXEL * px)
+    size = {"masks": masks * n_points, "clock": clock}
     per_pixel = {"clock": float(min(n_frames, MAX_FRAMES)) * px, "interpolation": float(n_t) * edge}
     out = {k: c * size.get(k, float(n_t) * n_points) + PIXEL_COSTS.get(k, 0.0) * per_pixel.get(k, 0.0)
            for k, c in STAGE_COSTS.items()}

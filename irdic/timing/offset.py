@@ -72,7 +72,7 @@ from ..noise import spatial_noise
 from ..numerics.threads import both
 from .checks import (MAX_STD_FRAMES, MIN_MOTION_JITTERS, MIN_MOTION_PX, check_fit, check_identified, check_inside,
                      check_motion, check_single, check_sizes)
-from .nodes import Mesh, Nodes
+from .nodes import Mesh, Nodes, thinned
 from .samples import Criterion, Sampler, leading, prepared
 from .score import Score, Uncertainty, secant, solve, uncertainty
 
@@ -162,11 +162,12 @@ class ClockOffset:
 def crop_box(positions: np.ndarray, shape: tuple[int, int], margin: int = 12) -> tuple[slice, slice]:
     """(rows, columns) slices of a frame of ``shape`` (H, W) around every finite position (..., 2) (u, v) px."""
     p = positions.reshape(-1, 2)
-    p = p[np.isfinite(p).all(axis=1)]
-    if not p.size:
+    # fmin / fmax pass over NaN: no copy of the finite rows (millions at paper scale); a row is finite or NaN
+    lo, hi = np.fmin.reduce(p, axis=0), np.fmax.reduce(p, axis=0)
+    if not np.isfinite(lo).all():
         raise DataError("no DIC point projects into the IR frames")
-    u0, v0 = np.floor(p.min(axis=0)).astype(int) - margin
-    u1, v1 = np.ceil(p.max(axis=0)).astype(int) + margin + 1
+    u0, v0 = np.floor(lo).astype(int) - margin
+    u1, v1 = np.ceil(hi).astype(int) + margin + 1
     H, W = shape
     return slice(max(v0, 0), min(v1, H)), slice(max(u0, 0), min(u1, W))
 
@@ -221,7 +222,7 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     stages (how well the motion between them is known) in quadrature.
     """
     t_ir, t_dic = np.asarray(t_ir, float), np.asarray(t_dic, float)
-    pos = prepared(np.asarray(positions, float), t_dic)
+    pos = thinned(prepared(np.asarray(positions, float), t_dic))
     period = float(np.median(np.diff(t_ir))) if t_ir.size > 1 else np.nan
     check_sizes(pos, t_dic, t_ir, parameter)
     motion, jitter = _motion(pos)

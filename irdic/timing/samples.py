@@ -225,12 +225,23 @@ class Criterion:
 
 
 def prepared(positions: np.ndarray, t_dic: np.ndarray) -> np.ndarray:
-    """Points (n_t, N', 2) seen at half the DIC times or more, their gaps interpolated linearly in time."""
+    """Points (n_t, N', 2) seen at half the DIC times or more, their gaps interpolated linearly in time (held at
+    the nearest time seen before the first and after the last, as :func:`numpy.interp`)."""
     ok_t = np.isfinite(positions).all(axis=2)
     ok = ok_t.sum(axis=0) >= max(2, (t_dic.size + 1) // 2)
     pos = positions[:, ok].copy()
     seen = ok_t[:, ok]
-    for j in np.flatnonzero(~seen.all(axis=0)):
-        for c in (0, 1):
-            pos[:, j, c] = np.interp(t_dic, t_dic[seen[:, j]], pos[seen[:, j], j, c])
+    if seen.all():
+        return pos
+    # each gap's last time seen before it and first after it, for all points at once
+    steps = np.arange(t_dic.size)[:, None]
+    before = np.maximum.accumulate(np.where(seen, steps, -1), axis=0)
+    after = np.minimum.accumulate(np.where(seen, steps, t_dic.size)[::-1], axis=0)[::-1]
+    gap = ~seen
+    i, j = np.nonzero(gap)
+    lo, hi = before[i, j], after[i, j]
+    lo, hi = np.where(lo < 0, hi, lo), np.where(hi >= t_dic.size, lo, hi)
+    span = t_dic[hi] - t_dic[lo]
+    w = np.divide(t_dic[i] - t_dic[lo], span, out=np.zeros_like(span), where=span > 0)[:, None]
+    pos[i, j] = pos[lo, j] * (1.0 - w) + pos[hi, j] * w
     return pos
