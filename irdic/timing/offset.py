@@ -190,7 +190,9 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
         The DIC points' (u, v) positions in the cropped frame's pixel
         coordinates (px, pixel (0, 0) = ``frames[:, 0, 0]``) at every DIC
         time, NaN where unknown (gaps are interpolated in time; points known
-        at fewer than half of the times are left out).
+        at fewer than half of the times are left out; points denser than
+        :data:`~irdic.timing.nodes.POINT_SPACING_PX` are thinned,
+        :func:`~irdic.timing.nodes.thinned`).
     centre : float
         Middle of the searched offsets (s); the search covers a quarter of the
         shorter record each way.

@@ -170,7 +170,7 @@ def leading(Xc: np.ndarray, rank: int = 1, start: np.ndarray | None = None, iter
     One component: by power iteration from ``start`` (m, 1) if given, until the value changes by less than
     ``tol`` relative or after ``iters`` steps (the pattern's value stands far above the noise's, so a few steps
     do). More: exactly, from the eigenvectors of the smaller Gram matrix (``Xc Xc^T`` or ``Xc^T Xc``) and a
-    Rayleigh-Ritz step on the subspace they span (``start``, ``iters`` and ``tol`` unused). Notes.
+    Rayleigh-Ritz step on the subspace they span (``start``, ``iters`` and ``tol`` unused).
 
     Notes
     -----
@@ -206,7 +206,7 @@ def leading(Xc: np.ndarray, rank: int = 1, start: np.ndarray | None = None, iter
 
 
 class Criterion:
-    """``J(tau)`` per sample on a fixed set of frames, with a warm start for the subspace iteration."""
+    """``J(tau)`` per sample on a fixed set of frames, with a warm start for the power iteration (one component)."""
 
     def __init__(self, sampler: Sampler, idx: np.ndarray, rank: int = 1):
         self.sampler, self.idx, self.rank = sampler, idx, rank
