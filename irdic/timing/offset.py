@@ -187,12 +187,9 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     t_dic : numpy.ndarray, shape (n_t,)
         DIC times (s), increasing.
     positions : numpy.ndarray, shape (n_t, N, 2)
-        The DIC points' (u, v) positions in the cropped frame's pixel
-        coordinates (px, pixel (0, 0) = ``frames[:, 0, 0]``) at every DIC
-        time, NaN where unknown (gaps are interpolated in time; points known
-        at fewer than half of the times are left out; points denser than
-        :data:`~irdic.timing.nodes.POINT_SPACING_PX` are thinned,
-        :func:`~irdic.timing.nodes.thinned`).
+        The DIC points' (u, v) positions in the cropped frame's pixel coordinates (px, pixel (0, 0) =
+        ``frames[:, 0, 0]``) at every DIC time, NaN where unknown (gaps are interpolated in time; points known at
+        fewer than half of the times are left out; dense ones thinned, :func:`~irdic.timing.nodes.thinned`).
     centre : float
         Middle of the searched offsets (s); the search covers a quarter of the
         shorter record each way.
@@ -224,10 +221,10 @@ def estimate_offset(frames: np.ndarray, t_ir: np.ndarray, t_dic: np.ndarray, pos
     stages (how well the motion between them is known) in quadrature.
     """
     t_ir, t_dic = np.asarray(t_ir, float), np.asarray(t_dic, float)
-    pos = thinned(prepared(np.asarray(positions, float), t_dic))
+    pos = prepared(np.asarray(positions, float), t_dic)
     period = float(np.median(np.diff(t_ir))) if t_ir.size > 1 else np.nan
-    check_sizes(pos, t_dic, t_ir, parameter)
-    motion, jitter = _motion(pos)
+    check_sizes(pos, t_dic, t_ir, parameter)  # on the points given: the user's count, not the kept one
+    motion, jitter = _motion(pos := thinned(pos))
     if t_ir.size > max_frames:
         keep = np.linspace(0, t_ir.size - 1, max_frames).round().astype(int)
         frames, t_ir = frames[keep], t_ir[keep]
