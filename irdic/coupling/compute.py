@@ -206,10 +206,11 @@ def stage_costs(n_t: int, n_points: int, n_frames: int, n_pixels: float | None =
 
     px = PIXELS_PER_POINT * float(n_points) if n_pixels is None else float(n_pixels)
     edge = 4.0 * np.sqrt(px) if outline is None else float(outline)
-    record = float(n_t if n_record is None else n_record) * n_points
+    times = float(n_t if n_record is None else n_record)
+    record = times * n_points
     masks = float(n_t if n_masks is None else n_masks)
     # the clock thins points denser than its spacing (irdic.timing.nodes.POINT_SPACING_PX)
-    clock = float(n_t if n_record is None else n_record) * min(float(n_points), CLOCK_POINTS_PER_PIXEL * px)
+    clock = times * min(float(n_points), CLOCK_POINTS_PER_PIXEL * px)
     size = {"masks": masks * n_points, "clock": clock}
     per_pixel = {"clock": float(min(n_frames, MAX_FRAMES)) * px, "interpolation": float(n_t) * edge}
     out = {k: c * size.get(k, float(n_t) * n_points) + PIXEL_COSTS.get(k, 0.0) * per_pixel.get(k, 0.0)

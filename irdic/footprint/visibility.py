@@ -20,6 +20,7 @@ import xarray as xr
 from ..errors import CalibrationError, DataError
 from ..logs import report
 from .mask import facing_camera, point_normals, specimen_mask
+from ..numerics.series import valid_neighbours
 from ..numerics.threads import parallel_map
 from ..pointcloud import nearest_neighbours
 
@@ -41,13 +42,7 @@ def fill_in_time(a: np.ndarray) -> np.ndarray:
     if gap_t.size == 0:
         return out
     n_t = a.shape[0]
-    # the nearest valid time before and after, time by time (ufunc.accumulate along the first axis walks the
-    # array column by column: ten times slower)
-    fwd = np.where(ok, np.arange(n_t)[:, None], -1)
-    bwd = np.where(ok, np.arange(n_t)[:, None], n_t)
-    for k in range(1, n_t):
-        np.maximum(fwd[k - 1], fwd[k], out=fwd[k])
-        np.minimum(bwd[n_t - k], bwd[n_t - k - 1], out=bwd[n_t - k - 1])
+    fwd, bwd = valid_neighbours(ok)
     f, b = fwd[gap_t, gap_p], bwd[gap_t, gap_p]
     out[gap_t, gap_p] = a[np.clip(np.where(f >= 0, f, b), 0, n_t - 1), gap_p]
     return out

@@ -26,7 +26,24 @@ from .temporal import TIME_SNAP, TemporalInterpolant, temporal_window
 from .temporal_choice import GCV_MAX_SERIES, gcv_temporal, judged_columns
 from .threads import blas_threads, parallel_map
 
-__all__ = ["SeriesFit", "smooth_series", "fill_series", "gcv_columns", "fill_gaps", "cardinal_weights"]
+__all__ = ["SeriesFit", "smooth_series", "fill_series", "gcv_columns", "fill_gaps", "cardinal_weights",
+           "valid_neighbours"]
+
+
+def valid_neighbours(ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Along the first axis (time) of ``ok`` (n_t, ...): each entry's last valid index at or before it (-1 where
+    none) and first valid index at or after it (``n_t`` where none), both of ``ok``'s shape.
+
+    Time by time over the rows: ``ufunc.accumulate`` along the first axis walks the array column by column, 6-10
+    x slower (300 times x 26,180 points: 0.17 against 0.03 s).
+    """
+    n_t = ok.shape[0]
+    steps = np.arange(n_t).reshape((n_t,) + (1,) * (ok.ndim - 1))
+    before, after = np.where(ok, steps, -1), np.where(ok, steps, n_t)
+    for k in range(1, n_t):
+        np.maximum(before[k - 1], before[k], out=before[k])
+        np.minimum(after[n_t - k], after[n_t - k - 1], out=after[n_t - k - 1])
+    return before, after
 
 
 def cardinal_weights(s, c=1.0):

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError, DataError, IrdicWarning
-from ..numerics.series import cardinal_weights
+from ..numerics.series import cardinal_weights, valid_neighbours
 from ..numerics.temporal import TemporalInterpolant, temporal_window
 from ..numerics.temporal_choice import gcv_temporal
 from ..validation import as_int, choice, float_array, increasing_times, psi_array, smoothing_factor
@@ -36,9 +36,7 @@ def _temporal_fill(X, valid, times, c, R0, max_gap, window=8):
     Returns the filled array and the (M, N) mask of entries filled.
     """
     M = X.shape[0]
-    idx = np.arange(M)[:, None]
-    prev = np.maximum.accumulate(np.where(valid, idx, -1), axis=0)
-    nxt = np.minimum.accumulate(np.where(valid, idx, M)[::-1], axis=0)[::-1]
+    prev, nxt = valid_neighbours(valid)
     todo = ~valid & (prev >= 0) & (nxt < M) & (nxt - prev - 1 <= max_gap)
     out = X.copy()
     # the weights depend only on the valid times relative to t_k: with regular

@@ -17,6 +17,7 @@ import copy
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from ..numerics.series import valid_neighbours
 from .nodes import Nodes
 
 __all__ = ["Sampler", "Criterion", "leading", "prepared"]
@@ -234,11 +235,8 @@ def prepared(positions: np.ndarray, t_dic: np.ndarray) -> np.ndarray:
     if seen.all():
         return pos
     # each gap's last time seen before it and first after it, for all points at once
-    steps = np.arange(t_dic.size)[:, None]
-    before = np.maximum.accumulate(np.where(seen, steps, -1), axis=0)
-    after = np.minimum.accumulate(np.where(seen, steps, t_dic.size)[::-1], axis=0)[::-1]
-    gap = ~seen
-    i, j = np.nonzero(gap)
+    before, after = valid_neighbours(seen)
+    i, j = np.nonzero(~seen)
     lo, hi = before[i, j], after[i, j]
     lo, hi = np.where(lo < 0, hi, lo), np.where(hi >= t_dic.size, lo, hi)
     span = t_dic[hi] - t_dic[lo]
