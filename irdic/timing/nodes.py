@@ -219,6 +219,17 @@ class Nodes:
             return own(t).reshape(t.size, self.M, 2)
         return self._combine(self.spline(t).reshape(t.size, self.N, 2))
 
+    def blocks(self, t: np.ndarray, rows: int):
+        """The image positions of :meth:`at` a block of ``rows`` times at a time: (slice of ``t``, positions
+        (m, M, 2) px) for each (the positions of all times at once are tens of MB at paper scale)."""
+        t = np.asarray(t, float)
+        own = self._own_spline()
+        for s in range(0, t.size, rows):
+            tb = t[s:s + rows]
+            q = own(tb).reshape(tb.size, self.M, 2) if own is not None else \
+                self._combine(self.spline(tb).reshape(tb.size, self.N, 2))
+            yield slice(s, s + tb.size), q
+
     def reference_velocity(self, t: np.ndarray, deformations: int = 12) -> np.ndarray:
         """Velocities (n, M, 2) of the nodes in the reference image (px/s) at times ``t`` (n,) s.
 

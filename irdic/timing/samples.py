@@ -20,7 +20,12 @@ from scipy.ndimage import gaussian_filter
 from ..numerics.series import valid_neighbours
 from .nodes import Nodes
 
-__all__ = ["Sampler", "Criterion", "leading", "prepared"]
+__all__ = ["Sampler", "Criterion", "leading", "prepared", "BLOCK_SAMPLES"]
+
+#: samples (frames x nodes) computed at once: the temporaries of a block stay in the CPU's cache and are reused
+#: from the allocator's heap, where arrays of all the samples (tens of MB at paper scale) were mapped afresh
+#: from the system on every call, and their page faults cost as much system time as the arithmetic took
+BLOCK_SAMPLES = 1 << 17
 
 
 class Sampler:
@@ -76,44 +81,40 @@ class Sampler:
         return np.flatnonzero((self.t_ir + tau_lo >= self.t0 - eps) & (self.t_ir + tau_hi <= self.t1 + eps))
 
     def positions(self, tau: float, idx: np.ndarray, nodes: Nodes | None = None):
-        """The nodes' positions (n, M, 2) in frames ``idx`` at ``tau``, the flat index of each one's upper left
-        pixel and its fractions (u, v) to the next: the last few are kept."""
+        """The flat index (n, M) of the upper left pixel of each node's position in frames ``idx`` at ``tau``, and
+        its fractions (u, v) to the next (float32, exact): the last few are kept."""
         nodes = nodes or self.nodes
         key = (float(tau), np.asarray(idx, np.int64).tobytes(), id(nodes))
         if key not in self._cache:
-            q = nodes.at(self.t_ir[idx] + tau)
-            # float32 positions (1e-5 px at 500 px) and 32-bit indices where they reach: half the memory traffic
-            u, v = np.empty(q.shape[:2], np.float32), np.empty(q.shape[:2], np.float32)
-            np.clip(q[..., 0], 0.0, self.w - 1.001, out=u)
-            np.clip(q[..., 1], 0.0, self.h - 1.001, out=v)
+            n, t = idx.size, self.t_ir[idx] + tau
+            # 32-bit indices where they reach: half the memory traffic
             kind = np.int32 if self.frames.size < 2**31 else np.int64
-            j, i = u.astype(kind), v.astype(kind)
-            base = i * kind(self.w)
-            base += j
-            base += (idx[:, None] * (self.h * self.w)).astype(kind)
+            base, fu, fv = np.empty((n, nodes.M), kind), np.empty((n, nodes.M), np.float32), np.empty((n, nodes.M),
+                                                                                                     np.float32)
+            for rows, q in nodes.blocks(t, _rows(nodes.M)):
+                # float32 positions: 1e-5 px at 500 px; u - j is then exact in float32
+                u = np.clip(q[..., 0], 0.0, self.w - 1.001).astype(np.float32)
+                v = np.clip(q[..., 1], 0.0, self.h - 1.001).astype(np.float32)
+                j, i = u.astype(kind), v.astype(kind)
+                np.subtract(u, j, out=fu[rows], casting="unsafe")
+                np.subtract(v, i, out=fv[rows], casting="unsafe")
+                i *= kind(self.w)
+                i += j
+                i += (idx[rows, None] * (self.h * self.w)).astype(kind)
+                base[rows] = i
             if len(self._cache) >= 3:
                 self._cache.pop(next(iter(self._cache)))
-            self._cache[key] = (q, base, np.subtract(u, j, dtype=float), np.subtract(v, i, dtype=float))
+            self._cache[key] = (base, fu, fv)
         return self._cache[key]
 
     def __call__(self, tau: float, idx: np.ndarray, raw: bool = False, nodes: Nodes | None = None) -> np.ndarray:
         """The samples (n, M) of frames ``idx`` (smoothed, or ``raw``), at the nodes' positions
         (another interpolant in time with ``nodes``)."""
-        _, base, fu, fv = self.positions(tau, idx, nodes)
+        base, fu, fv = self.positions(tau, idx, nodes)
         f = (self.raw if raw else self.frames).reshape(-1)
-        # top + fv (bottom - top), top = a + fu (b - a), bottom = c + fu (d - c), in place (the temporaries of
-        # millions of samples cost more than the arithmetic)
-        a, b = np.take(f, base), np.take(f, base + 1)
-        b -= a
-        top = np.multiply(fu, b)
-        top += a
-        c, d = np.take(f, base + self.w), np.take(f, base + (self.w + 1))
-        d -= c
-        out = np.multiply(fu, d)
-        out += c
-        out -= top
-        out *= fv
-        out += top
+        out = np.empty(base.shape)
+        for rows in _blocks(base.shape[0], base.shape[1]):
+            _bilinear(f, base[rows], fu[rows], fv[rows], self.w, out[rows])
         return out
 
     def gain(self, tau: float, idx: np.ndarray) -> np.ndarray:
@@ -128,19 +129,8 @@ class Sampler:
         every sample alike would prefer offsets that put static frames
         between pixels.
         """
-        _, _, fu, fv = self.positions(tau, idx)
-        c = self._neighbour_correlation
-
-        def axis(f):  # (1 - f)^2 + f^2 + 2 f (1 - f) c
-            g = 1.0 - f
-            g *= f
-            g *= -2.0 * (1.0 - c)
-            g += 1.0
-            return g
-
-        out = axis(fu)
-        out *= axis(fv)
-        return out
+        _, fu, fv = self.positions(tau, idx)
+        return _gain(fu, fv, self._neighbour_correlation)
 
     @property
     def _neighbour_correlation(self) -> float:
@@ -152,7 +142,8 @@ class Sampler:
     def spread(self, tau: float, idx: np.ndarray, Y: np.ndarray) -> np.ndarray:
         """``G B^T Y``: weights ``Y`` (n, M) on the samples of frames ``idx`` as weights on their pixels
         (n, h, w); ``sum(Y * X) = sum(spread * frames[idx])`` for the raw frames."""
-        _, base, fu, fv = self.positions(tau, idx)
+        base, fu, fv = self.positions(tau, idx)
+        fu, fv = fu.astype(float), fv.astype(float)
         base = base - (idx * (self.h * self.w))[:, None] + (np.arange(idx.size) * (self.h * self.w))[:, None]
         size = idx.size * self.h * self.w
         acc = np.zeros(size)
@@ -162,6 +153,50 @@ class Sampler:
         if self.smoothing > 0:
             acc = gaussian_filter(acc, (0, self.smoothing, self.smoothing), mode="constant")
         return acc
+
+
+def _rows(M: int) -> int:
+    """Frames per block of :data:`BLOCK_SAMPLES` samples of ``M`` nodes (at least one)."""
+    return max(1, BLOCK_SAMPLES // max(M, 1))
+
+
+def _blocks(n: int, M: int):
+    """Slices of ``n`` frames, :func:`_rows` each."""
+    rows = _rows(M)
+    return [slice(r, min(r + rows, n)) for r in range(0, n, rows)]
+
+
+def _bilinear(f: np.ndarray, base: np.ndarray, fu: np.ndarray, fv: np.ndarray, w: int, out: np.ndarray):
+    """``out`` = the bilinear samples of the flat frames ``f`` at pixels ``base`` (upper left) and fractions
+    ``fu``, ``fv`` (float32, exact): ``top + fv (bottom - top)``, ``top = a + fu (b - a)``, ``bottom = c + fu
+    (d - c)``, in place in float64."""
+    a, b = np.take(f, base), np.take(f, base + 1)
+    b -= a
+    top = np.multiply(fu, b, dtype=np.float64)
+    top += a
+    c, d = np.take(f, base + w), np.take(f, base + (w + 1))
+    d -= c
+    np.multiply(fu, d, out=out, dtype=np.float64)
+    out += c
+    out -= top
+    out *= fv
+    out += top
+
+
+def _gain(fu: np.ndarray, fv: np.ndarray, c: float) -> np.ndarray:
+    """Each sample's noise variance relative to a pixel's centre (:meth:`Sampler.gain`) from its fractions
+    ``fu``, ``fv`` and the correlation ``c`` of neighbouring smoothed pixels."""
+    def axis(f):  # (1 - f)^2 + f^2 + 2 f (1 - f) c
+        f = f.astype(np.float64)
+        g = 1.0 - f
+        g *= f
+        g *= -2.0 * (1.0 - c)
+        g += 1.0
+        return g
+
+    out = axis(fu)
+    out *= axis(fv)
+    return out
 
 
 def leading(Xc: np.ndarray, rank: int = 1, start: np.ndarray | None = None, iters: int = 300, tol: float = 1e-13):
@@ -216,13 +251,21 @@ class Criterion:
     def __call__(self, tau: float) -> float:
         """The misfit of the rank-``rank`` model per sample (K^2), each sample's residual squared over its noise
         gain (:meth:`Sampler.gain`)."""
-        X = self.sampler(tau, self.idx)
-        Xc = X - X.mean(axis=1, keepdims=True)
+        sampler = self.sampler
+        Xc = sampler(tau, self.idx)
+        Xc -= Xc.mean(axis=1, keepdims=True)
         # the criterion compares candidates whose misfits differ by far more than 1e-10 of the samples' power
         s2, U, V = leading(Xc, self.rank, self.start, tol=1e-10)
         self.start = V
-        R = Xc - (U * np.sqrt(s2)) @ V.T
-        return float(np.sum(R * R / self.sampler.gain(tau, self.idx))) / self.idx.size / self.sampler.M
+        B = U * np.sqrt(s2)
+        _, fu, fv = sampler.positions(tau, self.idx)
+        c, total = sampler._neighbour_correlation, 0.0
+        for rows in _blocks(*Xc.shape):
+            R = Xc[rows] - B[rows] @ V.T
+            R *= R
+            R /= _gain(fu[rows], fv[rows], c)
+            total += float(np.sum(R))
+        return total / self.idx.size / sampler.M
 
 
 def prepared(positions: np.ndarray, t_dic: np.ndarray) -> np.ndarray:

@@ -88,7 +88,7 @@ class Score:
 
     def __call__(self, tau: float, nodes=None) -> float:
         X = self.samples(tau) if nodes is None else self.sampler(tau, self.idx, nodes=nodes)
-        return float(np.sum(self.Y * X))
+        return _dot(self.Y, X)
 
     def residual(self) -> np.ndarray:
         """The samples of the last offset evaluated less the model fitted to them (n, M), K."""
@@ -104,8 +104,8 @@ def secant(score: Score, tau0: float, period: float) -> tuple[float, np.ndarray]
     d = SECANT_FRAMES * period
     lo = score.samples(tau0 - d)
     rate = (score.samples(tau0 + d) - lo) / (2.0 * d)
-    slope = float(np.sum(score.Y * rate))
-    return (tau0 - (float(np.sum(score.Y * lo)) + slope * d) / slope if slope > 0 else np.nan), rate
+    slope = _dot(score.Y, rate)
+    return (tau0 - (_dot(score.Y, lo) + slope * d) / slope if slope > 0 else np.nan), rate
 
 
 def solve(score: Score, start: float, rate: np.ndarray, period: float) -> tuple[float, float]:
@@ -195,9 +195,10 @@ def uncertainty(score: Score, tau: float, slope: float, sigma: float) -> Uncerta
     nodes = sampler.nodes
     ref = nodes.reference
     cell = np.floor((ref - ref.min(axis=0)) / TILE_PX).astype(np.int64)
-    tile = np.broadcast_to(cell[:, 1] * (cell[:, 0].max() + 1) + cell[:, 0], Y.shape).ravel()
+    tile = cell[:, 1] * (cell[:, 0].max() + 1) + cell[:, 0]
     YR = Y * score.residual()
-    robust = _robust(np.bincount(tile, YR.ravel()), np.bincount(tile, score.rate.ravel()), slope)
+    # each node's sum over the frames first: a tile holds whole nodes
+    robust = _robust(np.bincount(tile, YR.sum(axis=0)), np.bincount(tile, score.rate.sum(axis=0)), slope)
     # a variance from a few frames' sums scatters widely (one degree of freedom per frame): it counts where it
     # exceeds the white-noise one by more than three of its own standard deviations
     frames = _robust(YR.sum(axis=1), score.rate.sum(axis=1), slope)
@@ -208,6 +209,11 @@ def uncertainty(score: Score, tau: float, slope: float, sigma: float) -> Uncerta
         lower = nodes.with_order(nodes.order - 2 if nodes.order >= 4 else 1)
         interpolation = abs(score(tau, nodes=lower) - score(tau)) / slope
     return Uncertainty(noise, robust, interpolation, frames=frames)
+
+
+def _dot(A: np.ndarray, B: np.ndarray) -> float:
+    """``sum(A * B)`` of two arrays of one shape, without the product's temporary."""
+    return float(np.vdot(A.ravel(), B.ravel()))
 
 
 def _robust(sums: np.ndarray, rates: np.ndarray, slope: float) -> float:
