@@ -32,3 +32,25 @@ def test_local_normals_of_a_cylinder_are_radial():
     inner = (th.ravel() > 0.2) & (th.ravel() < np.pi - 0.2)
     assert ang[inner].max() < 0.5
     assert ang.max() < 6.0
+
+
+def test_smallest_eigenvector_equals_lapack_on_thin_and_isotropic_neighbourhoods():
+    """The closed form against numpy.linalg.eigh: nearly equal larger eigenvalues (a regular grid's in-plane
+    covariance, where arccos loses digits), thicknesses from 1e-3 to 1e-9 of the extent, far from the origin."""
+    from irdic.pointcloud import _smallest_eigenvector
+
+    rng = np.random.default_rng(3)
+    for thickness in (1e-3, 1e-6, 1e-9):
+        pts = np.concatenate([rng.standard_normal((2000, 12, 2)), thickness * rng.standard_normal((2000, 12, 1))],
+                             axis=2)
+        pts = pts @ np.linalg.qr(rng.standard_normal((3, 3)))[0].T + 100.0
+        nb = pts - pts.mean(axis=1, keepdims=True)
+        cov = np.einsum("nki,nkj->nij", nb, nb)
+        got, ref = _smallest_eigenvector(cov), np.linalg.eigh(cov)[1][:, :, 0]
+        np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-14)
+        assert np.linalg.norm(np.cross(got, ref), axis=1).max() < 1e-12
+    # an exactly isotropic plane, a line (no plane: LAPACK's answer) and a point (all zero)
+    cov = np.stack([np.diag([2.0, 2.0, 0.0]), np.diag([0.0, 3.0, 0.0]), np.zeros((3, 3))])
+    got = _smallest_eigenvector(cov)
+    assert abs(abs(got[0, 2]) - 1.0) < 1e-14
+    np.testing.assert_allclose(got[1:], np.linalg.eigh(cov[1:])[1][:, :, 0])
