@@ -159,14 +159,17 @@ def couple(dic: xr.Dataset, ir: xr.Dataset, calibration: xr.Dataset, *, chunk: t
 #: sampling (the clock alone 0.58-0.88 x on four stores); the set-up and the
 #: interpolation on the benchmarks' tube at 6,552, 13,104 and 26,180 points (14,300 px, outline 490 px, 56 masks
 #: built), the sweep tube (60,000 px, outline 1,000 px, 300 masks) and the static half-shell of 9,875 points
-#: (53,000 px, outline 930 px, one mask): their ratios are what the ETA rests on. ``write`` is the stage's
+#: (53,000 px, outline 930 px, one mask): their ratios are what the ETA rests on. After the masks' normals and the
+#: clock's blocked sampling the masks (x 0.65), the clock (x 0.6) and the interpolation's outline term (x 1.25)
+#: were refitted on the progress reports of five of those stores replayed (the three tubes, the sweep tube's still
+#: and 2 px/frame rows; benchmarks/README.md). ``write`` is the stage's
 #: store, written after :func:`couple` returns (never reported: the ETA includes it)
-STAGE_COSTS = {"setup": 3.5e-7, "masks": 8.8e-6, "clock": 7.3e-7, "interpolation": 8.1e-6, "rest": 3e-8,
+STAGE_COSTS = {"setup": 3.5e-7, "masks": 5.7e-6, "clock": 4.4e-7, "interpolation": 8.1e-6, "rest": 3e-8,
                "write": 3e-7}
 #: seconds of one core per IR frame and specimen pixel (the IR clock: its frames smoothed and sampled on nodes
 #: 1-2 px apart) and per DIC time and pixel of the specimen's outline (the interpolation's edge windows, whose
 #: cost follows the outline, not the area)
-PIXEL_COSTS = {"clock": 3.2e-7, "interpolation": 3.3e-5}
+PIXEL_COSTS = {"clock": 1.9e-7, "interpolation": 4.1e-5}
 #: seconds of one core per mask built and pixel of its outline in the interpolation (the edge windows of a new
 #: mask factorised; a reused mask reuses them)
 MASK_OUTLINE_COST = 6.2e-5
