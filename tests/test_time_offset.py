@@ -230,6 +230,41 @@ def test_leading_components_as_the_svd(shape):
         np.testing.assert_allclose(U.T @ U, np.eye(rank), atol=1e-12)
 
 
+def test_samples_and_criterion_independent_of_their_blocks(monkeypatch):
+    """The frames are sampled, and the criterion summed, in blocks of
+    :data:`~irdic.timing.samples.BLOCK_SAMPLES` samples: blocks of a few frames (ends not aligned with the
+    frames) give the samples bit for bit, the criterion to rounding, and the samples equal a bilinear
+    interpolation of the smoothed frames at the nodes' positions."""
+    import irdic.timing.samples as S
+    from irdic.timing.offset import crop_box
+    from irdic.footprint.visibility import project_points
+    from irdic.camera import load_camera
+
+    dic, ir, cal, _ = clock_scene(0.3, realistic=True, seed=1)
+    u, v = ir["u"].values, ir["v"].values
+    local = project_points(load_camera(cal), dic, u, v).local
+    rows, cols = crop_box(local, (v.size, u.size))
+    frames = ir["temperature"].isel(v=rows, u=cols).values
+    pos = S.prepared(local - [cols.start, rows.start], dic["time"].values)
+    nodes = Nodes(Mesh(pos, dic["time"].values), 1.5, 3.0)
+    sampler = S.Sampler(frames, ir["time"].values, nodes, 0.5)
+    idx = sampler.inside(0.0, 0.0)
+    whole = sampler(0.0, idx), S.Criterion(sampler, idx)(0.0)
+    monkeypatch.setattr(S, "BLOCK_SAMPLES", 3 * nodes.M + 7)
+    blocked = S.Sampler(frames, ir["time"].values, nodes, 0.5)
+    assert len(S._blocks(idx.size, nodes.M)) > 2
+    np.testing.assert_array_equal(blocked(0.0, idx), whole[0])
+    assert S.Criterion(blocked, idx)(0.0) == pytest.approx(whole[1], rel=1e-12)
+    # against scipy's bilinear interpolation of the smoothed frames at the nodes' positions
+    from scipy.ndimage import map_coordinates
+
+    q = nodes.at(sampler.t_ir[idx])
+    ref = np.stack([map_coordinates(sampler.frames[k].astype(float), [q[i, :, 1], q[i, :, 0]], order=1)
+                    for i, k in enumerate(idx)])
+    # float32 positions (1e-5 px at 500 px) on gradients of ~0.1 K/px: 1e-6 K
+    np.testing.assert_allclose(whole[0], ref, atol=1e-5)
+
+
 def test_points_denser_than_the_pixels_are_thinned(monkeypatch, caplog):
     """The paper-scale tube's DIC points lie 0.95 px apart in the IR image: the clock carries its nodes on a
     subset at least :data:`~irdic.timing.nodes.POINT_SPACING_PX` apart (its cost in proportion to the points)
