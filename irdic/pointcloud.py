@@ -80,8 +80,8 @@ def _smallest_eigenvector(cov: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.clip((a0 * (b0 * c0 - e * e) - d * (d * c0 - e * f) + f * (d * e - b0 * f)) / (2.0 * p2 * p), -1.0, 1.0)
     lam = q + 2.0 * p * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
-    rows = np.stack([np.stack([a - lam, d, f], axis=1), np.stack([d, b - lam, e], axis=1),
-                     np.stack([f, e, c - lam], axis=1)], axis=1)  # (n, 3, 3)
+    rows = cov.copy()  # A - λ_min I
+    rows[:, [0, 1, 2], [0, 1, 2]] -= lam[:, None]
     cands = np.stack([np.cross(rows[:, 0], rows[:, 1]), np.cross(rows[:, 0], rows[:, 2]),
                       np.cross(rows[:, 1], rows[:, 2])], axis=1)
     size = np.einsum("nki,nki->nk", cands, cands)

@@ -213,8 +213,10 @@ class Nodes:
 
     def at(self, t: np.ndarray) -> np.ndarray:
         """Image positions (n, M, 2) px of the nodes at times ``t`` (n,) s."""
-        t = np.asarray(t, float)
-        own = self._own_spline()
+        return self._at(self._own_spline(), np.asarray(t, float))
+
+    def _at(self, own, t: np.ndarray) -> np.ndarray:
+        """:meth:`at` from the nodes' own spline ``own``, or from the points' where it is None."""
         if own is not None:
             return own(t).reshape(t.size, self.M, 2)
         return self._combine(self.spline(t).reshape(t.size, self.N, 2))
@@ -225,10 +227,7 @@ class Nodes:
         t = np.asarray(t, float)
         own = self._own_spline()
         for s in range(0, t.size, rows):
-            tb = t[s:s + rows]
-            q = own(tb).reshape(tb.size, self.M, 2) if own is not None else \
-                self._combine(self.spline(tb).reshape(tb.size, self.N, 2))
-            yield slice(s, s + tb.size), q
+            yield slice(s, min(s + rows, t.size)), self._at(own, t[s:s + rows])
 
     def reference_velocity(self, t: np.ndarray, deformations: int = 12) -> np.ndarray:
         """Velocities (n, M, 2) of the nodes in the reference image (px/s) at times ``t`` (n,) s.

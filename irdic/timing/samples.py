@@ -117,8 +117,9 @@ class Sampler:
             _bilinear(f, base[rows], fu[rows], fv[rows], self.w, out[rows])
         return out
 
-    def gain(self, tau: float, idx: np.ndarray) -> np.ndarray:
-        """Each sample's noise variance (n, M) relative to a sample at a pixel's centre, for white pixel noise.
+    def gain(self, tau: float, idx: np.ndarray, rows: slice = slice(None)) -> np.ndarray:
+        """Each sample's noise variance (n, M) relative to a sample at a pixel's centre, for white pixel noise
+        (of the frames ``rows`` of ``idx`` only, where given).
 
         Notes
         -----
@@ -130,7 +131,18 @@ class Sampler:
         between pixels.
         """
         _, fu, fv = self.positions(tau, idx)
-        return _gain(fu, fv, self._neighbour_correlation)
+        c = self._neighbour_correlation
+
+        def axis(f):  # (1 - f)^2 + f^2 + 2 f (1 - f) c
+            g = 1.0 - f.astype(np.float64)
+            g *= f
+            g *= -2.0 * (1.0 - c)
+            g += 1.0
+            return g
+
+        out = axis(fu[rows])
+        out *= axis(fv[rows])
+        return out
 
     @property
     def _neighbour_correlation(self) -> float:
@@ -181,22 +193,6 @@ def _bilinear(f: np.ndarray, base: np.ndarray, fu: np.ndarray, fv: np.ndarray, w
     out -= top
     out *= fv
     out += top
-
-
-def _gain(fu: np.ndarray, fv: np.ndarray, c: float) -> np.ndarray:
-    """Each sample's noise variance relative to a pixel's centre (:meth:`Sampler.gain`) from its fractions
-    ``fu``, ``fv`` and the correlation ``c`` of neighbouring smoothed pixels."""
-    def axis(f):  # (1 - f)^2 + f^2 + 2 f (1 - f) c
-        f = f.astype(np.float64)
-        g = 1.0 - f
-        g *= f
-        g *= -2.0 * (1.0 - c)
-        g += 1.0
-        return g
-
-    out = axis(fu)
-    out *= axis(fv)
-    return out
 
 
 def leading(Xc: np.ndarray, rank: int = 1, start: np.ndarray | None = None, iters: int = 300, tol: float = 1e-13):
@@ -257,13 +253,11 @@ class Criterion:
         # the criterion compares candidates whose misfits differ by far more than 1e-10 of the samples' power
         s2, U, V = leading(Xc, self.rank, self.start, tol=1e-10)
         self.start = V
-        B = U * np.sqrt(s2)
-        _, fu, fv = sampler.positions(tau, self.idx)
-        c, total = sampler._neighbour_correlation, 0.0
+        B, total = U * np.sqrt(s2), 0.0
         for rows in _blocks(*Xc.shape):
             R = Xc[rows] - B[rows] @ V.T
             R *= R
-            R /= _gain(fu[rows], fv[rows], c)
+            R /= sampler.gain(tau, self.idx, rows)
             total += float(np.sum(R))
         return total / self.idx.size / sampler.M
 
