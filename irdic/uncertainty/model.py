@@ -56,7 +56,8 @@ are propagated through those same operators:
   half of that average, where it exceeds two of its standard errors, over
   the whole specimen where no neighbourhood resolves it: there an RMS over
   the region, not a local value. The strain's likewise, at one standard
-  error (:func:`~irdic.uncertainty.regression_bias.strain_reference_options`).
+  error (:func:`~irdic.uncertainty.regression_bias.strain_reference_options`). The rate's temporal
+  bias is at least the part the whole patch shares (:func:`~irdic.uncertainty.regression_bias.common_bias`).
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
@@ -87,8 +88,8 @@ from ..vocabulary import Status
 from ..footprint.fields import footprint_probes
 from .gradient_geometry import position_std
 from .probes import BIAS_PROBES, PROBE_GROUP, PROBES, SpreadStack, probe_block, probe_times, spread
-from .regression_bias import (BIAS_NEIGHBOURS, local_bias, noise_scale, reference_options, reference_spacing,
-                              scaled_probes)
+from .regression_bias import (BIAS_NEIGHBOURS, common_bias, local_bias, noise_scale, patch_halves,
+                              reference_options, reference_spacing, scaled_probes)
 from .ring import ring_apart, ring_noise_scale, ring_scatter, value_ring
 from .strain import noise_floor_note, strain_std
 
@@ -368,8 +369,9 @@ def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, wi
         # the value is regressed from the paper's temperatures: their own noise through the operators
         # the value's difference is averaged over each point's nearest before it is squared (value_ring)
         ring = value_ring(sf.psi, ks, apart) if spatial is not None else None
+        halves = patch_halves(sf.psi) if spatial is not None and W is not None else None  # common_bias's null
         acc = _spatial_probes(t, regress_space, geo, visible, rng, s_T if draw is None else s_paper, ks, W, window,
-                              spatial is not None, pix_draw, ring)
+                              spatial is not None, pix_draw, ring, halves)
         own = None if spatial is None else spatial[0]  # the regressions' input (the footprint's, with one)
         acc = scaled_probes(acc, noise_scale(own if draw is None else theta_paper, acc, regress_space, ks, trusted))
         del acc["res"]  # the residuals' sole use
@@ -377,11 +379,11 @@ def _ir_std(sf, paper, t, p, chosen_k, regress_space, geo, visible, rng, s_T, wi
             # the gradient and rate from the footprint temperatures: their correlated noise, drawn from a stream
             # of its own (the other probes' draws stay as they were); the paper temperatures' of these are
             # dropped first (GBs at paper scale)
-            keys = ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null", "rs_var_null")
+            keys = ("g", "g_var", "r", "rt_var", "rs_var", "g_var_null", "rt_var_null", "rs_var_null", "rt_common_null")
             for k in keys:
                 acc.pop(k)
             acc_fp = _spatial_probes(t, regress_space, geo, visible, rng.spawn(1)[0], s_T, ks, W, window,
-                                     spatial is not None, draw)
+                                     spatial is not None, draw, halves=halves)
             acc_fp = scaled_probes(acc_fp, noise_scale(own, acc_fp, regress_space, ks, trusted))
             del acc_fp["res"]
             acc.update({k: acc_fp[k] for k in keys})
@@ -408,8 +410,7 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     # against the lighter regression of the gradient's input after the same regression in time (the
     # value's reference; the points' own series at each time carried the temporal bias and full noise)
     d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
-    # the exact interpolation of the input at the points is the input itself; the estimates (sparse
-    # products, which release the GIL) on the stage's threads
+    # the interpolation of the input at the points is the input; the estimates (sparse products) on the threads
     nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
     # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
     d_value, scatter = (value - value_in, None) if ring is None else ring_scatter(ring, value - value_in)
@@ -430,11 +431,13 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     grad_std, temp_std = np.hypot(grad_std, b[0]), np.hypot(temp_std, b[1])
     if not temporal:
         return temp_std, grad_std, rate_std, None
+    b[2] = np.maximum(b[2], common_bias(spatial[4], psi, trusted, acc.get("rt_common_null"))[:, None])
     temp_std, rate_std, biased = _space_time_bias(b[2:], temp_std, rate_std)
     return temp_std, grad_std, rate_std, biased
 
 
-def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias, draw=None, ring=None):
+def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bias, draw=None, ring=None,
+                    halves=None):
     """Noise probes through the spatial (and temporal) regression of the temperatures.
 
     :data:`~irdic.uncertainty.probes.PROBES` white-noise fields of the point noise ``s_T`` (K) run
@@ -442,22 +445,21 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
     a time (one regression call each, so memory does not grow with the
     probes; a group's probes split over the stage's threads,
     :func:`~irdic.uncertainty.probes.probe_block`). Returns the mean squares over the probes (T, N): ``v`` (value),
-    ``g`` (T, N, 3, gradient), ``r`` (rate, with ``W``); with ``bias``, the
-    noise variance of the regression's difference to the exact interpolation
-    (``v_var``, ``g_var``; ``rt_var``, ``rs_var``, ``vt_var`` of
+    ``g`` (T, N, 3, gradient), ``r`` (rate, with ``W``); with ``bias``, the noise variance of the regression's
+    difference to the exact interpolation (``v_var``, ``g_var``; ``rt_var``, ``rs_var``, ``vt_var`` of
     :func:`_space_time_bias`), which :func:`~irdic.uncertainty.regression_bias.local_bias` subtracts.
     The probes are evaluated at the :data:`~irdic.uncertainty.probes.PROBE_TIMES` times of
     :func:`~irdic.uncertainty.probes.probe_times` (the regression in time mixes all of them first);
     every other time takes the nearest one's mean squares (:func:`~irdic.uncertainty.probes.spread`).
-    ``draw(rng, b)``: ``b`` unit-variance noise fields (b, T_w, N) with the
-    input's spatial correlation instead of white ones.
+    ``draw(rng, b)``: ``b`` unit-variance noise fields (b, T_w, N) with the input's spatial correlation instead
+    of white ones; ``halves``: as :func:`~irdic.uncertainty.probes.probe_block`'s (``rt_common_null``).
     """
     T, N = visible.shape
     sub, near = probe_times(T)
     acc = dict.fromkeys(("v", "g", "r", "v_var", "g_var", "rt_var", "rs_var", "vt_var", "res", "v_spread"), 0.0)
     n_bias = 0  # probes through the exact interpolation (whole groups, the first BIAS_PROBES or more)
     # each of the first BIAS_PROBES probes' squared differences: the bias estimates' own scatter on noise
-    nulls = {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
+    nulls = {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var", "rt_common")}
     tw, off = _probe_window(rng, t, N, window) if W is not None else (T, 0)
     seen = visible if tw == T else np.isfinite(window.theta)
     for start in range(0, PROBES, PROBE_GROUP):
@@ -469,7 +471,7 @@ def _spatial_probes(t, regress_space, geo, visible, rng, s_T, ks, W, window, bia
         ref_k = (reference_spacing(ks) or 1.0) if bias and start < BIAS_PROBES else None
 
         def part(rows):  # the group's probes split over the stage's threads: the group's memory, not more
-            return probe_block(noise[rows], regress_space, geo, visible, ks, W, sub, off, bias, ref_k, ring)
+            return probe_block(noise[rows], regress_space, geo, visible, ks, W, sub, off, bias, ref_k, ring, halves)
 
         parts = parallel_map(part, worker_slices(b))
         del noise

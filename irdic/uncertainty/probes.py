@@ -14,6 +14,7 @@ import warnings
 
 import numpy as np
 
+from .regression_bias import half_means
 from .ring import ring_scatter
 
 __all__ = ["PROBES", "PROBE_GROUP", "BIAS_PROBES", "PROBE_TIMES", "probe_times", "spread", "SpreadStack", "probe_block"]
@@ -99,7 +100,7 @@ class SpreadStack:
         return out if dtype is None else out.astype(dtype)
 
 
-def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k, ring=None):
+def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k, ring=None, halves=None):
     """A block of the noise probes of the spatial (and temporal) regression of the temperatures
     (:func:`irdic.uncertainty.model.uncertainties`; its probe groups run a block per thread).
 
@@ -109,7 +110,9 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
     itself where it is the same regression) or None; ``ks`` the spatial spacing; ``bias``: with the noise of the
     regressions' differences; ``ref_k``: the spacing of the gradient's reference (1: the exact
     interpolation) these probes also run through, or None; ``ring``: the mean over each point's nearest that the
-    value's difference takes before it is squared (:func:`~irdic.uncertainty.ring.ring_mean`), or None.
+    value's difference takes before it is squared (:func:`~irdic.uncertainty.ring.ring_mean`), or None;
+    ``halves`` (2, N): the patch's halves whose mean rate differences' product each probe gives (``rt_common``,
+    :func:`~irdic.uncertainty.regression_bias.common_bias`'s null), or None.
 
     Returns the sums over the ``b`` probes of the squares the uncertainty averages (``v``, ``g``, ``res``;
     ``r`` with ``W``; with ``bias`` ``v_var``, ``rt_var``, ``rs_var``, ``vt_var``, and ``v_spread`` with
@@ -120,7 +123,7 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
     b = noise.shape[0]
     m = b * sub.size
     W0, W1, I0, I1, Wv = W if W is not None else (None,) * 5
-    sums, squares = {}, {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var")}
+    sums, squares = {}, {k: [] for k in ("v_var", "g_var", "rt_var", "rs_var", "vt_var", "rt_common")}
     noise_c = noise[:, off:off + T][:, sub]
     if W0 is None:
         g, v = regress_space(noise_c.reshape(m, N), geo.dual[sub], ks)
@@ -144,7 +147,11 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
         value_in = W0[sub] @ noise
         if bias:  # the noise in the space-time regression's differences (model._space_time_bias)
             for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - noise), ("vt_var", Wv - I0, s)):
-                sq = (Wd[sub] @ x) ** 2
+                dx = Wd[sub] @ x
+                if key == "rt_var" and halves is not None:  # every probe: the product's scatter is wide
+                    hm = half_means(dx, halves, visible[sub])
+                    squares["rt_common"] += list(hm[..., 0] * hm[..., 1])
+                sq = dx ** 2
                 sums[key] = np.sum(sq, axis=0)
                 squares[key] += list(sq) if ref_k is not None else []
     g, v = g.reshape(b, sub.size, N, 3), v.reshape(b, sub.size, N)

@@ -4,7 +4,8 @@ reference in time (irdic.numerics.temporal.local_rate_weights)."""
 import numpy as np
 
 from irdic.numerics.temporal import TemporalInterpolant, local_rate_weights, rate_reference_stencil
-from irdic.uncertainty.regression_bias import (BIAS_Z, local_bias, reference_options, reference_spacing,
+from irdic.uncertainty.regression_bias import (BIAS_NEIGHBOURS, BIAS_Z, common_bias, half_means, local_bias,
+                                               patch_halves, reference_options, reference_spacing,
                                                strain_reference_options)
 from irdic.uncertainty.ring import (RING_APART_PX, RING_POINTS, ring_apart, ring_mean, ring_noise_scale, ring_scatter,
                                    value_ring)
@@ -42,6 +43,63 @@ def test_local_bias_resolves_a_bias_above_its_noise():
     null = rng.normal(0.0, 2.0, (K,) + v.shape) ** 2
     b = local_bias(d, v, psi, null=null)
     assert abs(np.sqrt(np.mean(b ** 2)) - 1.0) < 0.2, np.sqrt(np.mean(b ** 2))
+
+
+def _smooth_noise(rng, T, n, sd):
+    """(T, n * n) noise of std ``sd`` correlated over ~3 points (a 3 x 3 box filter of white noise), as a
+    regression's noise is."""
+    from scipy import ndimage
+
+    w = ndimage.uniform_filter(rng.standard_normal((T, n, n)), size=(1, 3, 3), mode="wrap")
+    return sd * (w / w.std()).reshape(T, n * n)
+
+
+def test_common_bias_is_the_ripple_the_whole_patch_shares():
+    """A ripple of 0.01 changing sign from time to time, shared by every point, under correlated noise of
+    0.017 per point (drawn-707's rate: each point's own estimate was 0 there): the RMS of the ripple over
+    each time and its neighbours to 10 %; where the points are noise alone, or the bias sits in one half
+    of the patch only, it stays below a quarter of the ripple; untrusted points and points without surface
+    parameters do not enter; too few points give 0. A bias of one half only (0.02, RMS over the patch 0.014)
+    times the other half's noise mean: about the geometric mean of the two, well below the patch's RMS."""
+    rng = np.random.default_rng(3)
+    n, T = 30, 12
+    psi = _grid(n)
+    ripple = 0.01 * (-1.0) ** np.arange(T) * (1.0 + 0.3 * np.sin(np.arange(T)))
+    expected = np.sqrt(np.convolve(ripple ** 2, np.ones(3), "same") / np.convolve(np.ones(T), np.ones(3), "same"))
+    noise = _smooth_noise(rng, T, n, 0.017)
+    got = common_bias(ripple[:, None] + noise, psi)
+    np.testing.assert_allclose(got, expected, rtol=0.1)
+    assert np.all(common_bias(noise, psi) < 0.25 * 0.01), common_bias(noise, psi)
+    one_half = np.where(psi[:, 0] < n / 2, 0.02, 0.0)[None, :] * (-1.0) ** np.arange(T)[:, None]
+    lopsided = common_bias(one_half + noise, psi)
+    assert np.sqrt(np.mean(lopsided ** 2)) < 0.35 * 0.0141 and lopsided.max() < 0.5 * 0.0141, lopsided
+    # points outside the trusted set or without parameters carry a wild difference: left out
+    tame = ripple[:, None] + noise
+    trusted = np.ones(tame.shape, bool)
+    trusted[:, ::7] = False
+    psi_gaps = psi.copy()
+    psi_gaps[5] = np.nan
+    wild = tame.copy()
+    wild[:, ::7], wild[:, 5] = 1e3, -1e3
+    np.testing.assert_array_equal(common_bias(wild, psi_gaps, trusted), common_bias(tame, psi_gaps, trusted))
+    np.testing.assert_allclose(common_bias(wild, psi_gaps, trusted), expected, rtol=0.2)
+    # with the probes' own products (the same noise drawn again) as the null: on pure noise nothing counts
+    # where the plain estimate let some times through, and the ripple is kept whole
+    halves = patch_halves(psi)
+    null = []
+    for _ in range(16):
+        m = half_means(_smooth_noise(rng, T, n, 0.017), halves, True)
+        null.append(m[:, 0] * m[:, 1])
+    assert np.any(common_bias(noise, psi) > 0)
+    assert np.mean(common_bias(noise, psi, null=null) > 0) <= 1 / 12, common_bias(noise, psi, null=null)
+    np.testing.assert_array_equal(common_bias(ripple[:, None] + noise, psi, null=null), got)
+    # a time chunk of one or two times: its own times only
+    for n_times in (1, 2):
+        short = common_bias(ripple[:n_times, None] + noise[:n_times], psi, null=[x[:n_times] for x in null])
+        assert short.shape == (n_times,)  # one product each: its noise not averaged over neighbours
+        np.testing.assert_allclose(short, np.sqrt(np.mean(ripple[:n_times] ** 2)), rtol=0.25)
+    few = psi[: 2 * BIAS_NEIGHBOURS - 1]
+    np.testing.assert_array_equal(common_bias(ripple[:, None] + noise[:, :few.shape[0]], few), 0.0)
 
 
 def test_pooled_bias_below_the_neighbourhoods_resolution():
