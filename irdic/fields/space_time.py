@@ -19,6 +19,7 @@ from ..numerics.series import fill_series, smooth_series
 from ..numerics.temporal import rate_reference_weights
 from ..numerics.temporal_choice import gcv_temporal
 from ..uncertainty.model import paper_std, uncertainties
+from ..uncertainty.regression_bias import reference_spacing
 from .smoothing import guarded_time_smoothing, rate_smoothing, regression_noise_var, value_time_smoothing
 from .spatial import regressed_gradient
 
@@ -153,9 +154,9 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
         _, th_s, _ = regressed_gradient(th_in, sf.psi, None, ks, everywhere=True, **kw)
     else:
         th_in, ts_in, t_eval, record, th_s = theta, t, None, t, field
-    # the regressions in time below fill the same gaps: once, together
-    th_s, th_in = fill_series([th_s, th_in], ts_in, c=p["c_time"], R0=p["R0_time"], record_times=record)
     tkw = dict(c=p["c_time"], R0=p["R0_time"], record_times=record)
+    # the gaps filled once, together, for the regressions in time below; with the rate's spatial reference
+    th_s, th_in, *th_ref = fill_series([th_s, th_in] + _half_spacing(th_in, sf.psi, ks, kw), ts_in, **tkw)
     k, k_gcv, k_value = _time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var)
     fit = smooth_series(th_s, ts_in, t_eval, smoothing=k, **tkw)
     rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw, fit.smoothing if k_gcv == "gcv" else k_gcv)
@@ -168,9 +169,16 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     if chosen["temperature_smoothing_value"] != fit.smoothing:  # the value's own, lighter regression in time
         smoothed = np.where(visible, smooth_series(th_s, ts_in, t_eval, smoothing=k_value, **tkw).value, np.nan)
         value = regressed_gradient(smoothed, sf.psi, None, ks, **kw)[1]
-    bias_inputs = _bias_inputs(theta, grad, field_value, total, smoothed, (th_in, th_s, ts_in, t_eval), visible,
-                               (fit.smoothing, rate_fit.smoothing), tkw)
+    bias_inputs = _bias_inputs(theta, grad, field_value, total, smoothed, (th_in, th_s, ts_in, t_eval, *th_ref),
+                               visible, (fit.smoothing, rate_fit.smoothing), tkw)
     return grad, total, total - convective, value, bias_inputs, chosen
+
+
+def _half_spacing(theta, psi, ks, kw):
+    """``[theta]`` (T, N) regressed at half the spatial spacing ``ks`` at each time, the rate's spatial bias
+    reference (:func:`_bias_inputs`), or ``[]`` where that reference is the points' own series (``ks`` below 2)."""
+    k_ref = reference_spacing(ks)
+    return [] if k_ref is None else [regressed_gradient(theta, psi, None, k_ref, everywhere=True, **kw)[1]]
 
 
 def _bias_inputs(theta, grad, value, total, smoothed, series, visible, spacings, tkw):
@@ -181,13 +189,21 @@ def _bias_inputs(theta, grad, value, total, smoothed, series, visible, spacings,
     interpolated points' own series would drown the estimate in their noise: drawn-1005's temperature std 3 x
     its noise part, the RMS of error/std 0.50).
 
-    ``series`` is ``(th_in, th_s, ts_in, t_eval)``: the points' own series, the spatially regressed one, their
-    times and the times evaluated; ``spacings`` the temporal spacings of the gradient and of the rate."""
-    th_in, th_s, ts_in, t_eval = series
+    ``series`` is ``(th_in, th_s, ts_in, t_eval[, th_ref])``: the points' own series, the spatially regressed one,
+    their times, the times evaluated, and the series regressed at half the spatial spacing; ``spacings`` the
+    temporal spacings of the gradient and of the rate. The rate's spatial bias is judged against the last (as the
+    gradient's, :func:`~irdic.uncertainty.regression_bias.reference_spacing`), where there is one: against the
+    points' own series, ~15 x noisier than the rate, its estimate needed their noise known to 1 % (the sweep's
+    still tube, 300 DIC times: the difference's noise 4-15 % above its probes' took 0.017 K/s for a bias where
+    the true one was 1e-4 and the rate erred by 0.002 K/s)."""
+    th_in, th_s, ts_in, t_eval, *th_ref = series
     k, k_rate = spacings
     # the spatial regression's bias is judged against the temporal regression of the points' own series
     own = smooth_series(th_in, ts_in, t_eval, smoothing=k, **tkw)
-    own_rate = own.rate if k_rate == k else smooth_series(th_in, ts_in, t_eval, smoothing=k_rate, **tkw).rate
+    if th_ref:
+        own_rate = smooth_series(th_ref[0], ts_in, t_eval, smoothing=k_rate, **tkw).rate
+    else:
+        own_rate = own.rate if k_rate == k else smooth_series(th_in, ts_in, t_eval, smoothing=k_rate, **tkw).rate
     # the temporal regressions' bias: against the same (regressed) series, whose noise is small (against the
     # points' own series the estimate drowned in their noise): the rate's against a local polynomial in time
     exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)

@@ -46,7 +46,7 @@ are propagated through those same operators:
   ``d`` to a less biased reference of the same input (value: the points'
   own series; gradient and strain: the regression with half the spacing,
   :func:`~irdic.uncertainty.regression_bias.reference_spacing`; the rate: a
-  local polynomial in time, :func:`~irdic.numerics.temporal.rate_reference_stencil`)
+  local polynomial in time, :func:`~irdic.numerics.temporal.rate_reference_stencil`, and the half spacing)
   has ``E d² = b² + b_ref² + v`` (``v``: the noise variance of ``d``, from the
   same probes through both operators); ``b² = <d²> - <v>`` averaged locally, where
   it exceeds its own scatter on noise
@@ -407,12 +407,11 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     ``ring``: the mean the value's difference takes before it is squared, as the probes' did, or None
     (:func:`~irdic.uncertainty.ring.value_ring`)."""
     theta, grad, value_in, value = spatial[:4]
-    # against the lighter regression of the gradient's input after the same regression in time (the
-    # value's reference; the points' own series at each time carried the temporal bias and full noise)
+    # against the lighter regression of the gradient's input after the same regression in time (the value's
+    # reference; the points' own series carried the temporal bias and full noise)
     d_grad = grad - regress_space(spatial[-1], geo.dual, reference_spacing(ks) or 1.0)[0]
     # the interpolation of the input at the points is the input; the estimates (sparse products) on the threads
     nbs = {}  # the neighbourhoods of the points, shared by the bias estimates below
-    # the gradient's reference, half the spacing, is as biased as the regression (reference_options)
     d_value, scatter = (value - value_in, None) if ring is None else ring_scatter(ring, value - value_in)
     # the probes' noise in the value's ring mean scaled to the data's (ring_noise_scale)
     k2 = ring_noise_scale(scatter, acc.pop("v_spread", None), trusted)
@@ -422,8 +421,9 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     del scatter
     jobs = [(d_grad, "g_var", reference_options(ks)), (d_value, "v_var", {})]
     temporal = len(spatial) > 5 and in_time
-    if temporal:  # the space-time regression's terms (_space_time_bias)
-        jobs += [(d, key, {}) for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]
+    if temporal:  # the space-time regression's terms (_space_time_bias); the rate's spatial one, as the gradient's
+        jobs += [(d, key, reference_options(ks) if key == "rs_var" else {})
+                 for d, key in zip(spatial[4:7], ("rt_var", "rs_var", "vt_var"))]
     # one pool for all, the gradient's (three components) first: the threads stay busy to the end
     b = parallel_map(lambda a: local_bias(a[0], acc[a[1]], psi, trusted, acc[a[1] + "_null"], ks, nbs, **a[2]),
                      jobs)

@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 
-from .regression_bias import half_means
+from .regression_bias import half_means, reference_spacing
 from .ring import ring_scatter
 
 __all__ = ["PROBES", "PROBE_GROUP", "BIAS_PROBES", "PROBE_TIMES", "probe_times", "spread", "SpreadStack", "probe_block"]
@@ -133,6 +133,9 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
         # in space at each time first, then in time (irdic.fields.space_time.space_time)
         s = np.nan_to_num(regress_space(noise.reshape(-1, N), None, ks)[1].reshape(noise.shape), copy=False)
         res = noise_c - s[:, off:off + T][:, sub]
+        k_ref = reference_spacing(ks) if bias else None  # the rate's spatial reference (space_time._bias_inputs)
+        s_ref = None if k_ref is None else np.nan_to_num(
+            regress_space(noise.reshape(-1, N), None, k_ref)[1].reshape(noise.shape), copy=False)
         np.nan_to_num(noise, copy=False)  # the hidden points count as 0 from here on, as in the data's differences
         sums["r"] = np.sum((W1[sub] @ s) ** 2, axis=0)  # (S, T_w) @ (b, T_w, N): one BLAS call per probe
         smoothed = W0[sub] @ s
@@ -146,11 +149,11 @@ def probe_block(noise, regress_space, geo, visible, ks, W, sub, off, bias, ref_k
         # the bias is judged against the temporal regression of the points' own series
         value_in = W0[sub] @ noise
         if bias:  # the noise in the space-time regression's differences (model._space_time_bias)
-            for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - noise), ("vt_var", Wv - I0, s)):
+            for key, Wd, x in (("rt_var", W1 - I1, s), ("rs_var", W1, s - (noise if s_ref is None else s_ref)),
+                               ("vt_var", Wv - I0, s)):
                 dx = Wd[sub] @ x
                 if key == "rt_var" and halves is not None:  # every probe: the product's scatter is wide
-                    hm = half_means(dx, halves, visible[sub])
-                    squares["rt_common"] += list(hm[..., 0] * hm[..., 1])
+                    squares["rt_common"] += list(np.prod(half_means(dx, halves, visible[sub]), axis=-1))
                 sq = dx ** 2
                 sums[key] = np.sum(sq, axis=0)
                 squares[key] += list(sq) if ref_k is not None else []
