@@ -23,7 +23,8 @@ import numpy as np
 from ..numerics.threads import parallel_map, worker_slices, workers
 
 __all__ = ["local_bias", "common_bias", "patch_halves", "half_means", "reference_spacing", "reference_options",
-           "strain_reference_options", "noise_scale", "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z", "REFERENCE_SHARE", "REFERENCE_Z"]
+           "strain_reference_options", "noise_scale", "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z", "REFERENCE_SHARE",
+           "REFERENCE_Z"]
 
 log = logging.getLogger(__name__)
 
@@ -134,7 +135,7 @@ def common_bias(d, psi, trusted=None, null=None):
         rows = null.rows(np.arange(T)) if hasattr(null, "rows") else np.asarray(null, dtype=float)
         with np.errstate(invalid="ignore"):
             se = np.sqrt(np.nanmean(np.square(average(rows)), axis=0))  # about 0: the products' mean on noise
-        keep &= ~(mean <= BIAS_Z * se)
+        keep &= ~(mean <= BIAS_Z * se)  # a time no probe reached (se NaN) keeps the estimate untested
     out[keep] = np.sqrt(mean[keep])
     return out
 
