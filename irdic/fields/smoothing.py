@@ -76,35 +76,57 @@ def resolve_gcv(points, x, t, psi, p, ops=None):
             p["surface_smoothing"] = (info["smoothing_shape"], info["smoothing"])
         p["surface_smoothing_time"] = info["smoothing_t"] if p["surface_smoothing_time"] is not None else None
     theta = points["temperature"].isel(time=w).values.astype(float)
+    # the candidates' designs kept from the first choice for the second (the same points)
+    space = dict(c=p["c_space"], R0=p["R0_space"], ops=ops, separation=pixel_pitch(points, psi), designs={})
     if p["temperature_smoothing_space"] == "gcv":
-        k = space_gcv(theta, psi, c=p["c_space"], R0=p["R0_space"], ops=ops, separation=pixel_pitch(points, psi))
+        k = space_gcv(theta, psi, **space)
         if k is not None:  # no time with 6 visible points among them: each chunk chooses its own
             p["temperature_smoothing_space"] = k
-    if p["temperature_smoothing"] == "gcv":
-        grad = value = None
-        if p["temperature_smoothing_space"] not in (None, "gcv"):
-            # judged on the spatially regressed series, as the fields regress them (the field also where a point has
-            # no temperature: irdic.fields.space_time.space_time); the gradient in the surface parameters (no
-            # surface yet) for the guard below
-            dual = parameter_dual(psi.shape[0])
-            ks = p["temperature_smoothing_space"]
-            grad, value = regressed_gradient(theta, psi, dual, ks, c=p["c_space"], R0=p["R0_space"], ops=ops,
-                                             everywhere=True)[:2]
-            theta = value
-            noise_var, value_var = regression_noise_var(points.isel(time=w), psi, dual, ks, p, ops)
-        # what smooth_series(theta, smoothing="gcv") would choose, at the cost of the series GCV judges; once
-        # for both choices below
-        theta = gcv_columns(theta, t[w], c=p["c_time"], R0=p["R0_time"])
-        k = gcv_temporal(t[w], theta, c=p["c_time"], R0=p["R0_time"])[0]
-        p["temperature_smoothing"] = k if grad is None else guarded_time_smoothing(k, t[w], grad, psi, noise_var, p)
-        if grad is not None:  # the value's own (irdic.fields.space_time.space_time)
-            p["temperature_smoothing_value"] = value_time_smoothing(p["temperature_smoothing"], t[w], value, psi,
-                                                                    value_var, p)
-        if p["temperature_smoothing_space"] is not None:  # the rate's own spacing (see irdic.fields.space_time)
-            p["temperature_smoothing_rate"] = rate_smoothing(t[w], theta, k, p)
+    chosen, kt = {}, p["temperature_smoothing"]
+    if kt == "gcv":
+        chosen = _time_smoothing(points.isel(time=w), theta, t[w], psi, p, ops)
+        kt = chosen["temperature_smoothing"]
+    again = "temperature_smoothing_space" in gcv and p["temperature_smoothing_space"] != "gcv"
+    if again and kt is not None and float(kt) > 1.0:  # 1: a centre at every stage, no regression in time
+        # judged again after the regression in time that the fields' gradient has (spatial._after_time)
+        k = space_gcv(theta, psi, after=(t[w], float(kt), p["c_time"], p["R0_time"], p["temperature_smoothing_space"]),
+                      **space)
+        if k != p["temperature_smoothing_space"]:
+            p["temperature_smoothing_space"] = k
+            chosen = _time_smoothing(points.isel(time=w), theta, t[w], psi, p, ops) if chosen else chosen
+    p.update(chosen)
     log.info("fields: smoothing chosen once on DIC times %d..%d: %s", w.start, w.stop - 1,
              ", ".join(f"{k} {p[k]}" for k in gcv))
     return p
+
+
+def _time_smoothing(points, theta, t, psi, p, ops):
+    """The smoothings in time chosen on ``theta`` (T, N) at ``t`` after the spatial regression
+    ``p["temperature_smoothing_space"]``: ``temperature_smoothing`` (GCV, guarded), and with a spatial regression
+    ``temperature_smoothing_value`` and ``temperature_smoothing_rate`` (dict)."""
+    grad = value = None
+    out = {}
+    ks = p["temperature_smoothing_space"]
+    if ks not in (None, "gcv"):
+        # judged on the spatially regressed series, as the fields regress them (the field also where a point has
+        # no temperature: irdic.fields.space_time.space_time); the gradient in the surface parameters (no
+        # surface yet) for the guard below
+        dual = parameter_dual(psi.shape[0])
+        grad, value = regressed_gradient(theta, psi, dual, ks, c=p["c_space"], R0=p["R0_space"], ops=ops,
+                                         everywhere=True)[:2]
+        theta = value
+        noise_var, value_var = regression_noise_var(points, psi, dual, ks, p, ops)
+    # what smooth_series(theta, smoothing="gcv") would choose, at the cost of the series GCV judges; once
+    # for both choices below
+    theta = gcv_columns(theta, t, c=p["c_time"], R0=p["R0_time"])
+    k = gcv_temporal(t, theta, c=p["c_time"], R0=p["R0_time"])[0]
+    out["temperature_smoothing"] = k if grad is None else guarded_time_smoothing(k, t, grad, psi, noise_var, p)
+    if grad is not None:  # the value's own (irdic.fields.space_time.space_time)
+        out["temperature_smoothing_value"] = value_time_smoothing(out["temperature_smoothing"], t, value, psi,
+                                                                  value_var, p)
+    if ks is not None:  # the rate's own spacing (see irdic.fields.space_time)
+        out["temperature_smoothing_rate"] = rate_smoothing(t, theta, k, p)
+    return out
 
 
 def rate_smoothing(t, series, value_k, p) -> float:

@@ -21,7 +21,7 @@ from ..numerics.temporal_choice import gcv_temporal
 from ..uncertainty.model import paper_std, uncertainties
 from ..uncertainty.regression_bias import reference_spacing
 from .smoothing import guarded_time_smoothing, rate_smoothing, regression_noise_var, value_time_smoothing
-from .spatial import regressed_gradient
+from .spatial import RISK_DESIGNS, regressed_gradient, space_gcv
 
 __all__ = ["space_time", "temperature_fields"]
 
@@ -126,23 +126,20 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
 
     Notes
     -----
-    Space first, then time. The tube's temperature is smooth in space (a
-    quadratic axial profile) but changes within a few DIC stages in time, so
-    a point's own series, with the full 0.05 K noise, makes GCV in time
-    choose centres every 4 stages, whose bias alone is 7 % of the rate. The
-    spatial regression of each stage removes most of the noise first
-    (GCV over the points, whose noise is white in space); GCV of the
-    regressed series in time then judges a nearly noise-free signal and
-    chooses the light smoothing the signal needs. The gradient is the spatial
-    regression's derivative of the temporally regressed values (the regressed
-    field's own gradient), the rate the temporal derivative of the spatially
-    regressed series, by a lighter regression in time (:func:`_rate_series`), the
-    value that field's or the spatially regressed series (:func:`~irdic.fields.smoothing.value_time_smoothing`).
-    """
+    Space first, then time, then space again. The tube's temperature is smooth in space (a quadratic axial
+    profile) but changes within a few DIC stages in time, so a point's own series, with the full 0.05 K noise,
+    makes GCV in time choose centres every 4 stages, whose bias alone is 7 % of the rate. The spatial regression
+    of each stage removes most of the noise first; GCV of the regressed series in time then judges a nearly
+    noise-free signal and chooses the light smoothing the signal needs. A spacing the gradient's risk chose is
+    judged again on the series regressed in time (:func:`_spacing_after_time`). The gradient is the spatial
+    regression's derivative of the temporally regressed values, the rate the temporal derivative of the spatially
+    regressed series, by a lighter regression in time (:func:`_rate_series`), the value that field's or the
+    spatially regressed series (:func:`~irdic.fields.smoothing.value_time_smoothing`)."""
     kw = dict(c=p["c_space"], R0=p["R0_space"], ops=ops)
     # also where a point has no temperature: its series in time holds the time's field there (docs/method.md, 4)
     grad, field, ks = regressed_gradient(theta, sf.psi, geo.dual, p["temperature_smoothing_space"], everywhere=True,
                                          **kw)
+    designs = None if ops is None else ops.pop(RISK_DESIGNS, None)  # its choice's, for _spacing_after_time
     value = np.where(np.isfinite(theta), field, np.nan)
     chosen = {"temperature_smoothing": None, "temperature_smoothing_space": ks}
     total, loc = paper_rate
@@ -158,6 +155,9 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     # the gaps filled once, together, for the regressions in time below; with the rate's spatial reference
     th_s, th_in, *th_ref = fill_series([th_s, th_in] + _half_spacing(th_in, sf.psi, ks, kw), ts_in, **tkw)
     k, k_gcv, k_value = _time_spacing(th_s, ts_in, grad, sf.psi, p, ks, noise_var)
+    if (after := _spacing_after_time(theta, t, sf.psi, p, ks, k, series, kw, designs)) is not None:
+        return space_time(theta, t, sf, geo, {**p, "temperature_smoothing_space": after}, series, convective,
+                          visible, paper_rate, ops, noise_var)
     fit = smooth_series(th_s, ts_in, t_eval, smoothing=k, **tkw)
     rate_fit = _rate_series(th_s, ts_in, t_eval, p, fit, tkw, fit.smoothing if k_gcv == "gcv" else k_gcv)
     chosen["temperature_smoothing"], chosen["temperature_smoothing_rate"] = fit.smoothing, rate_fit.smoothing
@@ -172,6 +172,18 @@ def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, op
     bias_inputs = _bias_inputs(theta, grad, field_value, total, smoothed, (th_in, th_s, ts_in, t_eval, *th_ref),
                                visible, (fit.smoothing, rate_fit.smoothing), tkw)
     return grad, total, total - convective, value, bias_inputs, chosen
+
+
+def _spacing_after_time(theta, t, psi, p, ks, k, series, kw, designs=None):
+    """The spatial spacing ``ks`` that the gradient's risk chose on single times, judged again on the series
+    regressed in time with the spacing ``k`` (:func:`~irdic.fields.spatial.space_gcv`, ``after``), where that
+    differs; else None. Only the whole record's own choice: a chunk's is the record's
+    (:func:`~irdic.fields.smoothing.resolve_gcv`, which judges it the same way). ``designs``: the first
+    choice's (:data:`~irdic.fields.spatial.RISK_DESIGNS`)."""
+    if p["temperature_smoothing_space"] != "gcv" or series is not None or k in (None, "gcv") or float(k) <= 1.0:
+        return None  # not chosen here, or no regression in time (1: a centre at every stage, the interpolation)
+    after = space_gcv(theta, psi, after=(t, float(k), p["c_time"], p["R0_time"], ks), designs=designs, **kw)
+    return None if after is None or after == ks else after
 
 
 def _half_spacing(theta, psi, ks, kw):

@@ -238,7 +238,7 @@ def gcv_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=(2.0, 2.5, 3.0, 4.0,
     return best[0], table
 
 
-def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row=None, quintets=0):
+def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row=None, quintets=0, designs=None):
     """``(k, n_parameters, risk, noise)`` of each candidate that fits (Notes of :func:`gradient_risk_spatial`);
     ``operator(p, design, c, R0)`` the derivative whose risk counts (default the gradient's). ``per_row``: a
     list that gets each candidate's terms of the risk per judged row (their sum over ``nj`` is ``risk``).
@@ -246,18 +246,29 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row
     fourth differences measure the noise (else the white-noise model gives it).
 
     The pilot (the first candidate that fits) is fitted first; the others, each a QR and a few products
-    against the pilot's, run on the stage's threads."""
+    against the pilot's, run on the stage's threads. ``designs``: a dict that keeps each candidate's ``(Q, M)``
+    for a later call on the same points (the same choice judged on other samples); emptied where it held
+    another set's."""
     operator = _gradient_operator if operator is None else operator
     n, ns = p.shape[0], F.shape[1] - 5 * quintets
     stencil = np.array([1.0, -4.0, 6.0, -4.0, 1.0]) / np.sqrt(70.0)  # unit variance for white noise in time
+    if designs is not None and not _same_set(designs.get("set"), (p, rows, h, c, R0, operator)):
+        designs.clear()
+        designs["set"] = (p, rows, h, c, R0, operator)
 
     def fitted(k):  # (Q, M, g, fourth differences) of spacing k, or None where it does not fit
-        try:
-            design = _fit_design(p, k, h, c, R0)
-        except GeometryError:
+        entry = None if designs is None else designs.get(k)
+        if entry is None:
+            try:
+                design = _fit_design(p, k, h, c, R0)
+                entry = (design[3], operator(p, design, c, R0)[rows])
+            except GeometryError:
+                entry = ()
+            if designs is not None:
+                designs[k] = entry
+        if not entry:
             return None
-        Qm = design[3]
-        M = operator(p, design, c, R0)[rows]
+        Qm, M = entry
         g = M @ (Qm.T @ F)
         return Qm, M, g[:, :ns], g[:, ns:].reshape(g.shape[0], quintets, 5) @ stencil
 
@@ -297,6 +308,11 @@ def _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator=None, per_row
     if per_row is not None:
         per_row += [r[4] for r in out]
     return [r[:4] for r in out]
+
+
+def _same_set(a, b):
+    """Whether the point sets and settings ``(p, rows, h, c, R0, operator)`` ``a`` and ``b`` are the same."""
+    return a is not None and all(np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y for x, y in zip(a, b))
 
 
 def _widths(p, h, ks):
@@ -367,7 +383,7 @@ def _one_per_separation(p, F, judged, separation, h):
 
 
 def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_CANDIDATES,
-                          max_points=GCV_MAX_POINTS, judged=None, separation=None, quintets=None):
+                          max_points=GCV_MAX_POINTS, judged=None, separation=None, quintets=None, designs=None):
     """Choose the spatial regression's centre spacing by the estimated mean squared error of its gradient.
 
     Parameters
@@ -392,6 +408,10 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     separation : float, optional
         Distance (mm) below which the data's noise is correlated (one IR
         pixel): denser points are judged on a subset (:func:`_one_per_separation`).
+    designs : dict, optional
+        Keeps the candidates' QR and derivative operators for a later call on
+        the same points and settings (the same choice judged on other
+        samples, :func:`irdic.fields.spatial.space_gcv_filled`).
 
     Returns
     -------
@@ -428,11 +448,11 @@ def gradient_risk_spatial(psi, samples, *, c=0.95, R0=1.0, candidates=GRADIENT_C
     7.8 % gradient error; see benchmarks/README.md.
     """
     return _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, "gradient",
-                        _gradient_operator, 2, quintets=quintets)
+                        _gradient_operator, 2, quintets=quintets, designs=designs)
 
 
 def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation, what, operator, copies,
-                 one_se=False, quintets=None):
+                 one_se=False, quintets=None, designs=None):
     """The spacing of least estimated risk of the derivative ``operator`` (its ``copies`` row blocks per point)
     and the table of :func:`gradient_risk_spatial` / :func:`laplacian_risk_spatial`; ``one_se`` (one row block):
     the widest within one standard error of it (:func:`_widest_within_one_se`)."""
@@ -456,7 +476,7 @@ def _risk_choice(psi, samples, c, R0, candidates, max_points, judged, separation
     terms = [] if one_se else None
     if nq and nq * nj < QUINTET_MIN_SAMPLES:
         F, nq = F[:, :F.shape[1] - 5 * nq], 0  # too few to measure the noise better than the white model
-    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator, terms, nq)
+    table = _gradient_risks(p, F, h, c, R0, rows, nj, candidates, operator, terms, nq, designs)
     if not table:
         raise DataError(f"{what}_risk_spatial: no candidate spacing fits {n} points (too few points)")
     chosen = _widest_within_one_se(table, terms, p[rows[:n]], h) if one_se else None

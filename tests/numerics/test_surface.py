@@ -968,3 +968,23 @@ def test_gradient_risk_measures_noise_correlated_in_space_from_runs_in_time():
             assert modelled < 0.3 * var[kk], kk
     risk = {kk: bias[kk] + var[kk] for kk in var}
     assert risk[k] <= 1.2 * min(risk.values()) and risk[k_white] > 20 * risk[k]
+
+
+def test_gradient_risk_designs_kept_for_other_samples_give_the_same_table():
+    """The candidates' designs kept from one call (``designs``) serve a later call on the same points with other
+    samples: its table equals a fresh call's exactly; other points clear them first."""
+    from irdic.surface.regression import gradient_risk_spatial
+
+    rng = np.random.default_rng(4)
+    psi = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0)), -1).reshape(-1, 2) * 0.5
+    psi = psi + rng.uniform(-0.1, 0.1, psi.shape)
+    f = 0.3 * np.sin(psi[:, 0] / 2) + 0.1 * psi[:, 1]
+    designs = {}
+    first = gradient_risk_spatial(psi, f[:, None] + rng.normal(0, 0.05, (len(psi), 4)), designs=designs)
+    kept = {k for k in designs if k != "set"}
+    assert len(kept) >= len(first[1])  # every candidate tried kept (those that do not fit as such)
+    F2 = f[:, None] + rng.normal(0, 0.02, (len(psi), 4))
+    assert gradient_risk_spatial(psi, F2, designs=designs) == gradient_risk_spatial(psi, F2)
+    other = psi[:600]
+    assert gradient_risk_spatial(other, F2[:600], designs=designs) == gradient_risk_spatial(other, F2[:600])
+    assert len(designs["set"][0]) <= 600  # the first set's designs cleared
