@@ -52,11 +52,10 @@ def space_gcv_filled(filled, p, *, c, R0, separation=None, after=None, designs=N
     """
     from ..surface.regression import gradient_risk_spatial
 
-    source, noise = filled, 1.0
-    rows = np.linspace(0, filled.shape[0] - 1, min(filled.shape[0], 8)).astype(int)
-    if after is not None:
-        source, rows, noise = _after_time(filled, *after[:4])
-    sample = source[rows].T
+    if after is None:
+        sample, noise = filled[np.linspace(0, filled.shape[0] - 1, min(filled.shape[0], 8)).astype(int)], 1.0
+    else:
+        sample, noise = _after_time(filled, *after[:4])
     quintets = None
     runs = min(QUINTETS, filled.shape[0] - 4)
     if runs > 0:
@@ -68,7 +67,7 @@ def space_gcv_filled(filled, p, *, c, R0, separation=None, after=None, designs=N
     # the rim's data carry more than noise (mixed edge pixels, extrapolation), which the least smoothed
     # pilot follows: judged inside it, all points fitted
     judged = judged_points(p)
-    k, table = gradient_risk_spatial(p, sample, c=c, R0=R0, judged=judged if judged.sum() >= 6 else None,
+    k, table = gradient_risk_spatial(p, sample.T, c=c, R0=R0, judged=judged if judged.sum() >= 6 else None,
                                      separation=separation, quintets=quintets, designs=designs)
     if after is not None:
         k = _narrower(table, after[4] if len(after) > 4 else None)
@@ -87,8 +86,8 @@ AFTER_TIME_SHARE = 1.25
 
 
 def _after_time(filled, t, k, c_t, R0_t):
-    """``(series, rows, noise)``: ``filled`` (T, N) at the times ``t`` regressed in time with spacing ``k`` at up
-    to 8 times to judge by (``series[rows]``), and the share of white noise's variance the regression keeps there.
+    """``(sample, noise)``: ``filled`` (T, N) at the times ``t`` regressed in time with spacing ``k``, at up to 8
+    of those times to judge by (8, N), and the share of white noise's variance the regression keeps there.
 
     Notes
     -----
@@ -112,7 +111,7 @@ def _after_time(filled, t, k, c_t, R0_t):
     usable = np.flatnonzero(share <= AFTER_TIME_SHARE * noise)
     rows = usable[np.linspace(0, usable.size - 1, min(usable.size, 8)).astype(int)]
     # only the sampled times regressed (``filled`` has no gaps: the regression is its weights' product)
-    return weights[rows] @ filled, np.arange(rows.size), noise
+    return weights[rows] @ filled, noise
 
 
 def _narrower(table, single):

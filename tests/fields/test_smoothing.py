@@ -108,9 +108,9 @@ def test_the_noise_share_a_regression_in_time_keeps_is_measured_on_white_noise()
 
     t = np.arange(41.0)
     noise = np.random.default_rng(0).normal(0.0, 1.0, (t.size, 4000))
-    sampled, rows, share = _after_time(noise, t, 6.0, P["c_time"], P["R0_time"])
+    sampled, share = _after_time(noise, t, 6.0, P["c_time"], P["R0_time"])
     smoothed = smooth_series(noise, t, None, smoothing=6.0, c=P["c_time"], R0=P["R0_time"]).value
-    times = [int(np.flatnonzero(np.all(np.isclose(smoothed, row, atol=1e-10), axis=1))[0]) for row in sampled[rows]]
+    times = [int(np.flatnonzero(np.all(np.isclose(smoothed, row, atol=1e-10), axis=1))[0]) for row in sampled]
     kept = np.mean(smoothed ** 2, axis=1)
     assert 0.05 < share < 0.5 and len(times) == 8
     assert np.median(kept) == pytest.approx(share, rel=0.1)
