@@ -112,6 +112,7 @@ def auto_choices(stores: Iterable[str | os.PathLike]) -> list[str]:
     is read from its ``settings`` (calibration) or from the attribute of the
     same name (the fields stage records each smoothing it chose, with why).
     """
+    from .fields.dataset import spacing_summary
     from .store import open_store
 
     lines = []
@@ -139,7 +140,9 @@ def auto_choices(stores: Iterable[str | os.PathLike]) -> list[str]:
                 continue
             why = attrs.get(f"{key}_reason")
             shown = "null" if value in (None, "None") else value
-            lines.append(f"{where}: {key} auto \u2192 {shown}" + (f" ({why})" if why else ""))
+            spacing = spacing_summary(key, attrs)
+            lines.append(f"{where}: {key} auto \u2192 {shown}" + (f", {spacing}" if spacing else "")
+                         + (f" ({why})" if why else ""))
     return lines
 
 

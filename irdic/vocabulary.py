@@ -195,6 +195,10 @@ DATASET_ATTRS: frozenset[str] = frozenset(
        "laplacian_noise_k"]
     + [f"{o}_{w}" for o in ("temperature_smoothing", "temperature_smoothing_space", "surface_smoothing")
        for w in ("chosen", "reason")]
+    # the centre spacings the fields' regressions used (irdic.fields.dataset.SPACINGS)
+    + [f"{o}_spacing" for o in ("temperature_smoothing", "temperature_smoothing_space", "temperature_smoothing_rate",
+                                "temperature_smoothing_value", "surface_smoothing", "surface_smoothing_shape",
+                                "surface_smoothing_time")]
     + [f"count_{s.name.lower()}" for s in Status])
 
 

@@ -93,3 +93,21 @@ def test_non_defaults_and_auto_choices(tmp_path):
                      "tube/fields.zarr: parametrisation auto \u2192 cylinder",
                      "tube/fields.zarr: solver auto \u2192 local",
                      "tube/fields.zarr: temperature_smoothing auto \u2192 4.0 (IR noise 0.05 K)"]
+
+
+def test_auto_choices_say_the_spacings_the_regressions_used(tmp_path):
+    """Where ``auto`` chose a regression, the line says its centre spacings (the fields store records them), so that
+    a series can be re-processed with them fixed; a regression that is off has none."""
+    ds = xr.Dataset({"a": ("x", np.zeros(2), {"units": "K", "long_name": "a"})},
+                    attrs={"temperature_smoothing_chosen": "gcv", "temperature_smoothing_space_chosen": "gcv",
+                           "surface_smoothing_chosen": "None", "temperature_smoothing_spacing": 3.0,
+                           "temperature_smoothing_rate_spacing": 2.0, "temperature_smoothing_value_spacing": 3.0,
+                           "temperature_smoothing_space_spacing": 12.000000000000002,
+                           "surface_smoothing_spacing": None})
+    write_dataset(ds, tmp_path / "tube" / "fields.zarr", stage="fields",
+                  params={"temperature_smoothing": "auto", "temperature_smoothing_space": "auto",
+                          "surface_smoothing": "auto"})
+    assert auto_choices([tmp_path / "tube" / "fields.zarr"]) == [
+        "tube/fields.zarr: surface_smoothing auto \u2192 null",
+        "tube/fields.zarr: temperature_smoothing auto \u2192 gcv, centres every 3 DIC stages (rate 2, value 3)",
+        "tube/fields.zarr: temperature_smoothing_space auto \u2192 gcv, centres every 12 point spacings"]

@@ -38,7 +38,7 @@ from ..numerics.temporal import temporal_window
 from ..strain import strain
 from ..surface import fit_surface, surface_geometry, surface_parameters
 from ..uncertainty.model import Window, with_strain_std
-from .dataset import fields_dataset, method_of, stacked_directions, with_uncertainty
+from .dataset import fields_dataset, method_of, spacing_attrs, stacked_directions, with_uncertainty
 from .smoothing import GCV_STAGES, SMOOTHING, checked_settings, resolve_gcv, surface_kw
 from .space_time import temperature_fields
 
@@ -193,8 +193,9 @@ def _fields(points, calibration, chunk, p, sizes):
     T, N = sf.x.shape[:2]
     # the fields use the dual basis (gradients) and the normal of the geometry, not its metrics
     geo = surface_geometry(sf.tangents)._replace(metric=None, inverse_metric=None, area_ratio=None, degenerate=None)
-    grad, total, loc, convective, best, unc = temperature_fields(points, calibration, sf, geo, t, p, noise_attrs,
-                                                                  series, ops)
+    grad, total, loc, convective, best, unc, chosen = temperature_fields(points, calibration, sf, geo, t, p,
+                                                                          noise_attrs, series, ops)
+    noise_attrs = {**noise_attrs, **spacing_attrs(chosen, sf.info)}
     # the strain's noise probes refit the surface: after the IR terms' inputs and the dual basis are gone
     geo = geo._replace(dual=None)
     release()

@@ -8,11 +8,73 @@ import xarray as xr
 from ..uncertainty.model import uncertainty_notes
 from ..vocabulary import COMPONENTS, cf_attrs
 
-__all__ = ["fields_dataset", "method_of", "stacked_directions", "with_uncertainty"]
+__all__ = ["fields_dataset", "method_of", "spacing_attrs", "spacing_summary", "stacked_directions", "with_uncertainty"]
 
 
 def method_of(info) -> str:
     return str(info.get("method")) if isinstance(info, dict) else str(info)
+
+
+#: the spacings a run used, by the store's attribute: the key of the temperature's choice or of the surface fit's
+#: ``info`` it is read from
+SPACINGS = {"temperature_smoothing_space_spacing": "temperature_smoothing_space",
+            "temperature_smoothing_spacing": "temperature_smoothing",
+            "temperature_smoothing_rate_spacing": "temperature_smoothing_rate",
+            "temperature_smoothing_value_spacing": "temperature_smoothing_value",
+            "surface_smoothing_spacing": "smoothing", "surface_smoothing_shape_spacing": "smoothing_shape",
+            "surface_smoothing_time_spacing": "smoothing_t"}
+
+
+def spacing_attrs(chosen, surface_info) -> dict:
+    """The centre spacings the regressions used, as ``fields.zarr`` records them: whatever ``gcv`` or ``auto``
+    chose, so that a series can be re-processed with the smoothing fixed.
+
+    Parameters
+    ----------
+    chosen : dict
+        The temperature's spacings (:func:`irdic.fields.space_time.space_time`'s ``chosen``): in space in point
+        spacings, in time (the gradient's and value's regression, the rate's, the value's own) in DIC stages;
+        None where that regression is off.
+    surface_info : dict
+        The surface fit's ``info`` (:func:`irdic.surface.fit_surface`): ``smoothing`` (the motion's spacing in
+        point spacings), ``smoothing_shape`` (the shape's, where regressed apart), ``smoothing_t`` (DIC stages).
+
+    Returns
+    -------
+    dict
+        ``<option>_spacing`` -> float, or None (no regression; 1 in time is a centre at every stage); an
+        option that is not there (no regression in space: no temperature spacings in time apart from the
+        first) is left out.
+    """
+    out = {}
+    for attr, key in SPACINGS.items():
+        src = surface_info if attr.startswith("surface") else chosen
+        if key in src:
+            v = src[key]
+            out[attr] = None if v is None else float(v)
+    return out
+
+
+#: per option, the spacing attributes :func:`spacing_summary` reads: (attribute, label, unit)
+_SHOWN = {"temperature_smoothing": (("temperature_smoothing_spacing", "", "DIC stages"),
+                                    ("temperature_smoothing_rate_spacing", "rate", ""),
+                                    ("temperature_smoothing_value_spacing", "value", "")),
+          "temperature_smoothing_space": (("temperature_smoothing_space_spacing", "", "point spacings"),),
+          "surface_smoothing": (("surface_smoothing_spacing", "", "point spacings"),
+                                ("surface_smoothing_shape_spacing", "shape", "")),
+          "surface_smoothing_time": (("surface_smoothing_time_spacing", "", "DIC stages"),)}
+
+
+def spacing_summary(option, attrs) -> str | None:
+    """The centre spacing(s) a store's ``attrs`` record for the smoothing ``option`` (:func:`spacing_attrs`), as
+    ``"centres every 3 DIC stages (rate 2, value 3)"``; None where none is recorded (a regression that is off, or
+    a store written before they were recorded)."""
+    got = [(label, unit, attrs[a]) for a, label, unit in _SHOWN.get(option, ()) if attrs.get(a) is not None]
+    if not got or got[0][0]:
+        return None
+    _, unit, main = got[0]
+    extra = ", ".join(f"{label} {v:.3g}" for label, _, v in got[1:])
+    return f"centres every {main:.3g} {unit}" + (f" ({extra})" if extra else "")
 
 
 def stacked_directions(st):

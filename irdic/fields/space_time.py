@@ -30,7 +30,8 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     """In-plane gradient (T, N, 3) K/mm, material rate with its local and convective parts (T, N) K/s,
     and the best estimate of the temperature (T, N) degC (denoised where smoothing is on); last the
     uncertainties of :func:`irdic.uncertainty.model.uncertainties`, the strain's pending
-    (:func:`~irdic.uncertainty.model.with_strain_std`).
+    (:func:`~irdic.uncertainty.model.with_strain_std`); and the spacings the regressions used
+    (:func:`space_time`'s ``chosen``).
 
     The projection Jacobian of the calibrated camera at the surface points
     turns pixel gradients into surface ones (see the module docstring).
@@ -89,7 +90,7 @@ def temperature_fields(points, calibration, sf, geo, t, p, noise_attrs, series=N
     report("uncertainty", 0.0)
     unc = uncertainties(points.assign_attrs(dic_noise_mm=noise_attrs.get("dic_noise_mm", np.nan)), sf, geo, paper,
                         grad, g_pix, t, p, chosen_k, regress_space, window=series, spatial=spatial, ops=ops)
-    return grad, total, loc, rate.convective, best, unc
+    return grad, total, loc, rate.convective, best, unc, chosen_k
 
 
 def space_time(theta, t, sf, geo, p, series, convective, visible, paper_rate, ops=None, noise_var=None):

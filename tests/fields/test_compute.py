@@ -4,6 +4,7 @@ import functools
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from irdic.errors import ConfigError, DataError
 from irdic.coupling import couple
@@ -186,6 +187,24 @@ def test_uncertainty_coverage_monte_carlo():
         # (irdic.uncertainty.strain; on the demo barrel the same change brings 0.57 / 0.85 up to 0.61 / 0.90)
         top = 0.95 if v == "max_principal_strain" else 0.82
         assert 0.55 <= one <= top and 0.86 <= two <= 0.99, (v, one, two)
+
+
+def test_the_store_records_the_spacings_auto_chose_and_they_reproduce_the_gradient():
+    """``fields.zarr`` says which centre spacings ``auto`` chose (in space in point spacings, in time in DIC
+    stages, the surface's); configured as numbers they give the same gradient (the rate then takes the
+    gradient's spacing in time, not its own)."""
+    dic, ir, cal, _ = synthetic_inputs("tube", "demo", ir_noise=0.05, dic_noise=0.003, seed=3)
+    pts = couple(dic, ir, cal)
+    f = fields(pts, cal)
+    a = f.attrs
+    assert a["temperature_smoothing_chosen"] == a["temperature_smoothing_space_chosen"] == "gcv"
+    ks, kt = a["temperature_smoothing_space_spacing"], a["temperature_smoothing_spacing"]
+    assert ks >= 2.0 and kt > 1.0 and 1.0 <= a["temperature_smoothing_rate_spacing"] <= kt
+    assert a["surface_smoothing_spacing"] >= 1.0 and "surface_smoothing_time_spacing" in a
+    fixed = fields(pts, cal, temperature_smoothing_space=ks, temperature_smoothing=kt)
+    xr.testing.assert_allclose(fixed.temperature_gradient, f.temperature_gradient, rtol=1e-10, atol=1e-12)
+    assert (fixed.attrs["temperature_smoothing_space_spacing"], fixed.attrs["temperature_smoothing_spacing"],
+            fixed.attrs["temperature_smoothing_rate_spacing"]) == (ks, kt, kt)
 
 
 def test_space_time_regression_space_first_tube_rate():
