@@ -19,7 +19,7 @@ from ..numerics.series import fill_series, smooth_series
 from ..numerics.temporal import rate_reference_weights
 from ..numerics.temporal_choice import gcv_temporal
 from ..uncertainty.model import paper_std, uncertainties
-from ..uncertainty.regression_bias import reference_spacing
+from ..uncertainty.regression_bias import first_mode_bias, reference_spacing
 from .smoothing import guarded_time_smoothing, rate_smoothing, regression_noise_var, value_time_smoothing
 from .spatial import RISK_DESIGNS, regressed_gradient, space_gcv
 
@@ -202,6 +202,9 @@ def _bias_inputs(theta, grad, value, total, smoothed, series, visible, spacings,
     interpolated points' own series would drown the estimate in their noise: drawn-1005's temperature std 3 x
     its noise part, the RMS of error/std 0.50).
 
+    The rate's temporal bias that a patch heated with one history shares, on the series' first temporal mode
+    (:func:`~irdic.uncertainty.regression_bias.first_mode_bias`), comes before the last.
+
     ``series`` is ``(th_in, th_s, ts_in, t_eval[, th_ref])``: the points' own series, the spatially regressed one,
     their times, the times evaluated, and the series regressed at half the spatial spacing; ``spacings`` the
     temporal spacings of the gradient and of the rate. The rate's spatial bias is judged against the last (as the
@@ -221,8 +224,12 @@ def _bias_inputs(theta, grad, value, total, smoothed, series, visible, spacings,
     # points' own series the estimate drowned in their noise): the rate's against a local polynomial in time
     exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)
     own_v = np.where(visible, own.value, np.nan)
-    return (theta, grad, own_v, value, total - rate_reference_weights(ts_in, t_eval, smoothing=k_rate) @ th_s,
-            total - own_rate, smoothed - exact.value, own_v)
+    ref = rate_reference_weights(ts_in, t_eval, smoothing=k_rate)
+
+    def difference(X):  # the rate's regression in time minus its reference
+        return smooth_series(X, ts_in, t_eval, smoothing=k_rate, **tkw).rate - ref @ X
+    return (theta, grad, own_v, value, total - ref @ th_s, total - own_rate, smoothed - exact.value,
+            first_mode_bias(th_s, difference), own_v)
 
 
 def _time_spacing(th_s, t, grad, psi, p, ks, noise_var):

@@ -262,5 +262,6 @@ def paper_value(points, series, space_time, spatial):
     theta = points["temperature_paper"].values.astype(float)
     ser = None if series is None else series._replace(theta=series.theta_paper)
     _, _, _, value, own, _ = space_time(theta, ser)
-    merged = (spatial[0], spatial[1], own[2], own[3]) + ((spatial[4], spatial[5], own[6]) if len(spatial) > 5 else ())
+    merged = (spatial[0], spatial[1], own[2], own[3]) + ((spatial[4], spatial[5], own[6], spatial[7])
+                                                         if len(spatial) > 5 else ())
     return value, merged + spatial[-1:]

@@ -47,9 +47,8 @@ are propagated through those same operators:
   own series; gradient and strain: the regression with half the spacing,
   :func:`~irdic.uncertainty.regression_bias.reference_spacing`; the rate: a
   local polynomial in time, :func:`~irdic.numerics.temporal.rate_reference_stencil`, and the half spacing)
-  has ``E d² = b² + b_ref² + v`` (``v``: the noise variance of ``d``, from the
-  same probes through both operators); ``b² = <d²> - <v>`` averaged locally, where
-  it exceeds its own scatter on noise
+  has ``E d² = b² + b_ref² + v`` (``v``: the noise variance of ``d``, from the same probes through both
+  operators); ``b² = <d²> - <v>`` averaged locally, where it exceeds its own scatter on noise
   (:func:`~irdic.uncertainty.regression_bias.local_bias`), is added to the variance.
   The gradient's reference, from 2 point spacings on, is as biased as the
   regression (``b_ref ≈ b``, :func:`~irdic.uncertainty.regression_bias.reference_options`):
@@ -57,7 +56,8 @@ are propagated through those same operators:
   the whole specimen where no neighbourhood resolves it: there an RMS over
   the region, not a local value. The strain's likewise, at one standard
   error (:func:`~irdic.uncertainty.regression_bias.strain_reference_options`). The rate's temporal
-  bias is at least the part the whole patch shares (:func:`~irdic.uncertainty.regression_bias.common_bias`).
+  bias is at least the part the whole patch shares (:func:`~irdic.uncertainty.regression_bias.common_bias`)
+  and its bias on the series' first temporal mode (:func:`~irdic.uncertainty.regression_bias.first_mode_bias`).
 
 Where the method's own bias dominates the noise the std is not a bound on the
 error and ``<field>_bias_dominated`` says so: within 2 px of the mask edge or
@@ -431,7 +431,8 @@ def _bias_terms(spatial, acc, psi, trusted, ks, regress_space, geo, in_time, tem
     grad_std, temp_std = np.hypot(grad_std, b[0]), np.hypot(temp_std, b[1])
     if not temporal:
         return temp_std, grad_std, rate_std, None
-    b[2] = np.maximum(b[2], common_bias(spatial[4], psi, trusted, acc.get("rt_common_null"))[:, None])
+    common = common_bias(spatial[4], psi, trusted, acc.get("rt_common_null"))[:, None]
+    b[2] = np.maximum(np.maximum(b[2], spatial[7]), common)
     temp_std, rate_std, biased = _space_time_bias(b[2:], temp_std, rate_std)
     return temp_std, grad_std, rate_std, biased
 
@@ -540,9 +541,8 @@ def _space_time_bias(b, temp_std, rate_std):
 
     ``b``: :func:`~irdic.uncertainty.regression_bias.local_bias` of ``(d_rate_t, d_rate_s, d_value_t)`` of
     :func:`uncertainties` (T, N) each, with the probes' noise variances of those differences
-    (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each
-    through the same operators as the difference. The
-    temporal bias is judged against a local polynomial in time of the
+    (:func:`_spatial_probes`: ``rt_var``, ``rs_var``, ``vt_var``), each through the same operators as the
+    difference. The temporal bias is judged against a local polynomial in time of the
     spatially regressed series (:func:`~irdic.numerics.temporal.rate_reference_stencil`;
     the IMQ interpolant was as biased as the regression), whose noise is that
     of the regressed series only: the bias of a fast transient is then
