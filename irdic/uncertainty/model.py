@@ -169,18 +169,17 @@ def uncertainties(points, sf, geo, paper, grad, g_pix, t, p, chosen_k, regress_s
         strain probes run over it, as the chunk's fields do, and only the
         record's own ends are flagged as series ends.
     spatial : tuple, optional
-        With the spatial regression of the temperatures: ``(theta, grad,
-        value_in, value[, d_rate_t, d_rate_s, d_value_t], grad_in)`` (T, N[,
-        3]): the point temperatures, the regressed gradient, the value
-        regression's input and output (their difference gives its bias), and
-        last the input whose lighter regression is the gradient's bias
-        reference (:func:`~irdic.uncertainty.regression_bias.reference_spacing`;
-        the points' own series after the regression in time, or the point
-        temperatures); with a regression in time too (``S_t`` in time, ``S`` in
-        space, ``I_t`` the exact interpolation in time): the rate of
-        ``S_t S Θ`` minus that of ``I_t S Θ`` (the temporal bias), minus that
-        of ``S_t Θ`` (the spatial one), and the value of ``S_t S Θ`` minus
-        ``S Θ``.
+        With the spatial regression of the temperatures: ``(theta, grad, value_in, value[, d_rate_t,
+        d_rate_s, d_value_t, b_rate_mode], grad_in)`` (T, N[, 3]): the point temperatures, the regressed
+        gradient, the value regression's input and output (their difference gives its bias), and last the
+        input whose lighter regression is the gradient's bias reference
+        (:func:`~irdic.uncertainty.regression_bias.reference_spacing`; the points' own series after the
+        regression in time, or the point temperatures); with a regression in time too (``S_t`` in time,
+        ``S`` in space, ``P_t`` the rate's reference in time): the rate of ``S_t S Θ`` minus that of
+        ``P_t S Θ`` (the temporal bias), minus that of ``S_t`` of the series at half the spatial spacing
+        (the spatial one), the value of ``S_t S Θ`` minus ``S Θ``, and the temporal bias on the first
+        temporal mode of ``S Θ`` (:func:`~irdic.uncertainty.regression_bias.first_mode_bias`),
+        a floor of the first.
     ops : dict, optional
         The stage's spatial operators (:func:`irdic.surface.shared_interpolant`).
 
