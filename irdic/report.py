@@ -105,6 +105,28 @@ def _clock(points: Path) -> str | None:
     return clock_summary(open_store(points).attrs)
 
 
+#: per option, the spacing attributes :func:`_spacing_summary` reads: (attribute, label, unit)
+_SHOWN = {"temperature_smoothing": (("temperature_smoothing_spacing", "", "DIC stages"),
+                                    ("temperature_smoothing_rate_spacing", "rate", ""),
+                                    ("temperature_smoothing_value_spacing", "value", "")),
+          "temperature_smoothing_space": (("temperature_smoothing_space_spacing", "", "point spacings"),),
+          "surface_smoothing": (("surface_smoothing_spacing", "", "point spacings"),
+                                ("surface_smoothing_shape_spacing", "shape", "")),
+          "surface_smoothing_time": (("surface_smoothing_time_spacing", "", "DIC stages"),)}
+
+
+def _spacing_summary(option: str, attrs: Mapping) -> str | None:
+    """The centre spacing(s) a store's ``attrs`` record for the smoothing ``option``
+    (:func:`irdic.fields.dataset.spacing_attrs`), as ``"centres every 3 DIC stages (rate 2, value 3)"``; None where
+    none is recorded (a regression that is off, or a store written before they were recorded)."""
+    got = [(label, unit, attrs[a]) for a, label, unit in _SHOWN.get(option, ()) if attrs.get(a) is not None]
+    if not got or got[0][0]:
+        return None
+    _, unit, main = got[0]
+    extra = ", ".join(f"{label} {v:.3g}" for label, _, v in got[1:])
+    return f"centres every {main:.3g} {unit}" + (f" ({extra})" if extra else "")
+
+
 def auto_choices(stores: Iterable[str | os.PathLike]) -> list[str]:
     """What each ``auto`` parameter chose, per store: ``"<store>: <key> auto -> <value>"``.
 
@@ -112,7 +134,6 @@ def auto_choices(stores: Iterable[str | os.PathLike]) -> list[str]:
     is read from its ``settings`` (calibration) or from the attribute of the
     same name (the fields stage records each smoothing it chose, with why).
     """
-    from .fields.dataset import spacing_summary
     from .store import open_store
 
     lines = []
@@ -140,7 +161,7 @@ def auto_choices(stores: Iterable[str | os.PathLike]) -> list[str]:
                 continue
             why = attrs.get(f"{key}_reason")
             shown = "null" if value in (None, "None") else value
-            spacing = spacing_summary(key, attrs)
+            spacing = _spacing_summary(key, attrs)
             lines.append(f"{where}: {key} auto \u2192 {shown}" + (f", {spacing}" if spacing else "")
                          + (f" ({why})" if why else ""))
     return lines

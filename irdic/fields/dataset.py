@@ -8,7 +8,7 @@ import xarray as xr
 from ..uncertainty.model import uncertainty_notes
 from ..vocabulary import COMPONENTS, cf_attrs
 
-__all__ = ["fields_dataset", "method_of", "spacing_attrs", "spacing_summary", "stacked_directions", "with_uncertainty"]
+__all__ = ["fields_dataset", "method_of", "spacing_attrs", "stacked_directions", "with_uncertainty"]
 
 
 def method_of(info) -> str:
@@ -53,28 +53,6 @@ def spacing_attrs(chosen, surface_info) -> dict:
             v = src[key]
             out[attr] = None if v is None else float(v)
     return out
-
-
-#: per option, the spacing attributes :func:`spacing_summary` reads: (attribute, label, unit)
-_SHOWN = {"temperature_smoothing": (("temperature_smoothing_spacing", "", "DIC stages"),
-                                    ("temperature_smoothing_rate_spacing", "rate", ""),
-                                    ("temperature_smoothing_value_spacing", "value", "")),
-          "temperature_smoothing_space": (("temperature_smoothing_space_spacing", "", "point spacings"),),
-          "surface_smoothing": (("surface_smoothing_spacing", "", "point spacings"),
-                                ("surface_smoothing_shape_spacing", "shape", "")),
-          "surface_smoothing_time": (("surface_smoothing_time_spacing", "", "DIC stages"),)}
-
-
-def spacing_summary(option, attrs) -> str | None:
-    """The centre spacing(s) a store's ``attrs`` record for the smoothing ``option`` (:func:`spacing_attrs`), as
-    ``"centres every 3 DIC stages (rate 2, value 3)"``; None where none is recorded (a regression that is off, or
-    a store written before they were recorded)."""
-    got = [(label, unit, attrs[a]) for a, label, unit in _SHOWN.get(option, ()) if attrs.get(a) is not None]
-    if not got or got[0][0]:
-        return None
-    _, unit, main = got[0]
-    extra = ", ".join(f"{label} {v:.3g}" for label, _, v in got[1:])
-    return f"centres every {main:.3g} {unit}" + (f" ({extra})" if extra else "")
 
 
 def stacked_directions(st):
