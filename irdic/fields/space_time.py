@@ -225,9 +225,8 @@ def _bias_inputs(theta, grad, value, total, smoothed, series, visible, spacings,
     exact = smooth_series(th_s, ts_in, t_eval, smoothing=None, **tkw)
     own_v = np.where(visible, own.value, np.nan)
     ref = rate_reference_weights(ts_in, t_eval, smoothing=k_rate)
-
-    def difference(X):  # the rate's regression in time minus its reference
-        return smooth_series(X, ts_in, t_eval, smoothing=k_rate, **tkw).rate - ref @ X
+    # the rate's regression in time minus its reference, as weights (T, M)
+    difference = smooth_series(np.eye(ts_in.size), ts_in, t_eval, smoothing=k_rate, **tkw).rate - ref
     return (theta, grad, own_v, value, total - ref @ th_s, total - own_rate, smoothed - exact.value,
             first_mode_bias(th_s, difference), own_v)
 

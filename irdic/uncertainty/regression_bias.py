@@ -22,9 +22,9 @@ import numpy as np
 
 from ..numerics.threads import parallel_map, worker_slices, workers
 
-__all__ = ["local_bias", "common_bias", "first_mode_bias", "patch_halves", "half_means", "reference_spacing", "reference_options",
-           "strain_reference_options", "noise_scale", "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z", "REFERENCE_SHARE",
-           "REFERENCE_Z"]
+__all__ = ["local_bias", "common_bias", "first_mode_bias", "patch_halves", "half_means", "reference_spacing",
+           "reference_options", "strain_reference_options", "noise_scale", "scaled_probes", "BIAS_NEIGHBOURS", "BIAS_Z",
+           "REFERENCE_SHARE", "REFERENCE_Z"]
 
 log = logging.getLogger(__name__)
 
@@ -70,14 +70,14 @@ def half_means(d, halves, use):
 
 
 def first_mode_bias(series, difference):
-    """The rate's temporal bias on the first temporal mode of the series, (T, N), the same units as ``difference``'s.
+    """The rate's temporal bias on the first temporal mode of the series, (T, N), in ``difference``'s units.
 
     Parameters
     ----------
     series : ndarray, shape (M, N)
         The spatially regressed series at the samples (degC), NaN-free where complete.
-    difference : callable
-        ``difference(X)`` (M, n) -> (T, n): the regression's rate minus its reference's (K/s), linear in ``X``.
+    difference : ndarray, shape (T, M)
+        The weights of the regression's rate minus its reference's (1/s): ``difference @ X`` (K/s).
 
     Returns
     -------
@@ -103,7 +103,7 @@ def first_mode_bias(series, difference):
     """
     X = np.asarray(series, dtype=float)
     M = X.shape[0]
-    D = difference(np.eye(M))  # (T, M): the difference as a matrix (constants give 0)
+    D = np.asarray(difference, dtype=float)  # constants give 0
     out = np.zeros((D.shape[0], X.shape[1]))
     live = np.isfinite(X).all(axis=0)
     n = int(live.sum())
